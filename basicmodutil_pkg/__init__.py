@@ -1,0 +1,1 @@
+"""Import path of the original Basic Module Util package, kept for old modules."""

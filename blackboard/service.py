@@ -1,0 +1,180 @@
+"""The Blackboard's logic: store results, answer requests, acknowledge what is durable.
+
+ROS callbacks only enqueue; one worker thread decodes, writes in batches and
+answers, in arrival order, so a request that follows a result sees it.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from typing import Any, Callable, List, Optional, Set
+
+from comm.errors import ProtocolError
+from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
+from blackboard.store import Store, rows_of
+
+__all__ = ["BlackboardService"]
+
+log = logging.getLogger("bmtree.blackboard")
+
+_RESULT, _REQUEST, _STOP = 0, 1, 2
+
+
+class BlackboardService:
+    """Args:
+        store: where values go.
+        publish_answer: sends an encoded BlackboardAnswer.
+        publish_ack: sends ``{"total": N, "call_ids": [...], "count": k}`` after each commit:
+            the results named there are durable.
+        prune_every: apply retention after this many stored values.
+    """
+
+    def __init__(self, store: Store, publish_answer: Callable[[str], None],
+                 publish_ack: Optional[Callable[[str], None]] = None, max_bytes: int = DEFAULT_MAX_BYTES,
+                 prune_every: int = 2000, batch: int = 500):
+        self.store = store
+        self._publish_answer = publish_answer
+        self._publish_ack = publish_ack
+        self.max_bytes = max_bytes
+        self.prune_every = prune_every
+        self.batch = batch
+        self.total = store.count()
+        self.rejected = 0
+        self._queue: "queue.Queue[tuple]" = queue.Queue()
+        self._since_prune = 0
+        self._touched: Set[str] = set()
+        self._thread = threading.Thread(target=self._work, name="blackboard-writer", daemon=True)
+        self._thread.start()
+
+    # called from any thread
+    def on_result(self, text: Any) -> None:
+        self._queue.put((_RESULT, text, time.time()))
+
+    def on_request(self, text: Any) -> None:
+        self._queue.put((_REQUEST, text, time.time()))
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._queue.put((_STOP, None, 0.0))
+        self._thread.join(timeout)
+
+    def flush(self, timeout: float = 5.0) -> bool:
+        """Wait until everything queued so far is processed (tests, shutdown)."""
+        done = threading.Event()
+        self._queue.put((_REQUEST, done, 0.0))
+        return done.wait(timeout)
+
+    # worker
+    def _work(self) -> None:
+        while True:
+            items = [self._queue.get()]
+            while len(items) < self.batch:
+                try:
+                    items.append(self._queue.get_nowait())
+                except queue.Empty:
+                    break
+            rows: List[tuple] = []
+            ids: List[str] = []
+            for kind, payload, stamp in items:
+                if kind == _RESULT:
+                    self._decode_result(payload, stamp, rows, ids)
+                    continue
+                self._commit(rows, ids)
+                rows, ids = [], []
+                if kind == _STOP:
+                    return
+                if isinstance(payload, threading.Event):
+                    payload.set()
+                else:
+                    self._answer(payload)
+            self._commit(rows, ids)
+            if self._since_prune >= self.prune_every:
+                self._prune()
+
+    def _decode_result(self, text: Any, stamp: float, rows: List[tuple], ids: List[str]) -> None:
+        try:
+            result = FunctionResult.decode(text, self.max_bytes)
+            raw = load_payload(text, self.max_bytes)
+        except ProtocolError as exc:
+            self.rejected += 1
+            log.warning("ignored a malformed result: %s", exc)
+            return
+        if result.call_id is not None:
+            ids.append(result.call_id)
+        rows.extend(rows_of(result.names, raw["rostypes"], raw["msgs"], result.basic_mod, result.function,
+                            result.call_id, stamp))
+
+    def _commit(self, rows: List[tuple], ids: List[str]) -> None:
+        if not rows and not ids:
+            return
+        try:
+            n = self.store.add(rows)
+        except Exception:
+            log.exception("could not store %d values", len(rows))
+            return
+        self.total += n
+        self._since_prune += n
+        self._touched.update(r[0] for r in rows)
+        if self._publish_ack is not None:
+            try:
+                self._publish_ack(json.dumps({"total": self.total, "count": n, "call_ids": ids}))
+            except Exception:
+                log.exception("could not publish the storage acknowledgement")
+
+    def _prune(self) -> None:
+        try:
+            removed = self.store.prune(self._touched)
+        except Exception:
+            log.exception("retention failed")
+            return
+        self.total -= removed
+        self._touched.clear()
+        self._since_prune = 0
+
+    def _answer(self, text: Any) -> None:
+        try:
+            req = BlackboardRequest.decode(text, self.max_bytes)
+        except ProtocolError as exc:
+            self.rejected += 1
+            log.warning("malformed request: %s", exc)
+            request_id = None
+            try:
+                rid = load_payload(text, self.max_bytes).get("request_id")
+                request_id = rid if isinstance(rid, str) else None
+            except ProtocolError:
+                pass
+            if request_id is not None:
+                self._publish_answer(BlackboardAnswer.encode_raw([], [], [], request_id, [], "bad request: %s" % exc))
+            return
+        names: List[str] = []
+        types: List[str] = []
+        texts: List[str] = []
+        sources: List[dict] = []
+        missing: List[str] = []
+        errors: List[str] = []
+        found = []
+        if req.call_id is not None:
+            found.extend(self.store.by_call(req.call_id))
+            if not found and not req.var_names:
+                missing.append(req.call_id)
+        for name in req.var_names:
+            try:
+                values = self.store.latest(name, req.history)
+            except ValueError as exc:
+                errors.append(str(exc))
+                missing.append(name)
+                continue
+            if not values:
+                missing.append(name)
+            for v in values:
+                v.name = name
+            found.extend(values)
+        for v in found:
+            names.append(v.name)
+            types.append(v.rostype)
+            texts.append(v.msg)
+            sources.append(v.source)
+        self._publish_answer(BlackboardAnswer.encode_raw(names, types, texts, req.request_id, missing,
+                                                         "; ".join(errors), sources))

@@ -1,0 +1,139 @@
+"""The Blackboard's durable store: SQLite in WAL mode, one row per output value.
+
+Values are kept as the JSON text that travelled on the wire, so storing and
+answering never re-encode a message.
+"""
+from __future__ import annotations
+
+import os
+import sqlite3
+import time
+from dataclasses import dataclass
+from typing import Iterable, List, Optional, Sequence, Tuple
+
+__all__ = ["Store", "StoredValue", "default_db_path", "parse_name", "DEFAULT_KEEP"]
+
+DEFAULT_KEEP = 1000
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS value (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    name TEXT NOT NULL,
+    rostype TEXT NOT NULL,
+    msg TEXT NOT NULL,
+    basic_mod TEXT,
+    function TEXT,
+    call_id TEXT,
+    stamp REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS value_name ON value (name, id);
+CREATE INDEX IF NOT EXISTS value_qualified ON value (basic_mod, function, name, id);
+CREATE INDEX IF NOT EXISTS value_call ON value (call_id);
+"""
+
+
+@dataclass
+class StoredValue:
+    name: str
+    rostype: str
+    msg: str
+    basic_mod: Optional[str]
+    function: Optional[str]
+    call_id: Optional[str]
+    stamp: float
+
+    @property
+    def source(self) -> dict:
+        return {"basic_mod": self.basic_mod, "function": self.function, "call_id": self.call_id,
+                "stamp": self.stamp}
+
+
+def default_db_path() -> str:
+    home = os.environ.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
+    return os.path.join(home, "bmtree", "blackboard.sqlite")
+
+
+def parse_name(name: str) -> Tuple[Optional[str], Optional[str], str]:
+    """``name`` or ``module/function/name``; ValueError for anything else."""
+    if not isinstance(name, str) or not name:
+        raise ValueError("invalid name %r: expected 'name' or 'module/function/name'" % (name,))
+    parts = name.split("/")
+    if len(parts) == 1:
+        return None, None, name
+    if len(parts) == 3 and all(parts):
+        return parts[0], parts[1], parts[2]
+    raise ValueError("invalid name %r: expected 'name' or 'module/function/name'" % (name,))
+
+
+class Store:
+    """One connection; use one Store per thread (SQLite's rule)."""
+
+    def __init__(self, path: str, keep: int = DEFAULT_KEEP):
+        if path != ":memory:":
+            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        self.path = path
+        self.keep = keep
+        self.db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")
+        self.db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        self.db.close()
+
+    def add(self, rows: Iterable[Tuple[str, str, str, Optional[str], Optional[str], Optional[str], float]]) -> int:
+        """Insert (name, rostype, msg, basic_mod, function, call_id, stamp) rows in one transaction."""
+        rows = list(rows)
+        if not rows:
+            return 0
+        with self.db:
+            self.db.execute("BEGIN")
+            self.db.executemany(
+                "INSERT INTO value (name, rostype, msg, basic_mod, function, call_id, stamp)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?)", rows)
+        return len(rows)
+
+    def prune(self, names: Iterable[str]) -> int:
+        """Apply the retention policy (keep the newest ``keep`` values) to the given names."""
+        removed = 0
+        with self.db:
+            self.db.execute("BEGIN")
+            for name in set(names):
+                cur = self.db.execute(
+                    "DELETE FROM value WHERE name = ? AND id <= (SELECT id FROM value WHERE name = ?"
+                    " ORDER BY id DESC LIMIT 1 OFFSET ?)", (name, name, self.keep))
+                removed += cur.rowcount
+        return removed
+
+    def latest(self, name: str, history: int = 1) -> List[StoredValue]:
+        """Newest first; ``name`` may be qualified (``module/function/name``)."""
+        mod, fn, short = parse_name(name)
+        if mod is None:
+            cur = self.db.execute("SELECT name, rostype, msg, basic_mod, function, call_id, stamp FROM value"
+                                  " WHERE name = ? ORDER BY id DESC LIMIT ?", (short, history))
+        else:
+            cur = self.db.execute("SELECT name, rostype, msg, basic_mod, function, call_id, stamp FROM value"
+                                  " WHERE basic_mod = ? AND function = ? AND name = ? ORDER BY id DESC LIMIT ?",
+                                  (mod, fn, short, history))
+        return [StoredValue(*row) for row in cur]
+
+    def by_call(self, call_id: str) -> List[StoredValue]:
+        cur = self.db.execute("SELECT name, rostype, msg, basic_mod, function, call_id, stamp FROM value"
+                              " WHERE call_id = ? ORDER BY id", (call_id,))
+        return [StoredValue(*row) for row in cur]
+
+    def names(self) -> List[Tuple[str, int, float]]:
+        """(name, count, newest stamp) of every name stored."""
+        return list(self.db.execute("SELECT name, COUNT(*), MAX(stamp) FROM value GROUP BY name ORDER BY name"))
+
+    def count(self) -> int:
+        return int(self.db.execute("SELECT COUNT(*) FROM value").fetchone()[0])
+
+
+def now() -> float:
+    return time.time()
+
+
+def rows_of(names: Sequence[str], rostypes: Sequence[str], texts: Sequence[str], basic_mod: Optional[str],
+            function: Optional[str], call_id: Optional[str], stamp: float) -> List[tuple]:
+    return [(n, t, m, basic_mod, function, call_id, stamp) for n, t, m in zip(names, rostypes, texts)]

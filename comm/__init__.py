@@ -1,0 +1,41 @@
+"""The bmtree wire protocol: typed messages, ROS value conversion, legacy commBM."""
+from __future__ import annotations
+
+from comm.errors import ProtocolError
+from comm.messages import (
+    DEFAULT_MAX_BYTES,
+    STATUSES,
+    BlackboardAnswer,
+    BlackboardRequest,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+    new_id,
+)
+from comm.rostypes import from_message, resolve_type, suggest_type, to_message
+
+__all__ = [
+    "DEFAULT_MAX_BYTES",
+    "STATUSES",
+    "BlackboardAnswer",
+    "BlackboardRequest",
+    "CancelRequest",
+    "Event",
+    "FunctionCall",
+    "FunctionResult",
+    "ProtocolError",
+    "from_message",
+    "new_id",
+    "resolve_type",
+    "suggest_type",
+    "to_message",
+]
+
+# The topic names of DESIGN §2, in one place.
+TOPIC_CALL = "/master/output"
+TOPIC_RESULT = "/function/output"
+TOPIC_CANCEL = "/master/cancel"
+TOPIC_EVENT = "/event/output"
+TOPIC_BB_REQUEST = "/blackboard/input"
+TOPIC_BB_ANSWER = "/blackboard/output"

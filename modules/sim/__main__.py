@@ -1,0 +1,33 @@
+"""Run one simulated module as a ROS node: ``python -m modules.sim navigation --world W``."""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import List, Optional
+
+from modules.definition import load_definition
+from modules.node import run_module
+from modules.sim import SIM_CLASSES, DEFAULT_WORLD, World, WorldError, definition_path
+
+
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m modules.sim", description="Run a simulated basic module.")
+    p.add_argument("module", choices=sorted(SIM_CLASSES))
+    p.add_argument("--world", default=DEFAULT_WORLD, help="world YAML (default: the shipped house)")
+    return p
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    import rospy
+
+    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    try:
+        world = World.load(args.world)
+    except (OSError, WorldError) as exc:
+        sys.stderr.write("error: %s\n" % exc)
+        return 2
+    return run_module(load_definition(definition_path(args.module)), SIM_CLASSES[args.module](world))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""The simulated house: rooms, places, objects, people, and injected faults."""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple
+
+import yaml
+
+__all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault"]
+
+DEFAULT_WORLD = os.path.join(os.path.dirname(__file__), "world.yaml")
+
+
+class WorldError(ValueError):
+    """A world file that cannot be used (the message names the key)."""
+
+
+@dataclass
+class Fault:
+    """What to do to a function: fail with a reason, hang, delay; ``times`` calls (None: all)."""
+
+    fail: Optional[str] = None
+    crash: Optional[str] = None
+    hang: bool = False
+    delay: float = 0.0
+    times: Optional[int] = None
+
+    @classmethod
+    def parse(cls, key: str, raw: Any) -> Fault:
+        if not isinstance(raw, dict):
+            raise WorldError("faults.%s must be a mapping" % key)
+        unknown = set(raw) - {"fail", "crash", "hang", "delay", "times"}
+        if unknown:
+            raise WorldError("faults.%s: unknown keys %s (use fail, crash, hang, delay, times)" % (
+                key, ", ".join(sorted(unknown))))
+        times = raw.get("times")
+        if times is not None and (not isinstance(times, int) or times < 0):
+            raise WorldError("faults.%s.times must be a non-negative integer" % key)
+        return cls(fail=raw.get("fail"), crash=raw.get("crash"), hang=bool(raw.get("hang", False)),
+                   delay=float(raw.get("delay", 0.0)), times=times)
+
+    def take(self) -> bool:
+        """True if this fault applies to the next call (and count it)."""
+        if self.times is None:
+            return True
+        if self.times <= 0:
+            return False
+        self.times -= 1
+        return True
+
+
+@dataclass
+class Thing:
+    name: str
+    room: str
+    x: float
+    y: float
+    z: float = 0.0
+    answers: List[str] = field(default_factory=list)
+
+
+@dataclass
+class World:
+    rooms: Dict[str, Tuple[float, float]]
+    places: Dict[str, Thing]
+    objects: Dict[str, Thing]
+    people: Dict[str, Thing]
+    start: str
+    speed: float = 1.0
+    faults: Dict[str, Fault] = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, path: str = DEFAULT_WORLD) -> World:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+        return cls.from_dict(data, path)
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "<world>") -> World:
+        if not isinstance(data, dict):
+            raise WorldError("%s: the world must be a mapping" % source)
+        try:
+            rooms = {n: (float(r["x"]), float(r["y"])) for n, r in (data.get("rooms") or {}).items()}
+
+            def things(key: str) -> Dict[str, Thing]:
+                out = {}
+                for n, t in (data.get(key) or {}).items():
+                    if t["room"] not in rooms:
+                        raise WorldError("%s: %s.%s.room: unknown room %r" % (source, key, n, t["room"]))
+                    out[n] = Thing(n, t["room"], float(t["x"]), float(t["y"]), float(t.get("z", 0.0)),
+                                   [str(a) for a in t.get("answers", [])])
+                return out
+
+            world = cls(rooms=rooms, places=things("places"), objects=things("objects"), people=things("people"),
+                        start=str(data.get("start", next(iter(rooms), ""))), speed=float(data.get("speed", 1.0)),
+                        faults={k: Fault.parse(k, v) for k, v in (data.get("faults") or {}).items()})
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            if isinstance(exc, WorldError):
+                raise
+            raise WorldError("%s: malformed world: %s" % (source, exc))
+        if world.start not in rooms:
+            raise WorldError("%s: start: unknown room %r" % (source, world.start))
+        if world.speed <= 0:
+            raise WorldError("%s: speed must be positive" % source)
+        return world
+
+    def locate(self, place: str) -> Optional[Tuple[str, float, float]]:
+        """(room, x, y) of a room or a place, None if unknown."""
+        if place in self.rooms:
+            x, y = self.rooms[place]
+            return place, x, y
+        p = self.places.get(place)
+        return (p.room, p.x, p.y) if p else None
+
+    def travel_time(self, a: Tuple[float, float], b: Tuple[float, float]) -> float:
+        return math.hypot(b[0] - a[0], b[1] - a[1]) / self.speed
