@@ -34,7 +34,7 @@ class BlackboardService:
 
     def __init__(self, store: Store, publish_answer: Callable[[str], None],
                  publish_ack: Optional[Callable[[str], None]] = None, max_bytes: int = DEFAULT_MAX_BYTES,
-                 prune_every: int = 2000, batch: int = 500):
+                 prune_every: int = 2000, batch: int = 500, threaded: bool = True):
         self.store = store
         self._publish_answer = publish_answer
         self._publish_ack = publish_ack
@@ -46,22 +46,38 @@ class BlackboardService:
         self._queue: "queue.Queue[tuple]" = queue.Queue()
         self._since_prune = 0
         self._touched: Set[str] = set()
-        self._thread = threading.Thread(target=self._work, name="blackboard-writer", daemon=True)
-        self._thread.start()
+        self.threaded = threaded
+        self._thread: Optional[threading.Thread] = None
+        if threaded:
+            self._thread = threading.Thread(target=self._work, name="blackboard-writer", daemon=True)
+            self._thread.start()
 
-    # called from any thread
-    def on_result(self, text: Any) -> None:
-        self._queue.put((_RESULT, text, time.time()))
+    # called from any thread (threaded), or inline (threaded=False, for in-process runs)
+    def on_result(self, text: Any, stamp: Optional[float] = None) -> None:
+        stamp = time.time() if stamp is None else stamp
+        if not self.threaded:
+            rows: List[tuple] = []
+            ids: List[str] = []
+            self._decode_result(text, stamp, rows, ids)
+            self._commit(rows, ids)
+            return
+        self._queue.put((_RESULT, text, stamp))
 
     def on_request(self, text: Any) -> None:
+        if not self.threaded:
+            self._answer(text)
+            return
         self._queue.put((_REQUEST, text, time.time()))
 
     def stop(self, timeout: float = 5.0) -> None:
-        self._queue.put((_STOP, None, 0.0))
-        self._thread.join(timeout)
+        if self._thread is not None:
+            self._queue.put((_STOP, None, 0.0))
+            self._thread.join(timeout)
 
     def flush(self, timeout: float = 5.0) -> bool:
         """Wait until everything queued so far is processed (tests, shutdown)."""
+        if not self.threaded:
+            return True
         done = threading.Event()
         self._queue.put((_REQUEST, done, 0.0))
         return done.wait(timeout)

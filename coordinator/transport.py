@@ -1,0 +1,38 @@
+"""How the coordinator reaches modules: an interface, so the engine runs with or without ROS.
+
+A transport sends calls, cancels and Blackboard requests, and hands every decoded
+incoming message (FunctionResult, Event, BlackboardAnswer) to ``deliver``, from any
+thread; the runner queues them and handles them in its ticking thread.
+"""
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable, Iterable
+
+from comm.messages import BlackboardRequest, CancelRequest, FunctionCall
+
+__all__ = ["Transport"]
+
+
+class Transport(abc.ABC):
+    @abc.abstractmethod
+    def connect(self, deliver: Callable[[Any], None]) -> None:
+        """Start receiving; ``deliver`` gets decoded messages."""
+
+    @abc.abstractmethod
+    def send_call(self, call: FunctionCall) -> None:
+        """Publish a call."""
+
+    @abc.abstractmethod
+    def send_cancel(self, cancel: CancelRequest) -> None:
+        """Publish a cancel."""
+
+    @abc.abstractmethod
+    def send_request(self, request: BlackboardRequest) -> None:
+        """Ask the Blackboard node."""
+
+    def wait_ready(self, modules: Iterable[str], timeout: float) -> None:
+        """Block until the named modules can be called (raise EnvironmentError if not)."""
+
+    def close(self) -> None:
+        """Stop receiving and release resources."""

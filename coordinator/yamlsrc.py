@@ -1,0 +1,83 @@
+"""YAML with positions: safe loading that remembers where every key and value came from."""
+from __future__ import annotations
+
+from typing import Any, Dict, List
+
+import yaml
+
+from coordinator.errors import Pos, TreeError, TreeErrors
+
+__all__ = ["LMap", "LList", "load_yaml", "pos_of"]
+
+
+class LMap(dict):
+    """A mapping that knows the position of itself, of each key and of each value."""
+
+    pos: Pos
+    key_pos: Dict[Any, Pos]
+    val_pos: Dict[Any, Pos]
+
+
+class LList(list):
+    pos: Pos
+    item_pos: List[Pos]
+
+
+def _pos(file: str, node: yaml.Node) -> Pos:
+    return Pos(file, node.start_mark.line + 1, node.start_mark.column + 1)
+
+
+class _Builder(yaml.SafeLoader):
+    pass
+
+
+def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor) -> Any:
+    if isinstance(node, yaml.MappingNode):
+        out = LMap()
+        out.pos, out.key_pos, out.val_pos = _pos(file, node), {}, {}
+        ctor.flatten_mapping(node)
+        for k_node, v_node in node.value:
+            key = _convert(k_node, file, ctor)
+            if isinstance(key, (dict, list)):
+                raise TreeErrors([TreeError(_pos(file, k_node), "a mapping key must be a scalar")])
+            if key in out:
+                raise TreeErrors([TreeError(_pos(file, k_node), "duplicate key %r" % (key,))])
+            out[key] = _convert(v_node, file, ctor)
+            out.key_pos[key] = _pos(file, k_node)
+            out.val_pos[key] = _pos(file, v_node)
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        lst = LList(_convert(n, file, ctor) for n in node.value)
+        lst.pos = _pos(file, node)
+        lst.item_pos = [_pos(file, n) for n in node.value]
+        return lst
+    return ctor.construct_object(node, deep=True)
+
+
+def load_yaml(text: str, file: str) -> Any:
+    """Parse one YAML document (safe loader only); syntax errors become TreeErrors."""
+    loader = _Builder(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        return _convert(node, file, loader)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+        raise TreeErrors([TreeError(Pos(file, line, col), "YAML syntax error: %s" % (exc.problem or exc))])
+    except yaml.YAMLError as exc:
+        raise TreeErrors([TreeError(Pos(file, 1, 1), "YAML error: %s" % exc)])
+    finally:
+        loader.dispose()
+
+
+def pos_of(container: Any, key: Any = None, default: Any = None) -> Pos:
+    """Position of a value inside a container (or of the container), falling back to ``default``."""
+    if key is not None:
+        if isinstance(container, LMap) and key in container.val_pos:
+            return container.val_pos[key]
+        if isinstance(container, LList) and isinstance(key, int) and key < len(container.item_pos):
+            return container.item_pos[key]
+    p = getattr(container, "pos", None)
+    return p if p is not None else default
