@@ -79,7 +79,7 @@ class Call(Leaf):
         values = result.values
         rec.outputs = {k: v for k, v in values.items()}
         if self.node.opts.get("check_success", True) and "success" in values and unwrap(values["success"]) is False:
-            self.ctx.finish(rec, "succeeded", "success: false")
+            self.ctx.finish(rec, "failed", "answered success: false")
             return self._fail("%s answered success: false" % rec.target)
         self.ctx.finish(rec, "succeeded")
         for out, key in self.node.opts.get("outputs", {}).items():

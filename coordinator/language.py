@@ -16,7 +16,7 @@ from coordinator.expr import Expr, ExprError
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["FORMAT", "KINDS", "Node", "Ref", "TreeFile", "load_tree", "refs_in"]
+__all__ = ["FORMAT", "KINDS", "Node", "Ref", "TreeFile", "load_tree", "refs_in", "used_modules", "walk"]
 
 FORMAT = 1
 _TOP_KEYS = ("format", "name", "description", "inputs", "root")
@@ -603,3 +603,24 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         raise TreeErrors(errors)
     assert tree is not None
     return tree
+
+
+def walk(node: Node) -> Any:
+    """Every node of a tree, includes expanded, depth first."""
+    yield node
+    for c in node.children:
+        yield from walk(c)
+    sub = node.opts.get("tree")
+    if sub is not None:
+        yield from walk(sub.root)
+
+
+def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:
+    """The modules a tree calls or waits on, and whether it recalls from the Blackboard node."""
+    mods: Set[str] = set()
+    recall = False
+    for n in walk(tree.root):
+        if n.kind in ("call", "wait_event") and isinstance(n.opts.get("target"), str):
+            mods.add(n.opts["target"].split(".")[0])
+        recall = recall or n.kind == "recall"
+    return mods, recall

@@ -65,10 +65,13 @@ class Display:
             self._lines = text.count("\n") + 1
         else:
             for b in root.iterate():
-                if self._last.get(b.id) != b.status:
-                    if b.status != Status.INVALID or b.id in self._last:
+                before = self._last.get(b.id)
+                if before != b.status:
+                    if b.status != Status.INVALID:
                         extra = " (%s)" % b.feedback_message if b.status == Status.FAILURE and b.feedback_message else ""
                         self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, b.status.value, b.name, extra))
+                    elif before == Status.RUNNING:
+                        self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", b.name))
                     self._last[b.id] = b.status
         self.stream.flush()
 

@@ -11,7 +11,7 @@ from typing import Any, Callable, Iterable
 
 from comm.messages import BlackboardRequest, CancelRequest, FunctionCall
 
-__all__ = ["Transport"]
+__all__ = ["Transport", "NullTransport"]
 
 
 class Transport(abc.ABC):
@@ -36,3 +36,19 @@ class Transport(abc.ABC):
 
     def close(self) -> None:
         """Stop receiving and release resources."""
+
+
+class NullTransport(Transport):
+    """For trees built only to be checked or rendered: sending anything is a bug."""
+
+    def connect(self, deliver: Callable[[Any], None]) -> None:
+        raise RuntimeError("this tree was built offline (check/render) and cannot run")
+
+    def send_call(self, call: FunctionCall) -> None:
+        raise RuntimeError("this tree was built offline (check/render) and cannot run")
+
+    def send_cancel(self, cancel: CancelRequest) -> None:
+        raise RuntimeError("this tree was built offline (check/render) and cannot run")
+
+    def send_request(self, request: BlackboardRequest) -> None:
+        raise RuntimeError("this tree was built offline (check/render) and cannot run")

@@ -1,0 +1,154 @@
+"""A private ROS graph: ``rosmaster`` on a free port and nodes as processes.
+
+Used by ``bmtree run --sim``/``demo``, the test kit's fixtures and the benchmarks.
+Every process it starts is ended by pid, nothing else is touched.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import xmlrpc.client
+from typing import Dict, List, Optional, Sequence
+
+from modules.discovery import node_alive
+
+__all__ = ["RosGraph", "GraphError", "free_port"]
+
+
+class GraphError(EnvironmentError):
+    """A process of the graph did not start or register in time."""
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class RosGraph:
+    """Start with :meth:`start_master`, add nodes with :meth:`start_node`, end with :meth:`close`.
+
+    Args:
+        ros_home: ROS_HOME for every process (logs, the Blackboard's store); a
+            temporary directory (removed at close) when not given.
+    """
+
+    def __init__(self, ros_home: Optional[str] = None):
+        self._tmp = None if ros_home else tempfile.mkdtemp(prefix="bmtree-ros-")
+        self.ros_home = ros_home or self._tmp or ""
+        os.makedirs(self.ros_home, exist_ok=True)
+        self.uri = ""
+        self.master: Optional[subprocess.Popen] = None
+        self.nodes: List[subprocess.Popen] = []
+        self._logs: List = []
+
+    @property
+    def env(self) -> Dict[str, str]:
+        env = dict(os.environ)
+        env.update(ROS_MASTER_URI=self.uri, ROS_HOME=self.ros_home, ROS_LOG_DIR=os.path.join(self.ros_home, "log"),
+                   PYTHONUNBUFFERED="1", ROS_IP="127.0.0.1")
+        env.pop("ROS_HOSTNAME", None)
+        return env
+
+    def _log(self, name: str):
+        path = os.path.join(self.ros_home, "%s.out" % name.strip("/").replace("/", "_"))
+        fh = open(path, "ab")
+        self._logs.append(fh)
+        return fh
+
+    def start_master(self, timeout: float = 15.0) -> str:
+        exe = shutil.which("rosmaster")
+        if exe is None:
+            raise GraphError("rosmaster is not installed (run 'make setup' or install python3-rosmaster)")
+        for _attempt in range(3):
+            port = free_port()
+            self.uri = "http://127.0.0.1:%d/" % port
+            log = self._log("rosmaster")
+            self.master = subprocess.Popen([exe, "--core", "-p", str(port), "-w", "3"], env=self.env,
+                                           stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                           start_new_session=True)
+            end = time.monotonic() + timeout
+            while time.monotonic() < end and self.master.poll() is None:
+                try:
+                    code, _, _ = xmlrpc.client.ServerProxy(self.uri).getPid("/bmtree")
+                    if code == 1:
+                        return self.uri
+                except OSError:
+                    pass
+                time.sleep(0.05)
+            self._end(self.master)
+        raise GraphError("rosmaster did not start (see %s)" % os.path.join(self.ros_home, "rosmaster.out"))
+
+    def start_node(self, args: Sequence[str], name: str, timeout: float = 20.0,
+                   env: Optional[Dict[str, str]] = None, wait: bool = True) -> subprocess.Popen:
+        """Start ``args`` (``sys.executable`` is used for a leading ``-m``) and, with ``wait``,
+        wait until the node ``name`` is registered with the master and answers."""
+        argv = [sys.executable, *args] if args and args[0] == "-m" else list(args)
+        proc = subprocess.Popen(argv, env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
+                                stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
+        self.nodes.append(proc)
+        if wait:
+            self.wait_node(name, timeout, proc)
+        return proc
+
+    def wait_node(self, name: str, timeout: float = 20.0, proc: Optional[subprocess.Popen] = None) -> str:
+        master = xmlrpc.client.ServerProxy(self.uri)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if proc is not None and proc.poll() is not None:
+                raise GraphError("node %s exited with code %s (see %s)" % (
+                    name, proc.returncode, os.path.join(self.ros_home, name.strip("/") + ".out")))
+            code, _, uri = master.lookupNode("/bmtree", name)
+            if code == 1 and node_alive(uri, 0.5):
+                return uri
+            time.sleep(0.05)
+        raise GraphError("node %s did not register within %gs" % (name, timeout))
+
+    def stop_node(self, proc: subprocess.Popen, timeout: float = 5.0) -> Optional[int]:
+        self._end(proc, timeout)
+        if proc in self.nodes:
+            self.nodes.remove(proc)
+        return proc.returncode
+
+    def kill_node(self, proc: subprocess.Popen) -> None:
+        """SIGKILL: the node gets no chance to clean up (crash tests)."""
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+        if proc in self.nodes:
+            self.nodes.remove(proc)
+
+    @staticmethod
+    def _end(proc: subprocess.Popen, timeout: float = 5.0) -> None:
+        if proc.poll() is not None:
+            return
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+    def close(self) -> None:
+        for proc in reversed(self.nodes):
+            self._end(proc, 3.0)
+        self.nodes.clear()
+        if self.master is not None:
+            self._end(self.master, 3.0)
+            self.master = None
+        for fh in self._logs:
+            fh.close()
+        self._logs.clear()
+        if self._tmp:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def __enter__(self) -> RosGraph:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
