@@ -14,7 +14,8 @@ from typing import Any, List, Tuple, Union
 import genpy
 from rospy_message_converter import json_message_converter
 
-from comm.rostypes import resolve_type
+from comm.messages import DEFAULT_MAX_BYTES
+from comm.rostypes import check_message, resolve_type
 
 __all__ = [
     "getRosType",
@@ -74,7 +75,7 @@ def _from_json_list(rostypes: Any, texts: Any) -> Union[List[Any], None]:
             return None
         try:
             msg = json_message_converter.convert_json_to_ros_message(t, text)
-            msg._check_types()
+            check_message(msg, t)
         except Exception:
             return None
         out.append(msg)
@@ -82,7 +83,7 @@ def _from_json_list(rostypes: Any, texts: Any) -> Union[List[Any], None]:
 
 
 def _load_obj(text: Any) -> Union[dict, None]:
-    if not isinstance(text, str):
+    if not isinstance(text, str) or len(text) > DEFAULT_MAX_BYTES:
         return None
     try:
         obj = json.loads(text)

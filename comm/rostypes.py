@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import io
 import json
 import pkgutil
+import struct
 from typing import Any, Dict, List, Optional
 
 import genpy
@@ -26,6 +28,7 @@ __all__ = [
     "message_to_json",
     "single_field",
     "known_types",
+    "check_message",
 ]
 
 _CLASS_CACHE: Dict[str, Any] = {}
@@ -137,11 +140,21 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
             raise ProtocolError("%s: %s" % (rostype, exc))
         except (TypeError, AttributeError, KeyError) as exc:
             raise ProtocolError("%s: malformed value (%s)" % (rostype, exc))
-    try:
-        msg._check_types()
-    except genpy.SerializationError as exc:
-        raise ProtocolError("%s: %s" % (rostype, exc))
+    check_message(msg, rostype)
     return msg
+
+
+def check_message(msg: Any, rostype: str = "") -> None:
+    """Type-check by serializing, as rospy would on publish.
+
+    genpy's ``_check_types`` alone refuses non-ASCII strings, which ROS 1 carries
+    fine as UTF-8 (a Spanish-speaking robot needs them); serialization diagnoses
+    wrong types through ``_check_types`` only when packing fails.
+    """
+    try:
+        msg.serialize(io.BytesIO())
+    except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError) as exc:
+        raise ProtocolError("%s: %s" % (rostype or getattr(msg, "_type", "?"), exc))
 
 
 def from_message(msg: Any) -> Dict[str, Any]:

@@ -37,13 +37,14 @@ class RosGraph:
     Args:
         ros_home: ROS_HOME for every process (logs, the Blackboard's store); a
             temporary directory (removed at close) when not given.
+        master_uri: an already running master to start nodes against.
     """
 
-    def __init__(self, ros_home: Optional[str] = None):
+    def __init__(self, ros_home: Optional[str] = None, master_uri: str = ""):
         self._tmp = None if ros_home else tempfile.mkdtemp(prefix="bmtree-ros-")
         self.ros_home = ros_home or self._tmp or ""
         os.makedirs(self.ros_home, exist_ok=True)
-        self.uri = ""
+        self.uri = master_uri  # given: use that master, never stop it
         self.master: Optional[subprocess.Popen] = None
         self.nodes: List[subprocess.Popen] = []
         self._logs: List = []

@@ -24,7 +24,9 @@ class LList(list):
 
 
 def _pos(file: str, node: yaml.Node) -> Pos:
-    return Pos(file, node.start_mark.line + 1, node.start_mark.column + 1)
+    """Where a node starts; for a quoted scalar, where its text starts (inside the quote)."""
+    quoted = isinstance(node, yaml.ScalarNode) and node.style in ("'", '"')
+    return Pos(file, node.start_mark.line + 1, node.start_mark.column + 1 + (1 if quoted else 0))
 
 
 class _Builder(yaml.SafeLoader):

@@ -1,0 +1,9 @@
+"""bmtree's test kit: mocked modules, a simulated clock, tree runs, ROS fixtures."""
+from __future__ import annotations
+
+from coordinator.testing.kit import Coverage, TreeRun, TreeTest
+from coordinator.testing.mocks import (FunctionMock, InProcessTransport, MockError, Mocks, Outcome, fail, hang,
+                                       reject, respond, succeed)
+
+__all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "Mocks", "Outcome", "TreeRun",
+           "TreeTest", "fail", "hang", "reject", "respond", "succeed"]

@@ -1,0 +1,100 @@
+"""The bmtree pytest plugin (entry point ``pytest11: bmtree``).
+
+Fixtures:
+    bmtree_tree: ``bmtree_tree("trees/x.yaml", inputs={...})`` -> a TreeTest (mocked modules, simulated clock).
+    ros_master: a real ``rosmaster --core`` on a free port for the session (its own ROS_HOME); yields the URI.
+    ros_graph: start nodes as processes against that master; they are stopped (by pid) after the test.
+    ros_probe: publish/collect topics from the test process (one rospy node per session).
+
+Option ``--bmtree-coverage``: after the session, report which tree nodes ran and their outcomes.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from typing import Any, Callable, Iterator
+
+import pytest
+
+from coordinator.testing.kit import Coverage, TreeTest
+
+__all__ = ["bmtree_tree", "ros_master", "ros_graph", "ros_probe"]
+
+_COVERAGE = pytest.StashKey[Coverage]() if hasattr(pytest, "StashKey") else None
+
+
+def pytest_addoption(parser: Any) -> None:
+    group = parser.getgroup("bmtree")
+    group.addoption("--bmtree-coverage", action="store_true", default=False,
+                    help="report which nodes of the tested trees ran and which outcomes they reached")
+
+
+def pytest_configure(config: Any) -> None:
+    config.addinivalue_line("markers", "ros: needs a real rosmaster (integration test)")
+    if _COVERAGE is not None:
+        config.stash[_COVERAGE] = Coverage()
+    else:  # pytest < 7
+        config._bmtree_coverage = Coverage()
+
+
+def _coverage(config: Any) -> Coverage:
+    return config.stash[_COVERAGE] if _COVERAGE is not None else config._bmtree_coverage
+
+
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any) -> None:
+    if config.getoption("--bmtree-coverage"):
+        cov = _coverage(config)
+        if cov.trees:
+            terminalreporter.write_sep("-", "bmtree tree coverage")
+            terminalreporter.write_line(cov.report())
+
+
+@pytest.fixture
+def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
+    """Factory: ``bmtree_tree(path, definitions=None, inputs=None)`` -> TreeTest."""
+    cov = _coverage(request.config)
+
+    def make(path: str, **kwargs: Any) -> TreeTest:
+        return TreeTest(path, coverage=cov, **kwargs)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def ros_master() -> Iterator[str]:
+    from coordinator.graph import RosGraph
+
+    home = tempfile.mkdtemp(prefix="bmtree-test-ros-")
+    graph = RosGraph(home)
+    uri = graph.start_master()
+    saved = {k: os.environ.get(k) for k in ("ROS_MASTER_URI", "ROS_HOME", "ROS_LOG_DIR")}
+    os.environ.update(ROS_MASTER_URI=uri, ROS_HOME=home, ROS_LOG_DIR=os.path.join(home, "log"))
+    try:
+        yield uri
+    finally:
+        graph.close()
+        shutil.rmtree(home, ignore_errors=True)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@pytest.fixture
+def ros_graph(ros_master: str) -> Iterator[Any]:
+    from coordinator.graph import RosGraph
+
+    graph = RosGraph(os.environ["ROS_HOME"], master_uri=ros_master)
+    try:
+        yield graph
+    finally:
+        graph.close()
+
+
+@pytest.fixture(scope="session")
+def ros_probe(ros_master: str) -> Any:
+    from coordinator.testing.ros import RosProbe
+
+    return RosProbe()

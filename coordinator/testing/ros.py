@@ -1,0 +1,101 @@
+"""Real-ROS helpers for integration tests: a probe node inside the test process.
+
+``rospy.init_node`` works once per process, so the probe is initialised once per
+test session against the session's master; nodes under test run as processes.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+__all__ = ["RosProbe", "Collector"]
+
+
+class Collector:
+    """Every ``std_msgs/String`` payload seen on a topic, in order (thread-safe)."""
+
+    def __init__(self, topic: str):
+        self.topic = topic
+        self._items: List[str] = []
+        self._cond = threading.Condition()
+        self.sub: Any = None
+
+    def _add(self, msg: Any) -> None:
+        with self._cond:
+            self._items.append(msg.data)
+            self._cond.notify_all()
+
+    @property
+    def items(self) -> List[str]:
+        with self._cond:
+            return list(self._items)
+
+    def clear(self) -> None:
+        with self._cond:
+            self._items.clear()
+
+    def wait_for(self, predicate: Callable[[str], bool], timeout: float = 10.0, count: int = 1) -> List[str]:
+        """The first ``count`` payloads matching ``predicate``; AssertionError after ``timeout``."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                found = [i for i in self._items if predicate(i)]
+                if len(found) >= count:
+                    return found[:count]
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise AssertionError("%d of %d expected messages on %s within %gs; last seen: %s" % (
+                        len(found), count, self.topic, timeout, self._items[-3:]))
+                self._cond.wait(left)
+
+
+class RosProbe:
+    """Publish and collect ``std_msgs/String`` payloads from the test process."""
+
+    def __init__(self, name: str = "bmtree_test_probe"):
+        import rospy
+
+        if not rospy.core.is_initialized():
+            rospy.init_node(name, anonymous=True, disable_signals=True)
+        self._pubs: Dict[str, Any] = {}
+
+    def publisher(self, topic: str, subscribers: int = 1, timeout: float = 10.0, latch: bool = False) -> Any:
+        """A publisher that is connected to at least ``subscribers`` subscribers."""
+        import rospy
+        from std_msgs.msg import String
+
+        pub = self._pubs.get(topic)
+        if pub is None:
+            pub = self._pubs[topic] = rospy.Publisher(topic, String, queue_size=10000, latch=latch)
+        end = time.monotonic() + timeout
+        while pub.get_num_connections() < subscribers:
+            if time.monotonic() > end:
+                raise AssertionError("only %d of %d subscribers connected to %s" % (
+                    pub.get_num_connections(), subscribers, topic))
+            time.sleep(0.02)
+        return pub
+
+    def publish(self, topic: str, text: str, subscribers: int = 1) -> None:
+        from std_msgs.msg import String
+
+        self.publisher(topic, subscribers).publish(String(text))
+
+    def collect(self, topic: str, publishers: int = 0, timeout: float = 10.0) -> Collector:
+        """Start collecting ``topic``; with ``publishers``, wait until that many are connected."""
+        import rospy
+        from std_msgs.msg import String
+
+        c = Collector(topic)
+        c.sub = rospy.Subscriber(topic, String, c._add, queue_size=100000)
+        end = time.monotonic() + timeout
+        while c.sub.get_num_connections() < publishers:
+            if time.monotonic() > end:
+                raise AssertionError("only %d of %d publishers connected to %s" % (
+                    c.sub.get_num_connections(), publishers, topic))
+            time.sleep(0.02)
+        return c
+
+    def close_collector(self, c: Optional[Collector]) -> None:
+        if c is not None and c.sub is not None:
+            c.sub.unregister()

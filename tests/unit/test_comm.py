@@ -1,0 +1,207 @@
+"""Wire protocol v2: typed messages, value conversion, the legacy commBM drop-in."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+from geometry_msgs.msg import Point
+from std_msgs.msg import Bool, Float64, String
+
+from comm import (BlackboardAnswer, BlackboardRequest, CancelRequest, Event, FunctionCall, FunctionResult,
+                  ProtocolError)
+from comm import commBM
+from comm.rostypes import resolve_type, suggest_type, to_message
+from modules.definition import load_definitions
+from modules.sim import SIM_DIR
+from tests.conftest import SHARED_REFERENCE
+
+ALL_DEFS = {}
+ALL_DEFS.update(load_definitions([SHARED_REFERENCE]) if os.path.isdir(SHARED_REFERENCE) else {})
+ALL_DEFS.update(load_definitions([SIM_DIR]))
+ALL_TYPES = sorted({p.rostype for d in ALL_DEFS.values() for f in d.functions.values()
+                    for p in f.inputs + f.outputs} | {p.rostype for d in ALL_DEFS.values()
+                                                      for e in d.events.values() for p in e.params})
+
+SAMPLES = {
+    "std_msgs/String": {"data": "héllo \"quoted\""},
+    "std_msgs/Bool": {"data": True},
+    "std_msgs/Float64": {"data": 2.5},
+    "geometry_msgs/Point": {"x": 1.5, "y": -2.0, "z": 0.25},
+}
+
+
+def test_every_data_type_is_sampled():
+    assert ALL_TYPES, "no definitions found"
+    assert set(ALL_TYPES) <= set(SAMPLES), "add samples for %s" % (set(ALL_TYPES) - set(SAMPLES))
+
+
+@pytest.mark.parametrize("rostype", sorted(SAMPLES))
+def test_round_trip_every_message_kind(rostype):
+    msg = to_message(rostype, SAMPLES[rostype])
+    call = FunctionCall("mod", "fn", [msg], names=["v"])
+    back = FunctionCall.decode(call.encode())
+    assert back == call and back.rostypes == [rostype]
+    res = FunctionResult(["v"], [msg], call_id="c1", basic_mod="mod", function="fn")
+    assert FunctionResult.decode(res.encode()) == res
+    ev = Event("mod", "ev", ["v"], [msg])
+    assert Event.decode(ev.encode()) == ev
+    ans = BlackboardAnswer(["v"], [msg], request_id="r1", missing=["w"], sources=[{"call_id": "c1"}])
+    assert BlackboardAnswer.decode(ans.encode()) == ans
+    # and through the legacy API
+    names, ros = commBM.readMsg2Ros(commBM.writeMsgFromRos([msg], ["v"]))
+    assert names == ["v"] and ros == [msg]
+    bm, fn, ros = commBM.readFunCall(commBM.writeFunCallFromRos("mod", "fn", [msg]))
+    assert (bm, fn, ros) == ("mod", "fn", [msg])
+    mod, event, names, ros = commBM.readEvent2Ros(commBM.writeEventFromRos("mod", "ev", [msg], ["v"]))
+    assert (mod, event, names, ros) == ("mod", "ev", ["v"], [msg])
+
+
+def test_cancel_and_request_round_trip():
+    c = CancelRequest("c1", "navigation", "go_to")
+    assert CancelRequest.decode(c.encode()) == c
+    r = BlackboardRequest(["a", "m/f/b"], history=3, call_id="c9")
+    assert BlackboardRequest.decode(r.encode()) == r
+
+
+def test_commbm_writes_the_original_keys_and_values():
+    p = Point(1.0, 2.0, 3.0)
+    text = commBM.writeFunCallFromRos("PYTHON_BM", "putObject", [p])
+    assert text.startswith('{\n  "basic_mod"')  # the original indents by 2
+    assert json.loads(text) == {"basic_mod": "PYTHON_BM", "function": "putObject",
+                                "msgs": ['{"x": 1.0, "y": 2.0, "z": 3.0}'], "rostypes": ["geometry_msgs/Point"]}
+    assert json.loads(commBM.writeMsgFromRos([Bool(True), p], ["success", "final_pos"])) == {
+        "names": ["success", "final_pos"], "rostypes": ["std_msgs/Bool", "geometry_msgs/Point"],
+        "msgs": ['{"data": true}', '{"x": 1.0, "y": 2.0, "z": 3.0}']}
+    assert json.loads(commBM.writeVarRequest(["success", "final_pos"])) == {"var_names": ["success", "final_pos"]}
+    assert commBM.readVarRequest('{"var_names": ["a"]}') == ["a"]
+    assert json.loads(commBM.writeMsgFromJson(['{"data": 1.0}'], ["r"], ["std_msgs/Float64"])) == {
+        "names": ["r"], "rostypes": ["std_msgs/Float64"], "msgs": ['{"data": 1.0}']}
+    assert json.loads(commBM.writeFunCallFromJson("M", "f", ['{"data": "x"}'], ["std_msgs/String"])) == {
+        "basic_mod": "M", "function": "f", "msgs": ['{"data": "x"}'], "rostypes": ["std_msgs/String"]}
+    assert commBM.readMsg2Json(commBM.writeMsgFromRos([String("a")], ["t"])) == (
+        ["t"], ['{"data": "a"}'], ["std_msgs/String"])
+    assert commBM.getRosType(Float64(1.0)) == "std_msgs/Float64"
+    assert commBM.json_loads_byteified('{"a": "b"}') == {"a": "b"}
+
+
+def test_basicmodutil_pkg_import_path():
+    from basicmodutil_pkg import commBM as legacy
+
+    assert legacy.writeFunCallFromRos is commBM.writeFunCallFromRos
+
+
+def test_typed_readers_accept_legacy_payloads():
+    legacy_call = commBM.writeFunCallFromRos("PYTHON_BM", "graspObject", [Point(1, 2, 3), Float64(0.1)])
+    call = FunctionCall.decode(legacy_call)
+    assert call.call_id is None and call.names is None and call.rostypes == ["geometry_msgs/Point", "std_msgs/Float64"]
+    legacy_result = commBM.writeMsgFromRos([Bool(True), Point(0, 0, 1)], ["success", "final_pos"])
+    res = FunctionResult.decode(legacy_result)
+    assert res.legacy and res.status == "succeeded" and res.basic_mod is None
+    assert res.values["final_pos"] == Point(0, 0, 1)
+    assert BlackboardRequest.decode(commBM.writeVarRequest(["x"])).var_names == ["x"]
+
+
+def test_legacy_readers_accept_payloads_with_new_keys():
+    call = FunctionCall("PYTHON_BM", "putObject", [Point(1, 2, 3)], names=["target_pos"])
+    assert commBM.readFunCall(call.encode()) == ("PYTHON_BM", "putObject", [Point(1, 2, 3)])
+    res = FunctionResult(["success"], [Bool(True)], call_id="c", basic_mod="m", function="f")
+    assert commBM.readMsg2Ros(res.encode()) == (["success"], [Bool(True)])
+
+
+GOOD_CALL = {"basic_mod": "m", "function": "f", "rostypes": ["geometry_msgs/Point"], "msgs": ['{"x": 1.0}']}
+
+
+def _with(**changes):
+    d = dict(GOOD_CALL)
+    for k, v in changes.items():
+        if v is _DROP:
+            d.pop(k)
+        else:
+            d[k] = v
+    return json.dumps(d)
+
+
+_DROP = object()
+
+MALFORMED = [
+    ("not json", "not valid JSON"),
+    ("", "not valid JSON"),
+    ("[1, 2]", "not a JSON object"),
+    ("42", "not a JSON object"),
+    (_with(function=_DROP), "missing key 'function'"),
+    (_with(basic_mod=_DROP), "missing key 'basic_mod'"),
+    (_with(rostypes=_DROP), "missing key 'rostypes'"),
+    (_with(msgs=_DROP), "missing key 'msgs'"),
+    (_with(function=3), "key 'function' must be a string"),
+    (_with(basic_mod=["m"]), "key 'basic_mod' must be a string"),
+    (_with(rostypes="geometry_msgs/Point"), "key 'rostypes' must be a list"),
+    (_with(msgs={"x": 1}), "key 'msgs' must be a list"),
+    (_with(rostypes=[5]), "rostypes[0] must be a string"),
+    (_with(rostypes=["std_msgs/Strin"]), "unknown ROS type 'std_msgs/Strin' (did you mean 'std_msgs/String'?)"),
+    (_with(rostypes=["float"]), "unknown ROS type 'float'"),
+    (_with(rostypes=["os/system"]), "unknown ROS type 'os/system'"),
+    (_with(msgs=['{"x": "abc"}']), "msgs[0] is not valid JSON for geometry_msgs/Point: field x must be float type"),
+    (_with(msgs=['{"q": 1.0}']), "msgs[0] is not valid JSON for geometry_msgs/Point"),
+    (_with(msgs=["{not json"]), "msgs[0] is not valid JSON for geometry_msgs/Point"),
+    (_with(msgs=[{"x": 1.0}]), "msgs[0] is not a JSON string for geometry_msgs/Point"),
+    (_with(msgs=['[1, 2]']), "msgs[0] is not valid JSON for geometry_msgs/Point: expected a mapping"),
+    (_with(msgs=[]), "'msgs' has 0 items but 'rostypes' has 1"),
+    (_with(names=["a", "b"]), "'names' has 2 items but 'msgs' has 1"),
+    (_with(names="a"), "key 'names' must be a list"),
+    (_with(call_id=7), "key 'call_id' must be a string"),
+    (_with(msgs=['{"x": 1.0, "y": [1]}']), "msgs[0] is not valid JSON for geometry_msgs/Point"),
+    ('{"basic_mod": "m", "function": "f", "rostypes": [], "msgs": [], "pad": "%s"}' % ("x" * (1 << 20)),
+     "exceeds the limit of 1048576 bytes"),
+]
+
+
+@pytest.mark.parametrize("payload,expected", MALFORMED, ids=[e for _, e in MALFORMED])
+def test_malformed_payloads_raise_protocol_error(payload, expected):
+    with pytest.raises(ProtocolError) as info:
+        FunctionCall.decode(payload)
+    assert expected in str(info.value)
+    # the legacy API keeps the original conventions; it ignores the keys it never knew
+    if any(k in expected for k in ("'names'", "'call_id'")):
+        assert commBM.readFunCall(payload)[:2] == ("m", "f")
+    else:
+        assert commBM.readFunCall(payload) == []
+
+
+def test_result_status_and_size_limit_are_checked():
+    with pytest.raises(ProtocolError, match="status 'done' is not one of"):
+        FunctionResult.decode(json.dumps({"names": [], "rostypes": [], "msgs": [], "status": "done"}))
+    small = FunctionResult(["t"], [String("x" * 200)]).encode()
+    with pytest.raises(ProtocolError, match="exceeds the limit of 100 bytes"):
+        FunctionResult.decode(small, max_bytes=100)
+    with pytest.raises(ProtocolError, match="must be a positive integer"):
+        BlackboardRequest.decode('{"var_names": ["a"], "history": 0}')
+    with pytest.raises(ProtocolError, match="not UTF-8"):
+        FunctionCall.decode(b"\xff\xfe")
+
+
+def test_legacy_writers_return_empty_string_on_bad_input():
+    assert commBM.writeMsgFromRos([1], ["a"]) == ""
+    assert commBM.writeMsgFromRos([String("a")], ["a", "b"]) == ""
+    assert commBM.writeMsgFromRos("x", ["a"]) == ""
+    assert commBM.writeFunCallFromRos(1, "f", []) == ""
+    assert commBM.writeFunCallFromRos("m", "f", [object()]) == ""
+    assert commBM.writeFunCallFromJson("m", "f", ["{}"], []) == ""
+    assert commBM.writeMsgFromJson(["{}"], [1], ["std_msgs/String"]) == ""
+    assert commBM.writeVarRequest("a") == "" and commBM.writeVarRequest([1]) == ""
+    assert commBM.writeEventFromRos("m", "e", [String("a")], []) == ""
+    assert commBM.readMsg2Ros("{}") == [] and commBM.readMsg2Json(5) == [] and commBM.readVarRequest(None) == []
+    assert commBM.readEvent2Ros('{"basic_mod": "m"}') == []
+
+
+def test_type_resolution_and_suggestions():
+    assert resolve_type("geometry_msgs/Point") is Point
+    assert resolve_type("geometry_msgs/Nope") is None and resolve_type("nodots") is None
+    assert resolve_type("a/b/c") is None and resolve_type("os.path/x") is None
+    assert suggest_type("float") == "std_msgs/Float64"
+    assert suggest_type("std_msgs/string") == "std_msgs/String"
+    assert to_message("std_msgs/String", "hi", allow_scalar=True) == String("hi")
+    with pytest.raises(ProtocolError, match="expected a mapping"):
+        to_message("geometry_msgs/Point", 1.0, allow_scalar=True)
+    with pytest.raises(ProtocolError, match="must be float"):
+        to_message("std_msgs/Float64", "fast", allow_scalar=True)

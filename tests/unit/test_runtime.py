@@ -1,0 +1,152 @@
+"""The module runtime without ROS: binding, checks, statuses, busy, cancel, events; the sim world."""
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from comm import CancelRequest, Event, FunctionCall, FunctionResult
+from comm import commBM
+from modules.runtime import BasicModule, BindingError, Failure, ModuleServer
+from modules.sim import Navigation, Speech, Vision, World, WorldError
+from modules.sim.robot import RobotState
+
+
+class Served:
+    """A ModuleServer whose outputs land in lists, for assertions."""
+
+    def __init__(self, definition, impl):
+        self.results, self.events = [], []
+        self.cond = threading.Condition()
+        self.server = ModuleServer(definition, impl, self._res, self._ev, cancel_grace=0.5)
+
+    def _res(self, text):
+        with self.cond:
+            self.results.append(FunctionResult.decode(text))
+            self.cond.notify_all()
+
+    def _ev(self, text):
+        self.events.append(Event.decode(text))
+
+    def call(self, function, **inputs):
+        fn = self.server.definition.function(function)
+        call = fn.build_call(inputs)
+        self.server.handle_call(call.encode())
+        return call.call_id
+
+    def result(self, call_id, timeout=5.0):
+        with self.cond:
+            ok = self.cond.wait_for(lambda: any(r.call_id == call_id for r in self.results), timeout)
+            assert ok, "no result for %s: %s" % (call_id, self.results)
+            return next(r for r in self.results if r.call_id == call_id)
+
+
+def test_binding_errors_name_both_sides(sim_defs):
+    class Partial(BasicModule):
+        def go_to(self, place):
+            return {}
+
+        def fly(self):
+            return {}
+
+    with pytest.raises(BindingError) as info:
+        ModuleServer(sim_defs["navigation"], Partial(), print, print)
+    text = str(info.value)
+    assert "function 'approach' of definition" in text and "has no method in class Partial" in text
+    assert "method 'fly' of class Partial is not a function of module 'navigation'" in text
+
+
+def test_calls_rejections_failures_and_exceptions(sim_defs):
+    class Voice(BasicModule):
+        def say(self, text):
+            if text.data == "boom":
+                raise RuntimeError("speaker on fire")
+            if text.data == "no":
+                raise Failure("muted")
+            return {"success": True}
+
+        def listen(self, seconds):
+            return {"success": True, "text": 3}  # breaks the definition
+
+    s = Served(sim_defs["speech"], Voice())
+    assert s.result(s.call("say", text="hola, ¿qué tal?")).status == "succeeded"
+    r = s.result(s.call("say", text="boom"))
+    assert (r.status, r.error) == ("failed", "RuntimeError: speaker on fire")
+    assert s.result(s.call("say", text="no")).error == "muted"
+    r = s.result(s.call("listen", seconds=1.0))
+    assert r.status == "failed" and "invalid outputs" in r.error and "text" in r.error
+    bad = FunctionCall("speech", "sing", [], names=[], call_id="x1")
+    s.server.handle_call(bad.encode())
+    r = s.result("x1")
+    assert r.status == "rejected" and "module 'speech' has no function 'sing'" in r.error
+    s.server.handle_call('{"basic_mod": "speech", "function": "say", "rostypes": ["std_msgs/Bool"],'
+                         ' "msgs": ["{\\"data\\": true}"], "names": ["text"], "call_id": "x2"}')
+    r = s.result("x2")
+    assert r.status == "rejected" and "input 'text' is std_msgs/Bool, the definition says std_msgs/String" in r.error
+    n = len(s.results)
+    s.server.handle_call(FunctionCall("navigation", "go_to", [], names=[]).encode())  # not ours
+    s.server.handle_call("garbage")
+    assert s.result(s.call("say", text="still here")).status == "succeeded"
+    assert len(s.results) == n + 1
+
+
+def test_legacy_positional_call_is_served(sim_defs):
+    s = Served(sim_defs["speech"], Speech(World.load()))
+    s.server.handle_call(commBM.writeFunCallFromJson("speech", "say", ['{"data": "hi"}'], ["std_msgs/String"]))
+    with s.cond:
+        assert s.cond.wait_for(lambda: s.results, 5)
+    r = s.results[0]
+    assert r.status == "succeeded" and r.call_id is None and r.basic_mod == "speech"
+    assert s.server.impl.said == ["hi"]
+
+
+def test_busy_and_cancel(sim_defs):
+    world = World.load()
+    world.speed = 2.0  # the kitchen is ~8 m away: 4 s
+    s = Served(sim_defs["navigation"], Navigation(world))
+    first = s.call("go_to", place="kitchen")
+    second = s.call("approach", target={"x": 1.0})
+    r = s.result(second)
+    assert r.status == "rejected" and r.error == "busy with call %s (go_to)" % first
+    assert s.result(s.call("where_am_i")).status == "succeeded"  # concurrent
+    s.server.handle_cancel(CancelRequest(first, "navigation", "go_to").encode())
+    r = s.result(first)
+    assert r.status == "cancelled"
+    pos = s.result(s.call("where_am_i")).values
+    assert pos["room"].data == "entrance" and 0.0 <= pos["position"].x < 8.0  # stopped on the way
+
+
+def test_events_are_checked_and_published(sim_defs):
+    state = RobotState("bedroom", 2.0, 6.0)
+    s = Served(sim_defs["vision"], Vision(World.load(), state))
+    r = s.result(s.call("find_person", name=""))
+    assert r.values["person"].data == "Ana"
+    assert [(e.event, e.values["person"].data) for e in s.events] == [("personSeen", "Ana")]
+    from comm import ProtocolError
+
+    with pytest.raises(ProtocolError, match="has no event 'vanished'"):
+        s.server.impl.emit("vanished")
+
+
+def test_sim_faults_and_world_errors(sim_defs):
+    world = World.from_dict(dict(
+        rooms={"a": {"x": 0, "y": 0}, "b": {"x": 1, "y": 0}}, start="a", speed=100,
+        faults={"navigation.go_to": {"fail": "wheel jammed", "times": 2}, "speech.say": {"crash": "segfault"}}))
+    s = Served(sim_defs["navigation"], Navigation(world))
+    assert [s.result(s.call("go_to", place="b")).error for _ in range(3)] == ["wheel jammed", "wheel jammed", ""]
+    assert s.result(s.call("go_to", place="attic")).error.startswith("unknown place 'attic'")
+    sp = Served(sim_defs["speech"], Speech(world))
+    assert sp.result(sp.call("say", text="x")).error == "RuntimeError: segfault"
+    with pytest.raises(WorldError, match="unknown room 'garage'"):
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "objects": {"car": {"room": "garage", "x": 0, "y": 0}}})
+    with pytest.raises(WorldError, match="unknown keys explode"):
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"x.y": {"explode": True}}})
+
+
+def test_recognition_only_sees_the_current_room(sim_defs):
+    state = RobotState("living_room", 4.0, 0.0)
+    s = Served(sim_defs["vision"], Vision(World.load(), state))
+    assert s.result(s.call("find_object", object="apple")).values["success"].data is False
+    state.room = "kitchen"
+    r = s.result(s.call("find_object", object="apple"))
+    assert r.values["success"].data is True and r.values["position"].x == pytest.approx(8.6)
