@@ -89,8 +89,11 @@ class TreeRunner:
 
     def _record(self) -> None:
         for b in self.root.iterate():
-            h = self.history.setdefault(b, [])
-            if not h or h[-1] != b.status:
+            h = self.history.get(b)
+            if h is None:
+                if b.status != Status.INVALID:  # not ticked yet: nothing happened to it
+                    self.history[b] = [b.status]
+            elif h[-1] != b.status:
                 h.append(b.status)
 
     def run(self, max_duration: Optional[float] = None) -> RunResult:

@@ -1,0 +1,167 @@
+"""YAML test scenarios for ``bmtree test``: module scripts, expected calls, expected status.
+
+    tree: ../trees/find_apple.yaml
+    scenarios:
+      - name: apple in the kitchen
+        inputs: {object: apple}
+        mocks:
+          vision.find_object:
+            - succeed: {success: false}
+            - succeed: {success: true, position: {x: 8.6, y: 2.3}}
+          navigation.go_to:
+            - fail: blocked
+            - succeed: {room: kitchen}
+              delay: 2.0
+        events:
+          - {at: 1.0, event: vision.lostPerson, params: {person: Ana}}
+        expect:
+          status: success
+          calls:
+            - speech.say
+            - navigation.go_to: {place: living_room}
+          blackboard: {object_room: kitchen}
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import Any, Dict, List, Optional, TextIO
+
+from coordinator.errors import Pos, TreeError, TreeErrors
+from coordinator.testing.kit import TreeRun, TreeTest
+from coordinator.testing.mocks import MockError, Outcome, fail, hang, reject, succeed
+from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
+from modules.definition import ModuleDefinition, default_module_paths, load_definitions
+
+__all__ = ["run_scenarios", "run_scenario_file"]
+
+_OUTCOMES = ("succeed", "fail", "reject", "hang")
+_SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect", "max_duration")
+_EXPECT_KEYS = ("status", "calls", "blackboard")
+
+
+def _outcome(raw: Any, at: Pos) -> Outcome:
+    if not isinstance(raw, dict):
+        raise TreeErrors([TreeError(at, "an outcome is a mapping such as {succeed: {...}} or {fail: reason}")])
+    kinds = [k for k in raw if k in _OUTCOMES]
+    extra = [k for k in raw if k not in _OUTCOMES and k != "delay"]
+    if len(kinds) != 1 or extra:
+        raise TreeErrors([TreeError(at, "an outcome has one of %s (and optionally delay), got %s" % (
+            ", ".join(_OUTCOMES), ", ".join(map(str, raw))))])
+    kind, delay = kinds[0], float(raw.get("delay", 0.0))
+    if kind == "succeed":
+        return succeed(delay, **dict(raw["succeed"] or {}))
+    if kind == "fail":
+        return fail(str(raw["fail"]), delay)
+    if kind == "reject":
+        return reject(str(raw["reject"]), delay)
+    return hang()
+
+
+def _check_keys(m: LMap, allowed: Any, what: str) -> None:
+    import difflib
+
+    errs = []
+    for k in m:
+        if k not in allowed:
+            hint = difflib.get_close_matches(str(k), list(allowed), n=1)
+            errs.append(TreeError(m.key_pos[k], "unknown %s key %r%s" % (what, k, " (did you mean %r?)" % hint[0]
+                                                                       if hint else "")))
+    if errs:
+        raise TreeErrors(errs)
+
+
+def _expect_calls(run: TreeRun, expected: List[Any]) -> List[str]:
+    problems = []
+    actual = run.calls()
+    if len(actual) != len(expected):
+        problems.append("expected %d calls, got %d: %s" % (len(expected), len(actual), ", ".join(run.targets)))
+    for i, (want, got) in enumerate(zip(expected, actual)):
+        target, inputs = (want, {}) if isinstance(want, str) else next(iter(want.items()))
+        if got.target != target:
+            problems.append("call %d: expected %s, got %s" % (i + 1, target, got.target))
+            continue
+        for k, v in (inputs or {}).items():
+            if got.inputs.get(k) != v:
+                problems.append("call %d (%s): input %s is %r, expected %r" % (i + 1, target, k, got.inputs.get(k), v))
+    return problems
+
+
+def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
+                      out: Optional[TextIO] = None) -> List[bool]:
+    """Run every scenario of a file; one PASS/FAIL line each. TreeErrors for a bad file."""
+    out = out or sys.stdout
+    with open(path, encoding="utf-8") as fh:
+        data = load_yaml(fh.read(), path)
+    top = Pos(path, 1, 1)
+    if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
+        raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
+    _check_keys(data, ("tree", "scenarios"), "top-level")
+    tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(data["tree"]))
+    defs = definitions if definitions is not None else load_definitions(default_module_paths())
+    results = []
+    for i, sc in enumerate(data["scenarios"]):
+        at = data["scenarios"].item_pos[i]
+        if not isinstance(sc, LMap):
+            raise TreeErrors([TreeError(at, "a scenario is a mapping")])
+        _check_keys(sc, _SCENARIO_KEYS, "scenario")
+        name = str(sc.get("name", "scenario %d" % (i + 1)))
+        test = TreeTest(tree_path, definitions=defs, inputs=dict(sc.get("inputs") or {}))
+        try:
+            for target, outcomes in (sc.get("mocks") or {}).items():
+                if not isinstance(outcomes, LList):
+                    outcomes_list = [outcomes]
+                    positions = [pos_of(sc["mocks"], target, at)]
+                else:
+                    outcomes_list, positions = list(outcomes), outcomes.item_pos
+                test.mocks[target].script(*[_outcome(o, p) for o, p in zip(outcomes_list, positions)])
+            for ev in sc.get("events") or []:
+                test.mocks.event(float(ev.get("at", 0.0)), str(ev["event"]), **dict(ev.get("params") or {}))
+        except MockError as exc:
+            raise TreeErrors([TreeError(pos_of(sc, "mocks", at), str(exc))])
+        expect = sc.get("expect") or {}
+        if isinstance(expect, LMap):
+            _check_keys(expect, _EXPECT_KEYS, "expect")
+        t0 = time.perf_counter()
+        run = test.run(max_duration=float(sc.get("max_duration", 3600.0)))
+        ms = (time.perf_counter() - t0) * 1000
+        problems = []
+        want_status = str(expect.get("status", "success")).upper()
+        if run.status.value != want_status:
+            problems.append("status %s, expected %s%s" % (run.status.value, want_status,
+                                                          " (%s)" % run.reason if run.reason else ""))
+        if "calls" in expect:
+            problems.extend(_expect_calls(run, list(expect["calls"] or [])))
+        bb = run.blackboard
+        for k, v in (expect.get("blackboard") or {}).items():
+            if bb.get(k) != v:
+                problems.append("blackboard %s is %r, expected %r" % (k, bb.get(k), v))
+        ok = not problems
+        out.write("%s %s: %s (%d calls, %.1f ms)\n" % ("PASS" if ok else "FAIL", path, name, len(run.calls()), ms))
+        for p in problems:
+            out.write("    %s\n" % p)
+        results.append(ok)
+    return results
+
+
+def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None) -> int:
+    """``bmtree test``: exit 0 if every scenario passed, 1 if one failed, 2 for an invalid file."""
+    out = out or sys.stdout
+    defs = load_definitions(modules or default_module_paths())
+    results: List[bool] = []
+    invalid = False
+    for path in paths:
+        try:
+            results.extend(run_scenario_file(path, defs, out))
+        except TreeErrors as exc:
+            sys.stderr.write(str(exc) + "\n")
+            invalid = True
+        except OSError as exc:
+            sys.stderr.write("%s: cannot read: %s\n" % (path, exc.strerror or exc))
+            invalid = True
+    passed = sum(results)
+    out.write("%d passed, %d failed\n" % (passed, len(results) - passed))
+    if invalid:
+        return 2
+    return 0 if passed == len(results) else 1

@@ -1,0 +1,294 @@
+"""The engine with the in-process transport and a simulated clock (no ROS master)."""
+from __future__ import annotations
+
+import pytest
+from py_trees.common import Status
+from std_msgs.msg import Bool, String
+
+from comm import FunctionResult
+from coordinator.builder import build_tree
+from coordinator.clock import SimClock
+from coordinator.context import RunContext
+from coordinator.language import load_tree
+from coordinator.runner import TreeRunner
+from coordinator.testing import MockError, TreeTest, fail, hang, succeed
+from coordinator.testing.mocks import InProcessTransport, Mocks
+
+
+def tree(tmp_path, body, name="t.yaml"):
+    path = tmp_path / name
+    path.write_text("format: 1\n" + body)
+    return str(path)
+
+
+def test_call_statuses_outputs_and_success_convention(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  sequence:
+    - call: speech.listen
+      inputs: {seconds: 2}
+      outputs: {text: heard}
+    - call: vision.find_object
+      inputs: {object: $heard}
+"""))
+    t.mocks["speech.listen"].succeed(text="cup")
+    t.mocks["vision.find_object"].succeed(success=False)
+    run = t.run()
+    assert run.failed and "answered success: false" in run.reason
+    assert run.calls("vision.find_object")[0].inputs == {"object": "cup"}
+    assert run.blackboard["heard"] == "cup"
+    assert run.statuses("speech.listen") == ["RUNNING", "SUCCESS"]
+
+
+def test_check_success_false_keeps_going(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  call: vision.find_object
+  inputs: {object: cup}
+  outputs: {success: seen}
+  check_success: false
+"""))
+    t.mocks["vision.find_object"].succeed(success=False)
+    run = t.run()
+    assert run.succeeded and run.blackboard["seen"] is False
+
+
+def test_call_timeout_cancels_and_fails(tmp_path):
+    t = TreeTest(tree(tmp_path, "root:\n  call: navigation.go_to\n  inputs: {place: kitchen}\n  timeout: 7\n"))
+    t.mocks["navigation.go_to"].hang()
+    run = t.run()
+    assert run.failed and "no answer within 7s" in run.reason
+    assert run.duration == pytest.approx(7.0)
+    (call,) = run.calls()
+    assert call.status == "timeout"
+    cancels = [m for m in run.transport.sent if type(m).__name__ == "CancelRequest"]
+    assert [c.call_id for c in cancels] == [call.call_id]
+
+
+def test_timeout_decorator_halts_child_with_cancel(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  selector:
+    - timeout: 3
+      child:
+        call: navigation.go_to
+        inputs: {place: kitchen}
+    - call: speech.say
+      inputs: {text: giving up}
+"""))
+    t.mocks["navigation.go_to"].succeed(delay=10.0, room="kitchen")
+    run = t.run()
+    assert run.succeeded and run.targets == ["navigation.go_to", "speech.say"]
+    assert run.calls("navigation.go_to")[0].status == "halted"
+    assert run.calls("speech.say")[0].started == pytest.approx(3.0)
+    assert any(type(m).__name__ == "CancelRequest" for m in run.transport.sent)
+
+
+def test_higher_priority_branch_halts_running_call(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+inputs:
+  alarm: {default: false}
+root:
+  parallel:
+    policy: one
+    children:
+      - sequence: [{wait: 2}, {set: {alarm: true}}, {wait: 100}]
+      - selector:
+          memory: false
+          children:
+            - check: alarm
+            - call: navigation.go_to
+              inputs: {place: kitchen}
+"""))
+    t.mocks["navigation.go_to"].hang()
+    run = t.run()
+    assert run.succeeded and run.duration == pytest.approx(2.0)
+    (call,) = run.calls("navigation.go_to")
+    assert call.status == "halted"
+    cancels = [m for m in run.transport.sent if type(m).__name__ == "CancelRequest"]
+    assert [c.call_id for c in cancels] == [call.call_id]
+
+
+def test_parallel_success_on_one_halts_the_other_branch(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  parallel:
+    policy: one
+    children:
+      - wait_event: vision.lostPerson
+        outputs: {person: lost}
+      - call: navigation.go_to
+        inputs: {place: kitchen}
+"""))
+    t.mocks["navigation.go_to"].hang()
+    t.mocks.event(4.0, "vision.lostPerson", person="Ana")
+    run = t.run()
+    assert run.succeeded and run.blackboard["lost"] == "Ana" and run.duration == pytest.approx(4.0)
+    assert run.calls("navigation.go_to")[0].status == "halted"
+
+
+def test_retry_repeat_parallel_inverter_force(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  sequence:
+    - retry: 3
+      child: {call: navigation.go_to, inputs: {place: kitchen}}
+    - repeat: 2
+      child: {call: speech.say, inputs: {text: hi}}
+    - parallel:
+        - call: speech.say
+          inputs: {text: one}
+        - wait: 1.5
+      policy: all
+    - inverter: {check: 'false'}
+    - force_success: {call: vision.find_object, inputs: {object: pear}}
+    - force_failure: {wait: 0}
+"""))
+    t.mocks["navigation.go_to"].fail_first(2, "blocked", room="kitchen")
+    t.mocks["vision.find_object"].succeed(success=False)
+    run = t.run()
+    assert run.failed  # the last node forces failure
+    assert [c.status for c in run.calls("navigation.go_to")] == ["failed", "failed", "succeeded"]
+    assert len(run.calls("speech.say")) == 3
+    assert run.duration == pytest.approx(1.5)
+
+
+def test_wait_event_timeout_and_set(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  selector:
+    - wait_event: navigation.arrived
+      timeout: 2
+    - set: {gave_up: true}
+"""))
+    run = t.run()
+    assert run.succeeded and run.blackboard == {"gave_up": True} and run.duration == pytest.approx(2.0)
+
+
+def test_recall_from_the_blackboard(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  sequence:
+    - call: navigation.go_to
+      inputs: {place: kitchen}
+    - recall: {where: navigation/go_to/room, ok: success}
+    - check: 'where == "kitchen" and ok'
+    - selector:
+        - recall: {nothing: never_stored}
+        - set: {missing_was_reported: true}
+"""))
+    t.mocks["navigation.go_to"].succeed(room="kitchen")
+    run = t.run()
+    assert run.succeeded and run.blackboard["where"] == "kitchen" and run.blackboard["missing_was_reported"]
+
+
+def test_mocks_refuse_what_the_module_would_refuse(tmp_path, sim_defs):
+    mocks = Mocks(sim_defs)
+    with pytest.raises(MockError, match="has no function 'fly'"):
+        mocks["navigation.fly"]
+    with pytest.raises(MockError, match="unknown output 'rooom'"):
+        mocks["navigation.go_to"].succeed(rooom="kitchen")
+    with pytest.raises(MockError, match="must be float"):
+        mocks["navigation.approach"].succeed(position={"x": "near"})
+    clock = SimClock()
+    transport = InProcessTransport(mocks, clock)
+    got = []
+    transport.connect(got.append)
+    from comm import FunctionCall
+
+    transport.send_call(FunctionCall("speech", "sing", [], names=[], call_id="c1"))
+    transport.send_call(FunctionCall("speech", "say", [Bool(True)], names=["text"], call_id="c2"))
+    assert [(r.status, r.call_id) for r in got] == [("rejected", "c1"), ("rejected", "c2")]
+    assert "has no function 'sing'" in got[0].error and "std_msgs/Bool" in got[1].error
+
+
+def _ctx_with_tree(tmp_path, sim_defs, body):
+    clock = SimClock()
+    mocks = Mocks(sim_defs)
+    ctx = RunContext(InProcessTransport(mocks, clock), clock, sim_defs)
+    root = build_tree(load_tree(tree(tmp_path, body), sim_defs), ctx)
+    return ctx, root, mocks
+
+
+def test_legacy_result_correlation(tmp_path, sim_defs):
+    """Results without call_id: by module+function, else by output names, else the oldest call."""
+    ctx, root, _ = _ctx_with_tree(tmp_path, sim_defs, """
+root:
+  parallel:
+    - call: speech.say
+      inputs: {text: a}
+    - call: navigation.where_am_i
+    - call: vision.find_object
+      inputs: {object: apple}
+""")
+    ctx.transport.send_call = lambda call: None      # nobody answers: we play the legacy modules
+    root.setup_with_descendants()
+    root.tick_once()
+    say, where, find = ctx.calls
+    ctx.dispatch(FunctionResult(["room", "position"], [String("hall"), __import__("geometry_msgs.msg").msg.Point()]))
+    assert where.result is not None and say.result is None            # by output names
+    ctx.dispatch(FunctionResult(["success"], [Bool(True)], basic_mod="speech", function="say"))
+    assert say.result is not None                                       # by module and function
+    ctx.dispatch(FunctionResult(["something"], [String("x")]))
+    assert find.result is not None                                      # the oldest pending call
+    ctx.dispatch(FunctionResult(["success"], [Bool(True)], call_id="not-pending"))
+    assert len(ctx.dropped) == 1                                        # a late answer matches nothing
+
+
+def test_late_result_of_timed_out_call_is_not_taken(tmp_path, sim_defs):
+    ctx, root, mocks = _ctx_with_tree(tmp_path, sim_defs, """
+root:
+  sequence:
+    - force_success: {call: navigation.go_to, inputs: {place: kitchen}, timeout: 1}
+    - call: navigation.go_to
+      inputs: {place: bedroom}
+      outputs: {room: room}
+""")
+    first_id = []
+    mocks["navigation.go_to"].script(hang(), succeed(delay=5.0, room="bedroom"))
+    root_runner = TreeRunner(root, ctx)
+    orig = ctx.transport.send_call
+
+    def spy(call):
+        first_id.append(call.call_id)
+        orig(call)
+        if len(first_id) == 2:  # the first call's late answer arrives while the second is pending
+            ctx.inbox.put(FunctionResult(["success", "room", "position"], [Bool(True), String("kitchen"),
+                                         __import__("geometry_msgs.msg").msg.Point()], call_id=first_id[0],
+                                         basic_mod="navigation", function="go_to"))
+
+    ctx.transport.send_call = spy
+    result = root_runner.run()
+    assert result.status == Status.SUCCESS
+    assert result.blackboard["room"].data == "bedroom"
+    # the cancelled answer and the late success of the first call both match nothing
+    assert [r.call_id for r in ctx.dropped] == [first_id[0]] * 2
+    assert [r.status for r in ctx.dropped] == ["cancelled", "succeeded"]
+
+
+def test_event_driven_chain_needs_no_tick_periods(tmp_path):
+    calls = "\n".join("    - call: speech.say\n      inputs: {text: '%d'}" % i for i in range(10))
+    t = TreeTest(tree(tmp_path, "root:\n  sequence:\n" + calls + "\n"))
+    run = t.run()
+    assert run.succeeded and len(run.calls()) == 10
+    assert run.duration == 0.0 and run.result.ticks <= 11
+
+
+def test_scripted_failures_and_rejections(tmp_path):
+    t = TreeTest(tree(tmp_path, """
+root:
+  selector:
+    - call: speech.say
+      inputs: {text: a}
+    - call: speech.say
+      inputs: {text: b}
+    - call: speech.say
+      inputs: {text: c}
+"""))
+    from coordinator.testing import reject
+
+    t.mocks["speech.say"].script(fail("hoarse"), reject("busy"), succeed())
+    run = t.run()
+    assert run.succeeded
+    assert [(c.status, c.error) for c in run.calls()] == [("failed", "hoarse"), ("rejected", "busy"),
+                                                          ("succeeded", "")]

@@ -1,0 +1,56 @@
+"""The pytest plugin, tested as users meet it (pytester runs a throwaway project)."""
+from __future__ import annotations
+
+import os
+
+from tests.conftest import TREES
+
+pytest_plugins = ["pytester"]
+
+USER_TEST = '''
+from coordinator.testing import fail, succeed
+
+TREE = %r
+
+def test_apple_in_kitchen(bmtree_tree):
+    t = bmtree_tree(TREE)
+    t.mocks["vision.find_object"].script(succeed(success=False), succeed(success=True, position={"x": 1.0}))
+    run = t.run()
+    assert run.succeeded
+    assert run.calls("navigation.go_to")[0].inputs["place"] == "living_room"
+    assert run.calls("navigation.go_to")[1].inputs["place"] == "kitchen"
+
+def test_wrong_expectation_fails(bmtree_tree):
+    t = bmtree_tree(TREE)
+    run = t.run()
+    assert run.calls("navigation.go_to")[0].inputs["place"] == "bedroom"
+
+def test_bad_script_is_refused(bmtree_tree):
+    t = bmtree_tree(TREE)
+    t.mocks["navigation.go_to"].succeed(success="very")
+'''
+
+
+def test_plugin_fixtures_and_assertions(pytester):
+    pytester.makepyfile(test_user=USER_TEST % os.path.join(TREES, "find_apple.yaml"))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1, failed=2)
+    result.stdout.fnmatch_lines(["*AssertionError*", "*MockError: scripted outputs of navigation.go_to break "
+                                 "its definition*"])
+
+
+def test_plugin_coverage_report(pytester):
+    pytester.makepyfile(test_user=USER_TEST % os.path.join(TREES, "find_apple.yaml"))
+    result = pytester.runpytest("-p", "no:cacheprovider", "--bmtree-coverage", "-k", "kitchen")
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines([
+        "*bmtree tree coverage*",
+        "*find_apple.yaml: * of * nodes ran",
+        "*find_apple.yaml:*: call 'say I could not find it' never ran",
+        "*search_room.yaml:*: call 'look for the object' reached SUCCESS, FAILURE",
+    ])
+
+
+def test_plugin_is_registered_by_entry_point(pytester):
+    result = pytester.runpytest("--help")
+    result.stdout.fnmatch_lines(["*--bmtree-coverage*"])
