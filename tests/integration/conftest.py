@@ -1,0 +1,108 @@
+"""Integration tests: a real rosmaster (session), real nodes as processes, real topics."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+import pytest
+import yaml
+
+from comm import FunctionCall, FunctionResult
+
+NODES = os.path.join(os.path.dirname(__file__), "nodes")
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if "integration" in str(item.fspath):
+            item.add_marker(pytest.mark.ros)
+
+
+@pytest.fixture
+def slow_world(tmp_path):
+    """The shipped house at 2 m/s: going to the kitchen takes about 4 s."""
+    from modules.sim import DEFAULT_WORLD
+
+    with open(DEFAULT_WORLD) as fh:
+        world = yaml.safe_load(fh)
+    world["speed"] = 2.0
+    path = tmp_path / "slow_world.yaml"
+    path.write_text(yaml.safe_dump(world))
+    return str(path)
+
+
+def start_sim_module(ros_graph, module, world=None, *params, node=None):
+    """Start a sim module; private parameters stay on the master after the node ends, so a node
+    given parameters should get its own ``node`` name."""
+    from modules.sim import DEFAULT_WORLD
+
+    node = node or "bm_" + module
+    args = ["-m", "modules.sim", module, "--world", world or DEFAULT_WORLD, "__name:=" + node, *params]
+    proc = ros_graph.start_node(args, "/" + node)
+    wait_announced(module)
+    return proc
+
+
+def wait_announced(*modules, timeout=15.0):
+    from modules.discovery import live_modules
+
+    end = time.monotonic() + timeout
+    while set(modules) - set(live_modules()):
+        assert time.monotonic() < end, "modules %s did not announce themselves" % (modules,)
+        time.sleep(0.05)
+
+
+class Caller:
+    """Sends calls from the test process and waits for their results on /function/output."""
+
+    def __init__(self, probe, subscribers=1):
+        self.probe = probe
+        self.results = probe.collect("/function/output")
+        self.subscribers = subscribers
+        self._pub = probe.publisher("/master/output", subscribers)
+
+    def wait_connected(self, publishers):
+        end = time.monotonic() + 10
+        while self.results.sub.get_num_connections() < publishers:
+            assert time.monotonic() < end, "result publishers did not connect"
+            time.sleep(0.02)
+
+    def send(self, call):
+        from std_msgs.msg import String
+
+        self._pub.publish(String(call.encode() if isinstance(call, FunctionCall) else call))
+        return getattr(call, "call_id", None)
+
+    def call(self, defs, qualified, timeout=10.0, **inputs):
+        mod, fn = qualified.split(".")
+        call = defs[mod].function(fn).build_call(inputs)
+        self.send(call)
+        return self.result(call.call_id, timeout)
+
+    def result(self, call_id, timeout=10.0):
+        text = self.results.wait_for(lambda t: json.loads(t).get("call_id") == call_id, timeout)[0]
+        return FunctionResult.decode(text)
+
+    def close(self):
+        self.probe.close_collector(self.results)
+
+
+@pytest.fixture
+def caller_factory(ros_probe):
+    made = []
+
+    def make(subscribers=1, publishers=1):
+        c = Caller(ros_probe, subscribers)
+        c.wait_connected(publishers)
+        made.append(c)
+        return c
+
+    yield make
+    for c in made:
+        c.close()
+
+
+def bmtree_cmd(*args):
+    return [sys.executable, "-m", "coordinator", *args]
