@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List
 
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST
 from comm.errors import ProtocolError

@@ -11,9 +11,9 @@ import argparse
 import sys
 from typing import List, Optional
 
-from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT
 from blackboard.service import BlackboardService
 from blackboard.store import DEFAULT_KEEP, Store, default_db_path
+from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 

@@ -12,9 +12,9 @@ import threading
 import time
 from typing import Any, Callable, List, Optional, Set
 
+from blackboard.store import Store, rows_of
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
-from blackboard.store import Store, rows_of
 
 __all__ = ["BlackboardService"]
 
@@ -43,7 +43,7 @@ class BlackboardService:
         self.batch = batch
         self.total = store.count()
         self.rejected = 0
-        self._queue: "queue.Queue[tuple]" = queue.Queue()
+        self._queue: queue.Queue = queue.Queue()
         self._since_prune = 0
         self._touched: Set[str] = set()
         self.threaded = threaded

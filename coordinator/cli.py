@@ -111,7 +111,7 @@ def cmd_modules(args: argparse.Namespace) -> int:
         live = live_modules()
         if not live:
             print("no modules running on %s" % os.environ.get("ROS_MASTER_URI", "?"))
-        for name, m in live.items():
+        for m in live.values():
             _print_module(m.definition, "node %s" % m.node)
         return EXIT_OK
     defs = _definitions(args.paths)
@@ -180,14 +180,16 @@ def cmd_run(args: argparse.Namespace) -> int:
             from coordinator.simgraph import start_sim
 
             print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(sorted(mods)))
+            sys.stdout.flush()
             graph = start_sim(world=args.world)
             os.environ["ROS_MASTER_URI"] = graph.uri
+            print("simulated robot up, master at %s" % graph.uri)
         from coordinator.ros_transport import RosTransport
 
         transport = RosTransport()
         try:
             transport.wait_ready(mods, args.wait, defs, blackboard=recall)
-        except EnvironmentError as exc:
+        except OSError as exc:
             _err("error: %s" % exc)
             return EXIT_ENV
         ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
@@ -333,7 +335,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     except ValueError as exc:  # e.g. a required tree input not given
         _err("error: %s" % exc)
         return EXIT_INVALID
-    except EnvironmentError as exc:
+    except OSError as exc:
         _err("error: %s" % exc)
         return EXIT_ENV
     except KeyboardInterrupt:

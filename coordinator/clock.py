@@ -21,7 +21,7 @@ class Clock(abc.ABC):
         """Seconds on this clock (monotonic)."""
 
     @abc.abstractmethod
-    def wait(self, inbox: "queue.Queue[Any]", timeout: float) -> Optional[Any]:
+    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
         """The next inbox item, or None after ``timeout`` seconds of this clock."""
 
     @abc.abstractmethod
@@ -33,7 +33,7 @@ class RealClock(Clock):
     def now(self) -> float:
         return time.monotonic()
 
-    def wait(self, inbox: "queue.Queue[Any]", timeout: float) -> Optional[Any]:
+    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
         try:
             return inbox.get(timeout=max(0.0, timeout))
         except queue.Empty:
@@ -70,7 +70,7 @@ class SimClock(Clock):
             fn()
         self._now = end
 
-    def wait(self, inbox: "queue.Queue[Any]", timeout: float) -> Optional[Any]:
+    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
         try:
             return inbox.get_nowait()
         except queue.Empty:

@@ -3,11 +3,19 @@ from __future__ import annotations
 
 import logging
 import queue
+import typing
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional
 
-from comm.messages import BlackboardAnswer, BlackboardRequest, CancelRequest, Event, FunctionCall, FunctionResult
+from comm.messages import (
+    BlackboardAnswer,
+    BlackboardRequest,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+)
 from comm.rostypes import from_message
 from coordinator.clock import Clock
 from coordinator.expr import _step, unwrap
@@ -62,12 +70,12 @@ class RunContext:
         self.recall_timeout = recall_timeout
         self.blackboard: Dict[str, Any] = {}
         self.calls: List[CallRecord] = []
-        self.pending: "OrderedDict[str, CallRecord]" = OrderedDict()
+        self.pending: typing.OrderedDict[str, CallRecord] = OrderedDict()
         self.events: List[Event] = []
         self.event_times: List[float] = []
         self.answers: Dict[str, BlackboardAnswer] = {}
         self.dropped: List[FunctionResult] = []
-        self.inbox: "queue.Queue[Any]" = queue.Queue()
+        self.inbox: queue.Queue = queue.Queue()
 
     # values ------------------------------------------------------------------------
     def lookup(self, key: str) -> Any:

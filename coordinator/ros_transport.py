@@ -7,8 +7,15 @@ from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT
 from comm.errors import ProtocolError
-from comm.messages import (DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, CancelRequest, Event,
-                           FunctionCall, FunctionResult)
+from comm.messages import (
+    DEFAULT_MAX_BYTES,
+    BlackboardAnswer,
+    BlackboardRequest,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+)
 from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
 from modules.discovery import LiveModule, live_modules
@@ -116,9 +123,14 @@ class RosTransport(Transport):
             problems = []
             live = self.live()
             nodes = []
+            legacy = self._legacy_nodes(master, [n for n in wanted if n not in live])
             for name in wanted:
                 if name not in live:
-                    problems.append("module %r is not running" % name)
+                    if name in legacy:
+                        nodes.append(legacy[name])
+                    else:
+                        problems.append("module %r is not running (no bmtree module announced it and no node "
+                                        "named /%s listens on %s)" % (name, name, TOPIC_CALL))
                     continue
                 nodes.append(live[name].node)
                 if definitions and name in definitions:
@@ -130,8 +142,27 @@ class RosTransport(Transport):
             if not problems:
                 return
             if time.monotonic() >= end:
-                raise EnvironmentError("; ".join(problems))
+                raise OSError("; ".join(problems))
             time.sleep(0.1)
+
+    @staticmethod
+    def _legacy_nodes(master: Any, names: List[str]) -> Dict[str, str]:
+        """Original modules do not announce themselves; they are found by node name.
+
+        A node called ``/<module>`` (in any namespace) that subscribes to
+        ``/master/output`` is taken as that module, the convention of the original
+        template modules.
+        """
+        if not names:
+            return {}
+        _, subs, _ = master.getSystemState()
+        listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
+        found = {}
+        for name in names:
+            for node in listeners:
+                if node.rsplit("/", 1)[-1] == name:
+                    found[name] = node
+        return found
 
     def _unconnected(self, master: Any, nodes: List[str], blackboard: bool) -> List[str]:
         """Nodes whose topics are not yet connected to ours (a first message would be lost)."""

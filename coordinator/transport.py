@@ -31,10 +31,10 @@ class Transport(abc.ABC):
     def send_request(self, request: BlackboardRequest) -> None:
         """Ask the Blackboard node."""
 
-    def wait_ready(self, modules: Iterable[str], timeout: float) -> None:
+    def wait_ready(self, modules: Iterable[str], timeout: float) -> None:  # noqa: B027 - optional, no-op default
         """Block until the named modules can be called (raise EnvironmentError if not)."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional, no-op default
         """Stop receiving and release resources."""
 
 

@@ -13,7 +13,14 @@ from typing import Any, Callable, Dict, List, Mapping, Optional
 from blackboard.service import BlackboardService
 from blackboard.store import Store
 from comm.errors import ProtocolError
-from comm.messages import BlackboardAnswer, BlackboardRequest, CancelRequest, Event, FunctionCall, FunctionResult
+from comm.messages import (
+    BlackboardAnswer,
+    BlackboardRequest,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+)
 from coordinator.clock import Clock
 from coordinator.context import plain
 from coordinator.transport import Transport

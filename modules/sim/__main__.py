@@ -7,7 +7,7 @@ from typing import List, Optional
 
 from modules.definition import load_definition
 from modules.node import run_module
-from modules.sim import SIM_CLASSES, DEFAULT_WORLD, World, WorldError, definition_path
+from modules.sim import DEFAULT_WORLD, SIM_CLASSES, World, WorldError, definition_path
 
 
 def make_parser() -> argparse.ArgumentParser:

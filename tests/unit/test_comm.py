@@ -8,9 +8,16 @@ import pytest
 from geometry_msgs.msg import Point
 from std_msgs.msg import Bool, Float64, String
 
-from comm import (BlackboardAnswer, BlackboardRequest, CancelRequest, Event, FunctionCall, FunctionResult,
-                  ProtocolError)
-from comm import commBM
+from comm import (
+    BlackboardAnswer,
+    BlackboardRequest,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+    ProtocolError,
+    commBM,
+)
 from comm.rostypes import resolve_type, suggest_type, to_message
 from modules.definition import load_definitions
 from modules.sim import SIM_DIR

@@ -5,8 +5,7 @@ import threading
 
 import pytest
 
-from comm import CancelRequest, Event, FunctionCall, FunctionResult
-from comm import commBM
+from comm import CancelRequest, Event, FunctionCall, FunctionResult, commBM
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer
 from modules.sim import Navigation, Speech, Vision, World, WorldError
 from modules.sim.robot import RobotState

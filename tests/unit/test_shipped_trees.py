@@ -6,7 +6,6 @@ import os
 import pytest
 
 from coordinator.testing import fail
-
 from tests.conftest import TREES
 
 FIND_APPLE = os.path.join(TREES, "find_apple.yaml")

@@ -1,0 +1,168 @@
+"""bmtree run against real module processes: shipped trees, failures, late answers, legacy modules."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import yaml
+
+from tests.conftest import SHARED_REFERENCE, TREES
+from tests.integration.conftest import NODES, bmtree_cmd, start_sim_module
+
+
+def run(*args, timeout=120, env=None):
+    return subprocess.run(bmtree_cmd(*args), capture_output=True, text=True, timeout=timeout,
+                          env=env or dict(os.environ), stdin=subprocess.DEVNULL)
+
+
+def test_shipped_trees_succeed_on_the_simulated_robot():
+    for tree, said in (("find_apple.yaml", "report"), ("invite_to_dining_room.yaml", "lead to the dining room")):
+        out = run("run", "--sim", os.path.join(TREES, tree))
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert "SUCCESS" in out.stdout.splitlines()[-1] or ": SUCCESS in" in out.stdout
+        assert said in out.stdout
+    # the run report names every call with its status
+    assert "navigation.go_to" in out.stdout and "succeeded" in out.stdout
+
+
+def test_find_apple_without_an_apple_ends_in_its_fallback(tmp_path):
+    from modules.sim import DEFAULT_WORLD
+
+    with open(DEFAULT_WORLD) as fh:
+        world = yaml.safe_load(fh)
+    del world["objects"]["apple"]
+    path = tmp_path / "no_apple.yaml"
+    path.write_text(yaml.safe_dump(world))
+    out = run("run", "--sim", "--world", str(path), os.path.join(TREES, "find_apple.yaml"), "-q")
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "find_apple: FAILURE" in out.stdout
+    calls = [line.split()[2] for line in out.stdout.splitlines() if line.startswith("  +")]
+    assert calls.count("vision.find_object") == 4 and calls[-1] == "speech.say"
+    assert "navigation.approach" not in calls
+
+
+def test_recall_through_the_blackboard_node(tmp_path):
+    tree = tmp_path / "recall.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - call: navigation.go_to\n      inputs: {place: kitchen}\n"
+                    "    - recall: {where: navigation/go_to/room}\n    - check: 'where == \"kitchen\"'\n"
+                    "    - force_success: {recall: {ghost: never_written}}\n")
+    out = run("run", "--sim", str(tree))
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "the Blackboard has no never_written" in out.stdout
+
+
+def _watch_call(ros_probe, function):
+    return ros_probe.collect("/master/output")
+
+
+def test_module_killed_mid_call_fails_within_timeout_and_falls_back(ros_graph, ros_probe, slow_world, tmp_path):
+    nav = start_sim_module(ros_graph, "navigation", slow_world)
+    start_sim_module(ros_graph, "speech")
+    tree = tmp_path / "killed.yaml"
+    tree.write_text("format: 1\nroot:\n  selector:\n    - call: navigation.go_to\n      name: drive\n"
+                    "      inputs: {place: kitchen}\n      timeout: 3\n"
+                    "    - call: speech.say\n      name: fallback\n      inputs: {text: I am stuck}\n")
+    calls = ros_probe.collect("/master/output")
+    proc = subprocess.Popen(bmtree_cmd("run", str(tree)), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=dict(os.environ))
+    try:
+        calls.wait_for(lambda t: '"go_to"' in t, 20)
+        t0 = time.monotonic()
+        ros_graph.kill_node(nav)
+        out, err = proc.communicate(timeout=30)
+        elapsed = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        ros_probe.close_collector(calls)
+    assert proc.returncode == 0, out + err
+    go_to = next(line for line in out.splitlines() if line.startswith("  +") and "navigation.go_to" in line)
+    assert "timeout" in go_to and "no answer within 3s" in go_to
+    assert any("speech.say" in line and "succeeded" in line for line in out.splitlines() if line.startswith("  +"))
+    assert elapsed < 20  # bounded by the call's 3 s timeout, not by the robot
+
+
+def test_late_answer_of_a_timed_out_call_is_not_taken(ros_graph, tmp_path):
+    ros_graph.start_node([sys.executable, os.path.join(NODES, "late_module.py")], "/bm_late")
+    tree = tmp_path / "late.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: late.echo
+        inputs: {seconds: 1.5, tag: first}
+        timeout: 0.5
+    - call: late.echo
+      inputs: {seconds: 2.0, tag: second}
+      outputs: {tag: got}
+    - check: 'got == "second"'
+""")
+    out = run("run", str(tree), "--modules", os.path.join(NODES, "late.json"), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = [line for line in out.stdout.splitlines() if line.startswith("  +")]
+    assert "timeout" in lines[0] and "succeeded" in lines[1]
+
+
+def test_original_style_module_is_driven_correctly(ros_graph, tmp_path):
+    ros_graph.start_node([sys.executable, os.path.join(NODES, "legacy_python_bm.py")], "/PYTHON_BM")
+    tree = tmp_path / "arm.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - call: PYTHON_BM.graspObject
+      inputs: {target_pos: {x: 0.3, y: 0.1, z: 0.9}, obj_radius: 0.2}
+      outputs: {final_pos: held_at}
+    - check: 'held_at.x == 0.3 and held_at.z == 0.9'
+    - call: PYTHON_BM.putObject
+      inputs: {target_pos: {x: -0.2, y: 0.0, z: 0.7}}
+      outputs: {final_pos: put_at}
+    - call: PYTHON_BM.goSafePos
+      outputs: {final_pos: safe}
+    - check: 'put_at.x == -0.2 and safe.z == 0.5'
+""")
+    out = run("run", str(tree), "--modules", SHARED_REFERENCE, "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.count("succeeded") == 3
+
+
+def test_missing_module_is_an_environment_error(ros_master, tmp_path):
+    out = run("run", os.path.join(TREES, "find_apple.yaml"), "--wait", "1")
+    assert out.returncode == 3
+    assert "module 'navigation' is not running" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_no_master_is_an_environment_error():
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/")
+    out = run("run", os.path.join(TREES, "find_apple.yaml"), "--wait", "0.5", env=env)
+    assert out.returncode == 3 and "no ROS master at http://127.0.0.1:9/" in out.stderr
+
+
+def test_invalid_tree_exits_2_before_touching_ros(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: 1\nroot:\n  call: speech.sya\n")
+    env = dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/")
+    out = run("run", "--sim", str(bad), env=env)
+    assert out.returncode == 2 and "bad.yaml:3:9: module 'speech' has no function 'sya'" in out.stderr
+
+
+def test_ctrl_c_cancels_and_cleans_up(slow_world):
+    import socket
+
+    proc = subprocess.Popen(bmtree_cmd("run", "--sim", "--world", slow_world, os.path.join(TREES, "find_apple.yaml")),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    seen = ""
+    while "RUNNING   navigation.go_to" not in seen and time.monotonic() < deadline:
+        seen += proc.stdout.readline()
+    uri = next(line.split("master at ")[1] for line in seen.splitlines() if "master at " in line)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 3 and "interrupted" in err
+    port = int(uri.rstrip("/").rsplit(":", 1)[1])
+    with socket.socket() as s:
+        assert s.connect_ex(("127.0.0.1", port)) != 0, "the private rosmaster still runs"
+    left = subprocess.run(["pgrep", "-f", slow_world], capture_output=True, text=True).stdout.split()
+    assert left == [], "nodes left running: %s" % left
