@@ -54,3 +54,16 @@ def test_plugin_coverage_report(pytester):
 def test_plugin_is_registered_by_entry_point(pytester):
     result = pytester.runpytest("--help")
     result.stdout.fnmatch_lines(["*--bmtree-coverage*"])
+
+
+def test_the_readme_example_runs(pytester):
+    from tests.conftest import ROOT
+
+    with open(os.path.join(ROOT, "README.md")) as fh:
+        readme = fh.read()
+    section = readme.split("## Testing your trees without a robot", 1)[1]
+    code = section.split("```python", 1)[1].split("```", 1)[0]
+    code = code.replace('"trees/find_apple.yaml"', repr(os.path.join(TREES, "find_apple.yaml")))
+    pytester.makepyfile(test_readme=code)
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
