@@ -13,7 +13,7 @@ from typing import List, Optional
 
 from blackboard.service import BlackboardService
 from blackboard.store import DEFAULT_KEEP, Store, default_db_path
-from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT
+from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT, sync_publisher
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 
@@ -40,11 +40,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     except Exception as exc:
         sys.stderr.write("error: cannot open the store %s: %s\n" % (path, exc))
         return 3
-    answer_pub = rospy.Publisher(TOPIC_BB_ANSWER, String, queue_size=1000)
+    answer_pub = sync_publisher(TOPIC_BB_ANSWER, String)  # from the writer thread, in request order
     ack_pub = rospy.Publisher(TOPIC_STORED, String, queue_size=1000, latch=True)
     service = BlackboardService(store, lambda t: answer_pub.publish(String(t)), lambda t: ack_pub.publish(String(t)))
-    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data), queue_size=10000)
-    rospy.Subscriber(TOPIC_BB_REQUEST, String, lambda m: service.on_request(m.data), queue_size=1000)
+    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data), queue_size=10000, tcp_nodelay=True)
+    rospy.Subscriber(TOPIC_BB_REQUEST, String, lambda m: service.on_request(m.data), queue_size=1000,
+                     tcp_nodelay=True)
     rospy.loginfo("blackboard storing in %s (%d values, keeping %d per name)", path, service.total, keep)
     rospy.spin()
     service.stop()

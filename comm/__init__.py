@@ -39,3 +39,19 @@ TOPIC_CANCEL = "/master/cancel"
 TOPIC_EVENT = "/event/output"
 TOPIC_BB_REQUEST = "/blackboard/input"
 TOPIC_BB_ANSWER = "/blackboard/output"
+
+
+def sync_publisher(topic: str, data_class: type, **kwargs: object) -> object:
+    """A rospy publisher that writes in the publishing thread (``queue_size=None``).
+
+    rospy's queued publish hands each message to a writer thread and yields the GIL,
+    which costs more than the whole protocol for the small, infrequent messages of
+    calls, results and answers. Only for publishers whose callers may block briefly.
+    """
+    import warnings
+
+    import rospy
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return rospy.Publisher(topic, data_class, queue_size=None, **kwargs)

@@ -29,22 +29,57 @@ class Clock(abc.ABC):
         """Run ``fn`` after ``delay`` seconds of this clock."""
 
 
+class _Timers:
+    """Deadlines kept in a heap and run by the waiting (ticking) thread: no timer threads."""
+
+    def __init__(self) -> None:
+        self._timers: List[Tuple[float, int, Callable[[], None]]] = []
+        self._seq = itertools.count()
+
+    def push(self, at: float, fn: Callable[[], None]) -> None:
+        heapq.heappush(self._timers, (at, next(self._seq), fn))
+
+    def next_at(self) -> Optional[float]:
+        return self._timers[0][0] if self._timers else None
+
+    def run_due(self, now: float) -> int:
+        ran = 0
+        while self._timers and self._timers[0][0] <= now:
+            _, _, fn = heapq.heappop(self._timers)
+            fn()
+            ran += 1
+        return ran
+
+
 class RealClock(Clock):
+    """Wall time (monotonic); ``call_later`` callbacks run inside :meth:`wait`, in the caller's thread."""
+
+    def __init__(self) -> None:
+        self._timers = _Timers()
+
     def now(self) -> float:
         return time.monotonic()
 
-    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
-        try:
-            return inbox.get(timeout=max(0.0, timeout))
-        except queue.Empty:
-            return None
-
     def call_later(self, delay: float, fn: Callable[[], None]) -> None:
-        import threading
+        self._timers.push(time.monotonic() + max(0.0, delay), fn)
 
-        t = threading.Timer(delay, fn)
-        t.daemon = True
-        t.start()
+    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
+        end = time.monotonic() + max(0.0, timeout)
+        while True:
+            now = time.monotonic()
+            self._timers.run_due(now)
+            try:
+                return inbox.get_nowait()
+            except queue.Empty:
+                pass
+            if now >= end:
+                return None
+            nxt = self._timers.next_at()
+            limit = end if nxt is None else min(end, nxt)
+            try:
+                return inbox.get(timeout=max(0.0, limit - now))
+            except queue.Empty:
+                continue
 
 
 class SimClock(Clock):

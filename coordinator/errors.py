@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Sequence
+from typing import List, NamedTuple, Sequence
 
 __all__ = ["TreeError", "TreeErrors", "Pos"]
 
 
-@dataclass(frozen=True)
-class Pos:
+class Pos(NamedTuple):
+    """Where something is written (a tuple: cheap, since every key and value gets one)."""
+
     file: str
     line: int
     column: int

@@ -5,7 +5,15 @@ import logging
 import time
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
 
-from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT
+from comm import (
+    TOPIC_BB_ANSWER,
+    TOPIC_BB_REQUEST,
+    TOPIC_CALL,
+    TOPIC_CANCEL,
+    TOPIC_EVENT,
+    TOPIC_RESULT,
+    sync_publisher,
+)
 from comm.errors import ProtocolError
 from comm.messages import (
     DEFAULT_MAX_BYTES,
@@ -65,10 +73,10 @@ class RosTransport(Transport):
         self._String = String
         if not rospy.core.is_initialized():
             rospy.init_node(self.node_name, anonymous=True, disable_signals=True)
-        self._pubs = {
-            "call": rospy.Publisher(TOPIC_CALL, String, queue_size=1000),
-            "cancel": rospy.Publisher(TOPIC_CANCEL, String, queue_size=100),
-            "request": rospy.Publisher(TOPIC_BB_REQUEST, String, queue_size=100),
+        self._pubs = {  # synchronous: lowest latency, and calls are small and few
+            "call": sync_publisher(TOPIC_CALL, String),
+            "cancel": sync_publisher(TOPIC_CANCEL, String),
+            "request": sync_publisher(TOPIC_BB_REQUEST, String),
         }
         self._subs = [
             rospy.Subscriber(TOPIC_RESULT, String, self._on(FunctionResult), queue_size=1000, tcp_nodelay=True),

@@ -9,6 +9,8 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 
 __all__ = ["LMap", "LList", "load_yaml", "pos_of"]
 
+_STR = "tag:yaml.org,2002:str"
+
 
 class LMap(dict):
     """A mapping that knows the position of itself, of each key and of each value."""
@@ -29,8 +31,8 @@ def _pos(file: str, node: yaml.Node) -> Pos:
     return Pos(file, node.start_mark.line + 1, node.start_mark.column + 1 + (1 if quoted else 0))
 
 
-class _Builder(yaml.SafeLoader):
-    pass
+# libyaml's parser when PyYAML was built with it (Debian's is): same nodes and marks, ~10x faster.
+_Builder = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor) -> Any:
@@ -53,6 +55,8 @@ def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor)
         lst.pos = _pos(file, node)
         lst.item_pos = [_pos(file, n) for n in node.value]
         return lst
+    if node.tag == _STR:  # the common case, without the constructor's machinery
+        return node.value
     return ctor.construct_object(node, deep=True)
 
 

@@ -17,7 +17,7 @@ import os
 import sys
 from typing import Any, Callable, List, Optional
 
-from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT
+from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
 from comm.messages import DEFAULT_MAX_BYTES
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement
@@ -46,15 +46,17 @@ class ModuleNode:
         name = rospy.get_param("~basic_mod", self.definition.name)
         if name != self.definition.name:
             self.definition = self.definition.renamed(name)
-        res_pub = rospy.Publisher(TOPIC_RESULT, String, queue_size=1000)
+        res_pub = sync_publisher(TOPIC_RESULT, String)  # from the call's worker thread
         ev_pub = rospy.Publisher(TOPIC_EVENT, String, queue_size=1000)
         self.server = ModuleServer(self.definition, self.impl,
                                    publish_result=lambda text: res_pub.publish(String(text)),
                                    publish_event=lambda text: ev_pub.publish(String(text)),
                                    max_bytes=self.max_bytes)
         self._subs = [
-            rospy.Subscriber(TOPIC_CALL, String, lambda m: self.server.handle_call(m.data), queue_size=1000),
-            rospy.Subscriber(TOPIC_CANCEL, String, lambda m: self.server.handle_cancel(m.data), queue_size=100),
+            rospy.Subscriber(TOPIC_CALL, String, lambda m: self.server.handle_call(m.data), queue_size=1000,
+                             tcp_nodelay=True),
+            rospy.Subscriber(TOPIC_CANCEL, String, lambda m: self.server.handle_cancel(m.data), queue_size=100,
+                             tcp_nodelay=True),
         ]
         self.impl.setup(self)
         self._param = "%s/%s" % (PARAM_ROOT, self.definition.name)

@@ -7,6 +7,7 @@ tests and the mocked modules all share it.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 from typing import Any, Callable, Dict, Iterable, List, Optional, Set, Union
@@ -18,6 +19,41 @@ from modules.definition import FunctionDefinition, ModuleDefinition
 __all__ = ["BasicModule", "CallContext", "Failure", "ModuleServer", "BindingError"]
 
 log = logging.getLogger("bmtree.module")
+
+
+class _Workers:
+    """Reusable threads for calls: a call never waits for a thread, and no thread is started
+    per call while one is idle."""
+
+    def __init__(self, name: str, idle_seconds: float = 30.0):
+        self._jobs: queue.Queue = queue.Queue()
+        self._idle = 0
+        self._lock = threading.Lock()
+        self._name = name
+        self._idle_seconds = idle_seconds
+
+    def submit(self, fn: Callable[..., None], *args: Any) -> None:
+        with self._lock:
+            start = self._idle == 0
+            if not start:
+                self._idle -= 1
+        self._jobs.put((fn, args))
+        if start:
+            threading.Thread(target=self._loop, name=self._name, daemon=True).start()
+
+    def _loop(self) -> None:
+        while True:
+            try:
+                fn, args = self._jobs.get(timeout=self._idle_seconds)
+            except queue.Empty:
+                with self._lock:
+                    if self._idle > 0 and self._jobs.empty():
+                        self._idle -= 1
+                        return
+                continue
+            fn(*args)
+            with self._lock:
+                self._idle += 1
 
 
 class Failure(Exception):
@@ -143,6 +179,7 @@ class ModuleServer:
         self._lock = threading.Lock()
         self._running: Dict[str, CallContext] = {}
         self._exclusive: Optional[CallContext] = None
+        self._workers = _Workers("%s-call" % definition.name)
         self._bind()
         impl._server = self
 
@@ -208,8 +245,7 @@ class ModuleServer:
         if ctx is None:
             self._reject(call_id, fname, "busy with call %s (%s)" % (busy.call_id, busy.function))
             return
-        threading.Thread(target=self._run, args=(fn, ctx, inputs), daemon=True,
-                         name="%s.%s" % (self.definition.name, fname)).start()
+        self._workers.submit(self._run, fn, ctx, inputs)
 
     def handle_cancel(self, text: Any) -> None:
         """Handle one ``/master/cancel`` payload; never raises."""

@@ -1,0 +1,1 @@
+"""bmtree's benchmarks: ``make bench`` (``python -m bench``). See bench/README.md."""

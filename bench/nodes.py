@@ -1,0 +1,84 @@
+"""Processes the benchmarks start: a raw rospy echo, a bmtree echo module, a result publisher.
+
+    python -m bench.nodes echo                 # raw std_msgs/String ping-pong partner
+    python -m bench.nodes module               # the 'bench' basic module (runtime, answers at once)
+    python -m bench.nodes publish ID RATE SECONDS [COUNT]   # results on /function/output at RATE/s
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+from modules.runtime import BasicModule
+
+DEFINITION = os.path.join(os.path.dirname(os.path.abspath(__file__)), "bench_module.json")
+
+
+class Bench(BasicModule):
+    def ping(self, text):
+        return {"text": text}
+
+
+def echo() -> int:
+    import rospy
+    from std_msgs.msg import String
+
+    rospy.init_node("bench_echo")
+    pub = rospy.Publisher("/bench/pong", String, queue_size=100, tcp_nodelay=True)
+    rospy.Subscriber("/bench/ping", String, pub.publish, queue_size=100, tcp_nodelay=True)
+    rospy.spin()
+    return 0
+
+
+def module() -> int:
+    from modules.definition import load_definition
+    from modules.node import run_module
+
+    return run_module(load_definition(DEFINITION), Bench(), "bm_bench")
+
+
+def publish(ident: str, rate: float, seconds: float, count: int = 0) -> int:
+    """Publish results at ``rate`` per second for ``seconds`` (or until ``count`` were sent);
+    print how many were sent."""
+    import rospy
+    from std_msgs.msg import Float64, String
+
+    from comm import FunctionResult
+
+    rospy.init_node("bench_pub_%s" % ident)
+    pub = rospy.Publisher("/function/output", String, queue_size=100000, tcp_nodelay=True)
+    while pub.get_num_connections() < 1:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    sent = 0
+    start = time.monotonic()
+    names = ["value_%s_%d" % (ident, i) for i in range(10)]
+    while True:
+        now = time.monotonic() - start
+        if now >= seconds or (count and sent >= count):
+            break
+        due = int(now * rate) + 1
+        if count:
+            due = min(due, count)
+        while sent < due:
+            res = FunctionResult([names[sent % 10]], [Float64(sent)], call_id="%s-%d" % (ident, sent),
+                                 basic_mod="bench", function="measure")
+            pub.publish(String(res.encode()))
+            sent += 1
+        time.sleep(0.0005)
+    time.sleep(0.5)  # let rospy's queue drain before exiting
+    print(sent, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    verb = sys.argv[1]
+    if verb == "echo":
+        sys.exit(echo())
+    if verb == "module":
+        sys.exit(module())
+    if verb == "publish":
+        sys.exit(publish(sys.argv[2], float(sys.argv[3]), float(sys.argv[4]),
+                         int(sys.argv[5]) if len(sys.argv) > 5 else 0))
+    sys.exit("unknown verb %r" % verb)
