@@ -3,7 +3,7 @@
 Subscribes to ``/function/output`` and ``/blackboard/input``, answers on
 ``/blackboard/output``, and after each commit publishes on ``/blackboard/stored``
 (latched, std_msgs/String JSON ``{"total", "count", "call_ids"}``) which results
-are now durable.
+are now durable. Private parameters: ``~db``, ``~keep``, ``~max_bytes`` (payload limit).
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from typing import List, Optional
 from blackboard.service import BlackboardService
 from blackboard.store import DEFAULT_KEEP, Store, default_db_path
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT, sync_publisher
+from comm.messages import DEFAULT_MAX_BYTES
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 
@@ -42,7 +43,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 3
     answer_pub = sync_publisher(TOPIC_BB_ANSWER, String)  # from the writer thread, in request order
     ack_pub = rospy.Publisher(TOPIC_STORED, String, queue_size=1000, latch=True)
-    service = BlackboardService(store, lambda t: answer_pub.publish(String(t)), lambda t: ack_pub.publish(String(t)))
+    max_bytes = int(rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
+    service = BlackboardService(store, lambda t: answer_pub.publish(String(t)), lambda t: ack_pub.publish(String(t)),
+                                max_bytes=max_bytes)
     rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data), queue_size=10000, tcp_nodelay=True)
     rospy.Subscriber(TOPIC_BB_REQUEST, String, lambda m: service.on_request(m.data), queue_size=1000,
                      tcp_nodelay=True)

@@ -186,7 +186,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print("simulated robot up, master at %s" % graph.uri)
         from coordinator.ros_transport import RosTransport
 
-        transport = RosTransport()
+        transport = RosTransport(max_bytes=args.max_bytes)
         try:
             transport.wait_ready(mods, args.wait, defs, blackboard=recall)
         except OSError as exc:
@@ -277,6 +277,7 @@ def make_parser() -> argparse.ArgumentParser:
         sp.add_argument("--period", type=float, default=0.25, help="longest time between ticks (s)")
         sp.add_argument("--max-duration", type=float, help="stop the task after this many seconds")
         sp.add_argument("--wait", type=float, default=10.0, help="how long to wait for the master and modules (s)")
+        sp.add_argument("--max-bytes", type=int, default=1 << 20, help="largest payload accepted (bytes)")
         sp.add_argument("-q", "--quiet", action="store_true", help="no live tree display")
 
     d = sub.add_parser("demo", help="run find_apple on the simulated robot (private master)")

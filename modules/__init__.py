@@ -12,7 +12,7 @@ from modules.definition import (
     load_definitions,
     parse_definition,
 )
-from modules.runtime import BasicModule, BindingError, CallContext, Failure, ModuleServer
+from modules.runtime import BasicModule, BindingError, CallContext, Failure, ModuleServer, Rejected
 
 __all__ = [
     "BasicModule",
@@ -25,6 +25,7 @@ __all__ = [
     "ModuleDefinition",
     "ModuleServer",
     "Param",
+    "Rejected",
     "default_module_paths",
     "load_definition",
     "load_definitions",

@@ -5,7 +5,8 @@ Run one from the command line::
     bmtree-module --definition my_module.json --class my_package.my_module:MyModule
 
 or ``python -m modules.node ...``. ROS remappings and private parameters work as
-usual; ``_basic_mod:=other_name`` renames the module as the original modules did.
+usual; ``_basic_mod:=other_name`` renames the module as the original modules did, and
+``_max_bytes:=N`` changes the payload size limit (default 1 MiB).
 """
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ class ModuleNode:
         from std_msgs.msg import String
 
         name = rospy.get_param("~basic_mod", self.definition.name)
+        self.max_bytes = int(rospy.get_param("~max_bytes", self.max_bytes))
         if name != self.definition.name:
             self.definition = self.definition.renamed(name)
         res_pub = sync_publisher(TOPIC_RESULT, String)  # from the call's worker thread

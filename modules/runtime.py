@@ -16,7 +16,7 @@ from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, CancelRequest, Event, FunctionCall, FunctionResult, load_payload
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["BasicModule", "CallContext", "Failure", "ModuleServer", "BindingError"]
+__all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "ModuleServer", "BindingError"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -58,6 +58,11 @@ class _Workers:
 
 class Failure(Exception):
     """Raise (or return) this from a function to answer ``failed`` with a reason."""
+
+
+class Rejected(Exception):
+    """Raise this to answer ``rejected``: the call cannot be taken now (its Exec-condition
+    does not hold), as opposed to a call that was tried and failed."""
 
 
 class BindingError(Exception):
@@ -285,6 +290,8 @@ class ModuleServer:
                     result = self._result(ctx, "failed", "invalid outputs: %s" % exc)
         except Failure as exc:
             result = self._result(ctx, "failed", str(exc) or "failed")
+        except Rejected as exc:
+            result = self._result(ctx, "rejected", str(exc) or "rejected")
         except Exception as exc:
             log.exception("%s raised", fn.qualified)
             result = self._result(ctx, "failed", "%s: %s" % (type(exc).__name__, exc))

@@ -26,8 +26,8 @@ from coordinator.context import plain
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["MockError", "Outcome", "FunctionMock", "Mocks", "InProcessTransport",
-           "succeed", "fail", "hang", "reject", "respond"]
+__all__ = ["MockError", "Outcome", "FunctionMock", "Mocks", "InProcessTransport", "OUTCOME_KINDS",
+           "succeed", "fail", "hang", "reject", "respond", "outcome_from_dict", "outcome_to_dict"]
 
 
 class MockError(AssertionError):
@@ -64,6 +64,47 @@ def hang() -> Outcome:
 def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
     """Compute outputs from the inputs: ``fn(**inputs_as_plain_values) -> dict`` or an Outcome."""
     return Outcome("respond", fn=fn, delay=delay)
+
+
+OUTCOME_KINDS = ("succeed", "fail", "reject", "hang")
+
+
+def outcome_from_dict(raw: Any) -> Outcome:
+    """``{succeed: {outputs}}``, ``{fail: reason}``, ``{reject: reason}`` or ``{hang: true}``,
+    with an optional ``delay`` (seconds): the scripts of scenario files and mock nodes."""
+    if not isinstance(raw, dict):
+        raise MockError("an outcome is a mapping such as {succeed: {...}} or {fail: reason}, got %r" % (raw,))
+    kinds = [k for k in raw if k in OUTCOME_KINDS]
+    extra = [k for k in raw if k not in OUTCOME_KINDS and k != "delay"]
+    if len(kinds) != 1 or extra:
+        raise MockError("an outcome has one of %s (and optionally delay), got %s" % (
+            ", ".join(OUTCOME_KINDS), ", ".join(map(str, raw))))
+    kind = kinds[0]
+    try:
+        delay = float(raw.get("delay", 0.0))
+    except (TypeError, ValueError):
+        raise MockError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
+    if kind == "succeed":
+        outputs = raw["succeed"] or {}
+        if not isinstance(outputs, dict):
+            raise MockError("succeed takes a mapping of outputs, got %r" % (outputs,))
+        return succeed(delay, **dict(outputs))
+    if kind == "fail":
+        return fail(str(raw["fail"]), delay)
+    if kind == "reject":
+        return reject(str(raw["reject"]), delay)
+    return hang()
+
+
+def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
+    if outcome.kind == "respond":
+        raise MockError("a respond(...) outcome runs Python and cannot be sent to a mock node process")
+    value: Any = {"succeed": dict(outcome.outputs), "fail": outcome.reason, "reject": outcome.reason,
+                  "hang": True}[outcome.kind]
+    out: Dict[str, Any] = {outcome.kind: value}
+    if outcome.delay:
+        out["delay"] = outcome.delay
+    return out
 
 
 def _zero(fn: FunctionDefinition) -> Dict[str, Any]:

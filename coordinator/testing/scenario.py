@@ -30,33 +30,21 @@ from typing import Any, Dict, List, Optional, TextIO
 
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.testing.kit import TreeRun, TreeTest
-from coordinator.testing.mocks import MockError, Outcome, fail, hang, reject, succeed
+from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition, default_module_paths, load_definitions
 
 __all__ = ["run_scenarios", "run_scenario_file"]
 
-_OUTCOMES = ("succeed", "fail", "reject", "hang")
 _SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect", "max_duration")
 _EXPECT_KEYS = ("status", "calls", "blackboard")
 
 
 def _outcome(raw: Any, at: Pos) -> Outcome:
-    if not isinstance(raw, dict):
-        raise TreeErrors([TreeError(at, "an outcome is a mapping such as {succeed: {...}} or {fail: reason}")])
-    kinds = [k for k in raw if k in _OUTCOMES]
-    extra = [k for k in raw if k not in _OUTCOMES and k != "delay"]
-    if len(kinds) != 1 or extra:
-        raise TreeErrors([TreeError(at, "an outcome has one of %s (and optionally delay), got %s" % (
-            ", ".join(_OUTCOMES), ", ".join(map(str, raw))))])
-    kind, delay = kinds[0], float(raw.get("delay", 0.0))
-    if kind == "succeed":
-        return succeed(delay, **dict(raw["succeed"] or {}))
-    if kind == "fail":
-        return fail(str(raw["fail"]), delay)
-    if kind == "reject":
-        return reject(str(raw["reject"]), delay)
-    return hang()
+    try:
+        return outcome_from_dict(raw)
+    except MockError as exc:
+        raise TreeErrors([TreeError(at, str(exc))])
 
 
 def _check_keys(m: LMap, allowed: Any, what: str) -> None:

@@ -292,3 +292,37 @@ root:
     assert run.succeeded
     assert [(c.status, c.error) for c in run.calls()] == [("failed", "hoarse"), ("rejected", "busy"),
                                                           ("succeeded", "")]
+
+
+def test_live_definition_mismatch_is_described(sim_defs):
+    from coordinator.ros_transport import diff_definitions
+    from modules.definition import parse_definition
+
+    live = sim_defs["navigation"].to_dict()
+    live["Functions"][0]["Input-params"][0]["Data-type"] = "geometry_msgs/Point"
+    live["Functions"] = [f for f in live["Functions"] if f["Name"] != "approach"]
+    diff = diff_definitions(sim_defs["navigation"], parse_definition(live))
+    assert "go_to inputs differ: here place:std_msgs/String, running place:geometry_msgs/Point" in diff
+    assert "function 'approach' is not served by the running module" in diff
+    assert diff_definitions(sim_defs["navigation"], sim_defs["navigation"]) == []
+
+
+def test_display_on_a_terminal_and_as_lines(tmp_path):
+    import io
+
+    from coordinator.runner import Display
+
+    t = TreeTest(tree(tmp_path, "root:\n  sequence:\n    - call: speech.say\n      inputs: {text: hi}\n"
+                                "    - check: 'false'\n      name: impossible\n"))
+    clock = SimClock()
+    ctx = RunContext(InProcessTransport(t.mocks, clock), clock, t.definitions)
+    for tty in (True, False):
+        out = io.StringIO()
+        ctx = RunContext(InProcessTransport(t.mocks, clock), clock, t.definitions)
+        TreeRunner(build_tree(t.tree, ctx), ctx, display=Display(out, tty=tty, min_interval=0.0)).run()
+        text = out.getvalue()
+        if tty:
+            assert "\x1b[" in text and "speech.say" in text   # redrawn in place with py_trees' unicode tree
+        else:
+            assert "\x1b[" not in text
+            assert "SUCCESS   speech.say" in text and "FAILURE   impossible (false is false)" in text

@@ -149,3 +149,33 @@ def test_recognition_only_sees_the_current_room(sim_defs):
     state.room = "kitchen"
     r = s.result(s.call("find_object", object="apple"))
     assert r.values["success"].data is True and r.values["position"].x == pytest.approx(8.6)
+
+
+def test_hang_delay_faults_and_module_rejections(sim_defs):
+    import time as _time
+
+    from modules.runtime import Rejected
+
+    world = World.from_dict(dict(rooms={"a": {"x": 0, "y": 0}}, start="a", faults={
+        "speech.listen": {"hang": True}, "speech.say": {"delay": 0.3, "times": 1}}))
+    s = Served(sim_defs["speech"], Speech(world))
+    t0 = _time.monotonic()
+    assert s.result(s.call("say", text="late")).status == "succeeded"
+    assert _time.monotonic() - t0 >= 0.3
+    hung = s.call("listen", seconds=1.0)
+    _time.sleep(0.2)
+    with s.cond:
+        assert not any(r.call_id == hung for r in s.results)        # hangs until cancelled
+    s.server.handle_cancel(CancelRequest(hung, "speech", "listen").encode())
+    assert s.result(hung).status == "cancelled"
+
+    class Picky(BasicModule):
+        def say(self, text):
+            raise Rejected("the robot is charging")
+
+        def listen(self, seconds):
+            return {"success": False, "text": ""}
+
+    p = Served(sim_defs["speech"], Picky())
+    r = p.result(p.call("say", text="x"))
+    assert (r.status, r.error) == ("rejected", "the robot is charging")
