@@ -82,6 +82,7 @@ class Call(Leaf):
             self.ctx.finish(rec, "failed", "answered success: false")
             return self._fail("%s answered success: false" % rec.target)
         self.ctx.finish(rec, "succeeded")
+        self.feedback_message = "succeeded in %.3fs" % (rec.duration or 0.0)
         for out, key in self.node.opts.get("outputs", {}).items():
             self.ctx.blackboard[key] = values[out]
         return Status.SUCCESS
