@@ -7,7 +7,7 @@ import py_trees
 
 from coordinator import behaviours as B
 from coordinator.context import RunContext
-from coordinator.language import _REQUIRED, Node, TreeFile
+from coordinator.treeast import REQUIRED, Node, TreeFile
 
 __all__ = ["build", "build_tree"]
 
@@ -20,7 +20,7 @@ def _children(node: Node, ctx: RunContext) -> list:
 
 def _include(node: Node, ctx: RunContext) -> py_trees.behaviour.Behaviour:
     sub: TreeFile = node.opts["tree"]
-    values: Dict[str, Any] = {k: v for k, v in sub.inputs.items() if v is not _REQUIRED}
+    values: Dict[str, Any] = {k: v for k, v in sub.inputs.items() if v is not REQUIRED}
     values.update(node.opts.get("args", {}))
     kids = []
     if values:
@@ -67,7 +67,7 @@ def build_tree(tree: TreeFile, ctx: RunContext, inputs: Optional[Dict[str, Any]]
     if missing:
         raise ValueError("tree input%s %s must be given" % ("s" if len(missing) > 1 else "",
                                                             ", ".join(repr(m) for m in missing)))
-    values = {k: v for k, v in tree.inputs.items() if v is not _REQUIRED}
+    values = {k: v for k, v in tree.inputs.items() if v is not REQUIRED}
     values.update(inputs or {})
     ctx.blackboard.update(ctx.resolve(values))
     return build(tree.root, ctx)

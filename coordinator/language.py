@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import difflib
 import os
-from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Set, Tuple
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import ProtocolError
+from coordinator.dataflow import check_flow
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.expr import Expr, ExprError
+from coordinator.treeast import REQUIRED, Node, Ref, TreeFile, refs_in, used_modules, walk
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import FunctionDefinition, ModuleDefinition
 
@@ -21,39 +23,6 @@ __all__ = ["FORMAT", "KINDS", "Node", "Ref", "TreeFile", "load_tree", "refs_in",
 FORMAT = 1
 _TOP_KEYS = ("format", "name", "description", "inputs", "root")
 _INPUT_KEYS = ("default", "description")
-
-
-@dataclass(frozen=True)
-class Ref:
-    """``$key.field[0]`` in a YAML value: read from the tree blackboard when the node starts."""
-
-    key: str
-    path: Tuple[Any, ...] = ()
-
-    def __str__(self) -> str:
-        return "$" + self.key + "".join("[%d]" % p if isinstance(p, int) else "." + p for p in self.path)
-
-
-@dataclass
-class Node:
-    kind: str
-    name: str
-    pos: Pos
-    children: List[Node] = field(default_factory=list)
-    opts: Dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class TreeFile:
-    path: str
-    name: str
-    description: str
-    inputs: Dict[str, Any]            # name -> default (_REQUIRED if none)
-    root: Node
-    required_inputs: FrozenSet[str] = frozenset()
-
-
-_REQUIRED = object()
 
 
 @dataclass(frozen=True)
@@ -124,16 +93,6 @@ def _literal(value: Any) -> Any:
     if isinstance(value, list):
         return [_literal(v) for v in value]
     return value
-
-
-def refs_in(value: Any) -> List[Ref]:
-    if isinstance(value, Ref):
-        return [value]
-    if isinstance(value, dict):
-        return [r for v in value.values() for r in refs_in(v)]
-    if isinstance(value, list):
-        return [r for v in value for r in refs_in(v)]
-    return []
 
 
 class _Parser:
@@ -216,7 +175,7 @@ class _Parser:
             if "default" in spec:
                 inputs[name] = _literal(spec["default"])
             else:
-                inputs[name] = _REQUIRED
+                inputs[name] = REQUIRED
                 required.append(name)
         return inputs, required
 
@@ -307,12 +266,15 @@ class _Parser:
 
     def _number(self, node: Node, raw: LMap, key: str, value: Any, at: Pos, minimum: float = 0.0,
                 integer: bool = False) -> Optional[float]:
-        ok = isinstance(value, int) if integer else isinstance(value, (int, float))
-        if not ok or isinstance(value, bool) or value < minimum or (minimum == 0.0 and not integer and value == 0
-                                                                    and node.kind != "wait"):
-            what = "an integer >= %d" % minimum if integer else "a positive number of seconds"
-            if node.kind == "wait":
-                what = "a number of seconds >= 0"
+        """A count (integer >= minimum) or a duration (> 0 seconds; >= 0 for ``wait``)."""
+        numeric = isinstance(value, int) if integer else isinstance(value, (int, float))
+        if integer:
+            ok, what = numeric and value >= minimum, "an integer >= %d" % minimum
+        elif node.kind == "wait":
+            ok, what = numeric and value >= 0, "a number of seconds >= 0"
+        else:
+            ok, what = numeric and value > 0, "a positive number of seconds"
+        if not ok or isinstance(value, bool):
             self.err(at, "%s of %s must be %s, got %r" % (key, node.kind, what, value))
             return None
         return value
@@ -528,58 +490,6 @@ def _default_name(node: Node) -> str:
     return node.kind
 
 
-# data flow -----------------------------------------------------------------------------
-def _flow(node: Node, avail: FrozenSet[str], errors: List[TreeError], tree: TreeFile) -> FrozenSet[str]:
-    """Keys surely written when ``node`` succeeds; reports reads of keys not surely written."""
-
-    def need(keys: Any) -> None:
-        for k in sorted(keys):
-            if k not in avail:
-                errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
-                                                   "node (write it earlier or declare it under 'inputs:')" % k))
-
-    k, o = node.kind, node.opts
-    if k == "sequence":
-        cur = avail
-        for c in node.children:
-            cur = cur | _flow(c, cur, errors, tree)
-        return cur - avail
-    if k in ("selector", "parallel"):
-        ws = [_flow(c, avail, errors, tree) for c in node.children]
-        if not ws:
-            return frozenset()
-        if k == "parallel" and o.get("policy") == "all":
-            return frozenset().union(*ws)
-        return frozenset.intersection(*ws)
-    if k in ("retry", "repeat", "timeout"):
-        return _flow(node.children[0], avail, errors, tree) if node.children else frozenset()
-    if k in ("inverter", "force_success", "force_failure"):
-        for c in node.children:
-            _flow(c, avail, errors, tree)
-        return frozenset()
-    if k == "call":
-        need({r.key for r in refs_in(o.get("inputs", {}))})
-        return frozenset(o.get("outputs", {}).values())
-    if k == "wait_event":
-        return frozenset(o.get("outputs", {}).values())
-    if k == "recall":
-        return frozenset(o.get("names", {}))
-    if k == "set":
-        need({r.key for r in refs_in(o.get("values", {}))})
-        return frozenset(o.get("values", {}))
-    if k == "check":
-        need(o["expr"].keys if "expr" in o else ())
-        return frozenset()
-    if k == "include":
-        need({r.key for r in refs_in(o.get("args", {}))})
-        sub: Optional[TreeFile] = o.get("tree")
-        if sub is None:
-            return frozenset()
-        bound = frozenset(o.get("args", {})) | frozenset(k2 for k2, v in sub.inputs.items() if v is not _REQUIRED)
-        return bound | _flow(sub.root, bound | avail, errors, sub)
-    return frozenset()
-
-
 def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
               loader: Optional[Callable[[str], str]] = None, given: Set[str] = frozenset()) -> TreeFile:
     """Parse and validate a tree file and its includes; TreeErrors lists every problem.
@@ -596,31 +506,8 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
     tree = parser.load_file(path, (), None)
     errors = list(parser.errors)
     if tree is not None:
-        avail = frozenset(k for k, v in tree.inputs.items() if v is not _REQUIRED) | frozenset(given) | \
-            frozenset(tree.required_inputs)
-        _flow(tree.root, avail, errors, tree)
+        errors.extend(check_flow(tree, frozenset(given)))
     if errors:
         raise TreeErrors(errors)
     assert tree is not None
     return tree
-
-
-def walk(node: Node) -> Any:
-    """Every node of a tree, includes expanded, depth first."""
-    yield node
-    for c in node.children:
-        yield from walk(c)
-    sub = node.opts.get("tree")
-    if sub is not None:
-        yield from walk(sub.root)
-
-
-def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:
-    """The modules a tree calls or waits on, and whether it recalls from the Blackboard node."""
-    mods: Set[str] = set()
-    recall = False
-    for n in walk(tree.root):
-        if n.kind in ("call", "wait_event") and isinstance(n.opts.get("target"), str):
-            mods.add(n.opts["target"].split(".")[0])
-        recall = recall or n.kind == "recall"
-    return mods, recall

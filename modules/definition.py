@@ -235,7 +235,7 @@ def _schema_message(err: jsonschema.ValidationError) -> str:
     return err.message
 
 
-def _params(raw: List[Dict[str, Any]], module: str) -> Tuple[Param, ...]:
+def _params(raw: List[Dict[str, Any]]) -> Tuple[Param, ...]:
     return tuple(Param(p["Name"], p["Data-type"], p.get("Description", "")) for p in raw)
 
 
@@ -267,7 +267,7 @@ def parse_definition(data: Any, source: str = "<definition>") -> ModuleDefinitio
         check_params(f["Input-params"], "Functions[%d].Input-params" % i)
         check_params(f["Output-params"], "Functions[%d].Output-params" % i)
         functions[f["Name"]] = FunctionDefinition(
-            name=f["Name"], inputs=_params(f["Input-params"], name), outputs=_params(f["Output-params"], name),
+            name=f["Name"], inputs=_params(f["Input-params"]), outputs=_params(f["Output-params"]),
             description=f["Description"], exec_condition=f["Exec-condition"],
             concurrent=bool(f.get("Concurrent", False)), module=name)
     events: Dict[str, EventDefinition] = {}
@@ -275,7 +275,7 @@ def parse_definition(data: Any, source: str = "<definition>") -> ModuleDefinitio
         if e["Name"] in events:
             problems.append("%s: Events[%d].Name: duplicate event name %r" % (source, i, e["Name"]))
         check_params(e["Event-params"], "Events[%d].Event-params" % i)
-        events[e["Name"]] = EventDefinition(e["Name"], _params(e["Event-params"], name), e["Description"], name)
+        events[e["Name"]] = EventDefinition(e["Name"], _params(e["Event-params"]), e["Description"], name)
     if problems:
         raise DefinitionError(problems)
     return ModuleDefinition(name=name, functions=functions, events=events, brief=data["Brief Description"],
