@@ -66,13 +66,17 @@ def _tree_file(tmp: str, name: str, body: str) -> str:
     return path
 
 
-def _calls_in_running_tree(tree: Any, transport: Any, defs: Dict[str, Any]) -> List[float]:
-    """Durations of every call of one run: from the leaf sending to the leaf's SUCCESS."""
+def _calls_in_running_tree_records(tree: Any, transport: Any, defs: Dict[str, Any]) -> List[Any]:
     ctx = RunContext(transport, RealClock(), defs)
     result = TreeRunner(build_tree(tree, ctx), ctx, period=1.0).run()
     if not result.succeeded:
         raise RuntimeError("bench tree failed: %s" % result.reason)
-    return [c.ended - c.started for c in result.calls]
+    return result.calls
+
+
+def _calls_in_running_tree(tree: Any, transport: Any, defs: Dict[str, Any]) -> List[float]:
+    """Durations of every call of one run: from the leaf sending to the leaf's SUCCESS."""
+    return [c.ended - c.started for c in _calls_in_running_tree_records(tree, transport, defs)]
 
 
 def call_latency(graph: RosGraph, tmp: str, n: int) -> List[Row]:
@@ -95,17 +99,14 @@ def call_latency(graph: RosGraph, tmp: str, n: int) -> List[Row]:
                                              for _ in range(10))
     ten = load_tree(_tree_file(tmp, "ten.yaml", chain), defs)
     _calls_in_running_tree(loop, transport, defs)  # warm-up: connections, caches
-    raw, ours = [], []
-    for _ in range(4):  # interleaved, so that machine noise hits both alike
+    raw, ours, spans = [], [], []
+    for _ in range(4):  # interleaved, so that machine noise hits all three alike
         raw.extend(_raw_pingpong(payload, block))
         ours.extend(_calls_in_running_tree(loop, transport, defs))
-    r, o = summary(raw), summary(ours)
-    spans = []
-    for _ in range(max(20, n // 10)):
-        ctx = RunContext(transport, RealClock(), defs)
-        res = TreeRunner(build_tree(ten, ctx), ctx, period=1.0).run()
-        spans.append(res.calls[-1].ended - res.calls[0].started)
-    c = summary(spans)
+        for _ in range(max(5, block // 10)):
+            calls = _calls_in_running_tree_records(ten, transport, defs)
+            spans.append(calls[-1].ended - calls[0].started)
+    r, o, c = summary(raw), summary(ours), summary(spans)
     ms = 1000.0
     return [
         Row("call leaf round trip, median", o["median"] * ms, "ms", r["median"] * ms, "<= 1.5x",

@@ -8,7 +8,7 @@ problem; values come back as type-checked ROS message instances.
 from __future__ import annotations
 
 import json
-import uuid
+import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -33,7 +33,8 @@ STATUSES = ("succeeded", "failed", "rejected", "cancelled")
 
 
 def new_id() -> str:
-    return uuid.uuid4().hex[:16]
+    """A random 64-bit id as 16 hex digits (unique enough for calls and requests in flight)."""
+    return os.urandom(8).hex()
 
 
 def load_payload(text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> Dict[str, Any]:

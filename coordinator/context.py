@@ -44,7 +44,7 @@ class CallRecord:
 
     target: str
     call_id: str
-    inputs: Dict[str, Any]
+    messages: Dict[str, Any]      # the inputs as sent (ROS messages)
     started: float
     ended: Optional[float] = None
     status: str = "running"      # running, succeeded, failed, rejected, cancelled, timeout, halted
@@ -52,6 +52,11 @@ class CallRecord:
     outputs: Dict[str, Any] = field(default_factory=dict)
     function: Optional[FunctionDefinition] = None
     result: Optional[FunctionResult] = None
+
+    @property
+    def inputs(self) -> Dict[str, Any]:
+        """The inputs as plain data (``{"place": "kitchen"}``), for reports and tests."""
+        return {k: plain(v) for k, v in self.messages.items()}
 
     @property
     def duration(self) -> Optional[float]:
@@ -103,7 +108,7 @@ class RunContext:
     # calls -------------------------------------------------------------------------
     def start_call(self, fn: FunctionDefinition, call: FunctionCall) -> CallRecord:
         rec = CallRecord(target=fn.qualified, call_id=call.call_id or "", function=fn, started=self.clock.now(),
-                         inputs={n: plain(m) for n, m in zip(call.names or [], call.msgs)})
+                         messages=dict(zip(call.names or [], call.msgs)))
         self.calls.append(rec)
         self.pending[rec.call_id] = rec
         self.transport.send_call(call)

@@ -87,12 +87,15 @@ class TreeRunner:
         self.history: Dict[Any, List[Status]] = {}
         self.ticks = 0
 
-    def _record(self) -> None:
-        for b in self.root.iterate():
+    def _tick(self) -> None:
+        """One tick; with ``record_history``, note the status of every node it visited."""
+        if not self.record_history:
+            self.root.tick_once()
+            return
+        for b in self.root.tick():
             h = self.history.get(b)
             if h is None:
-                if b.status != Status.INVALID:  # not ticked yet: nothing happened to it
-                    self.history[b] = [b.status]
+                self.history[b] = [b.status]
             elif h[-1] != b.status:
                 h.append(b.status)
 
@@ -104,10 +107,8 @@ class TreeRunner:
         reason = ""
         try:
             while True:
-                self.root.tick_once()
+                self._tick()
                 self.ticks += 1
-                if self.record_history:
-                    self._record()
                 if self.display is not None:
                     self.display(self.root, ctx.clock.now() - start)
                 if self.root.status in (Status.SUCCESS, Status.FAILURE):
