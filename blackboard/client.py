@@ -28,8 +28,9 @@ class BlackboardClient:
         self._lock = threading.Lock()
         self._pub = rospy.Publisher(TOPIC_BB_REQUEST, String, queue_size=100)
         self._sub = rospy.Subscriber(TOPIC_BB_ANSWER, String, self._on_answer, queue_size=100)
-        end = time.monotonic() + connect_timeout
-        while self._pub.get_num_connections() == 0 and time.monotonic() < end:
+        end = time.monotonic() + connect_timeout  # an answer sent before we listen is lost
+        while (self._pub.get_num_connections() == 0 or self._sub.get_num_connections() == 0) \
+                and time.monotonic() < end:
             time.sleep(0.01)
 
     def _on_answer(self, msg: Any) -> None:

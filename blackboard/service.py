@@ -47,6 +47,12 @@ class BlackboardService:
         self._since_prune = 0
         self._touched: Set[str] = set()
         self.threaded = threaded
+        # Items received but not yet handled, and the store's lock: a request arriving when
+        # nothing is pending is answered at once in the caller's thread (one hand-off less),
+        # which keeps "a request that follows a result sees it".
+        self._pending = 0
+        self._pending_lock = threading.Lock()
+        self._store_lock = threading.Lock()
         self._thread: Optional[threading.Thread] = None
         if threaded:
             self._thread = threading.Thread(target=self._work, name="blackboard-writer", daemon=True)
@@ -61,17 +67,28 @@ class BlackboardService:
             self._decode_result(text, stamp, rows, ids)
             self._commit(rows, ids)
             return
-        self._queue.put((_RESULT, text, stamp))
+        self._enqueue((_RESULT, text, stamp))
 
     def on_request(self, text: Any) -> None:
         if not self.threaded:
             self._answer(text)
             return
-        self._queue.put((_REQUEST, text, time.time()))
+        with self._store_lock:
+            with self._pending_lock:
+                idle = self._pending == 0
+            if idle:
+                self._answer(text)
+                return
+        self._enqueue((_REQUEST, text, time.time()))
+
+    def _enqueue(self, item: tuple) -> None:
+        with self._pending_lock:
+            self._pending += 1
+        self._queue.put(item)
 
     def stop(self, timeout: float = 5.0) -> None:
         if self._thread is not None:
-            self._queue.put((_STOP, None, 0.0))
+            self._enqueue((_STOP, None, 0.0))
             self._thread.join(timeout)
 
     def flush(self, timeout: float = 5.0) -> bool:
@@ -79,7 +96,7 @@ class BlackboardService:
         if not self.threaded:
             return True
         done = threading.Event()
-        self._queue.put((_REQUEST, done, 0.0))
+        self._enqueue((_REQUEST, done, 0.0))
         return done.wait(timeout)
 
     # worker
@@ -91,23 +108,33 @@ class BlackboardService:
                     items.append(self._queue.get_nowait())
                 except queue.Empty:
                     break
-            rows: List[tuple] = []
-            ids: List[str] = []
-            for kind, payload, stamp in items:
-                if kind == _RESULT:
-                    self._decode_result(payload, stamp, rows, ids)
-                    continue
-                self._commit(rows, ids)
-                rows, ids = [], []
-                if kind == _STOP:
-                    return
-                if isinstance(payload, threading.Event):
-                    payload.set()
-                else:
-                    self._answer(payload)
+            with self._store_lock:
+                stop = self._handle(items)
+                with self._pending_lock:
+                    self._pending -= len(items)
+            if stop:
+                return
+
+    def _handle(self, items: List[tuple]) -> bool:
+        """Store and answer one batch in arrival order; True at the stop marker."""
+        rows: List[tuple] = []
+        ids: List[str] = []
+        for kind, payload, stamp in items:
+            if kind == _RESULT:
+                self._decode_result(payload, stamp, rows, ids)
+                continue
             self._commit(rows, ids)
-            if self._since_prune >= self.prune_every:
-                self._prune()
+            rows, ids = [], []
+            if kind == _STOP:
+                return True
+            if isinstance(payload, threading.Event):
+                payload.set()
+            else:
+                self._answer(payload)
+        self._commit(rows, ids)
+        if self._since_prune >= self.prune_every:
+            self._prune()
+        return False
 
     def _decode_result(self, text: Any, stamp: float, rows: List[tuple], ids: List[str]) -> None:
         try:
