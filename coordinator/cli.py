@@ -175,6 +175,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             for name, live in live_modules().items():
                 defs.setdefault(name, live.definition)
         tree = load_tree(args.tree, defs, given=set(given))
+        missing = sorted(tree.required_inputs - set(given))
+        if missing:
+            raise _Usage("%s needs the input%s %s: give them with --set KEY=VALUE" % (
+                args.tree, "s" if len(missing) > 1 else "", ", ".join(missing)))
         mods, recall = used_modules(tree)
         if args.sim:
             from coordinator.simgraph import start_sim

@@ -35,23 +35,41 @@ def _pos(file: str, node: yaml.Node) -> Pos:
 _Builder = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor) -> Any:
+MAX_NODES = 200000
+
+
+class _Budget:
+    """Counts converted nodes: aliases can make a small file expand without bound."""
+
+    def __init__(self, file: str):
+        self.left = MAX_NODES
+        self.file = file
+
+    def spend(self, node: yaml.Node) -> None:
+        self.left -= 1
+        if self.left < 0:
+            raise TreeErrors([TreeError(_pos(self.file, node), "the document expands to more than %d YAML nodes "
+                                                                "(recursive or repeated aliases?)" % MAX_NODES)])
+
+
+def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor, budget: _Budget) -> Any:
+    budget.spend(node)
     if isinstance(node, yaml.MappingNode):
         out = LMap()
         out.pos, out.key_pos, out.val_pos = _pos(file, node), {}, {}
         ctor.flatten_mapping(node)
         for k_node, v_node in node.value:
-            key = _convert(k_node, file, ctor)
+            key = _convert(k_node, file, ctor, budget)
             if isinstance(key, (dict, list)):
                 raise TreeErrors([TreeError(_pos(file, k_node), "a mapping key must be a scalar")])
             if key in out:
                 raise TreeErrors([TreeError(_pos(file, k_node), "duplicate key %r" % (key,))])
-            out[key] = _convert(v_node, file, ctor)
+            out[key] = _convert(v_node, file, ctor, budget)
             out.key_pos[key] = _pos(file, k_node)
             out.val_pos[key] = _pos(file, v_node)
         return out
     if isinstance(node, yaml.SequenceNode):
-        lst = LList(_convert(n, file, ctor) for n in node.value)
+        lst = LList(_convert(n, file, ctor, budget) for n in node.value)
         lst.pos = _pos(file, node)
         lst.item_pos = [_pos(file, n) for n in node.value]
         return lst
@@ -67,7 +85,9 @@ def load_yaml(text: str, file: str) -> Any:
         node = loader.get_single_node()
         if node is None:
             return None
-        return _convert(node, file, loader)
+        return _convert(node, file, loader, _Budget(file))
+    except RecursionError:
+        raise TreeErrors([TreeError(Pos(file, 1, 1), "the document is nested too deeply")])
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)

@@ -151,3 +151,23 @@ def test_expressions_on_ros_messages_and_errors():
         with pytest.raises(ExprError) as info:
             Expr(bad)
         assert info.value.offset == where
+
+
+def test_hostile_yaml_is_a_clean_error(tmp_path, sim_defs):
+    bomb = tmp_path / "bomb.yaml"
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
+    lines += ["a%d: &a%d [*a%d, *a%d, *a%d, *a%d, *a%d, *a%d, *a%d, *a%d, *a%d, *a%d]" % ((i, i) + (i - 1,) * 10)
+              for i in range(1, 9)]
+    bomb.write_text("\n".join(lines) + "\nformat: 1\nroot: {wait: 1}\n")
+    with pytest.raises(TreeErrors, match="expands to more than 200000 YAML nodes"):
+        load_tree(str(bomb), sim_defs)
+    deep = tmp_path / "deep.yaml"
+    deep.write_text("format: 1\nroot: " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(TreeErrors, match="nested too deeply|a node must be a mapping"):
+        load_tree(str(deep), sim_defs)
+
+
+def test_run_refuses_missing_required_inputs_before_starting_anything(capsys):
+    env_tree = os.path.join(TREES, "search_room.yaml")
+    assert bmtree(["run", "--sim", env_tree]) == 2
+    assert "needs the input room: give them with --set KEY=VALUE" in capsys.readouterr().err
