@@ -12,9 +12,10 @@ import py_trees
 from py_trees.common import Status
 
 from comm.errors import ProtocolError
+from comm.messages import FunctionCall, new_id
 from coordinator.context import CallRecord, RunContext
 from coordinator.expr import ExprError, unwrap
-from coordinator.language import Node
+from coordinator.treeast import Node, refs_in
 
 __all__ = ["Call", "Recall", "Check", "WaitEvent", "SetKeys", "Wait", "Timeout", "Retry", "Repeat", "Leaf"]
 
@@ -37,6 +38,13 @@ class Leaf(py_trees.behaviour.Behaviour):
 class Call(Leaf):
     """Call ``module.function``; SUCCESS when it succeeds (and ``success`` is not false)."""
 
+    def __init__(self, node: Node, ctx: RunContext):
+        super().__init__(node, ctx)
+        # Inputs without references are the same on every call: convert them once (they were
+        # validated with the tree, so this cannot fail).
+        fn = node.opts["function"]
+        self._static = None if refs_in(node.opts["inputs"]) else fn.convert_inputs(node.opts["inputs"])
+
     def initialise(self) -> None:
         self.reason = ""
         self.feedback_message = ""
@@ -45,7 +53,10 @@ class Call(Leaf):
         self.timeout = o.get("timeout") or self.ctx.default_timeout
         fn = o["function"]
         try:
-            call = fn.build_call(self.ctx.resolve(o["inputs"]))
+            if self._static is not None:
+                call = FunctionCall(fn.module, fn.name, list(self._static), [p.name for p in fn.inputs], new_id())
+            else:
+                call = fn.build_call(self.ctx.resolve(o["inputs"]))
         except (KeyError, ExprError, ProtocolError) as exc:
             self.reason = "cannot build the call: %s" % (exc.args[0] if exc.args else exc)
             return
