@@ -108,6 +108,9 @@ def cmd_modules(args: argparse.Namespace) -> int:
     if args.live:
         from modules.discovery import live_modules
 
+        if not _master_up(args.wait):
+            _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+            return EXIT_ENV
         live = live_modules()
         if not live:
             print("no modules running on %s" % os.environ.get("ROS_MASTER_URI", "?"))
@@ -303,7 +306,8 @@ def make_parser() -> argparse.ArgumentParser:
     rd.set_defaults(func=cmd_render)
     m = sub.add_parser("modules", help="list module definitions, or the modules running now (--live)")
     m.add_argument("paths", nargs="*")
-    m.add_argument("--live", action="store_true")
+    m.add_argument("--live", action="store_true", help="the modules running now on $ROS_MASTER_URI")
+    m.add_argument("--wait", type=float, default=2.0, help="how long to wait for the master with --live (s)")
     m.set_defaults(func=cmd_modules)
     b = sub.add_parser("blackboard", help="inspect the Blackboard node's store offline")
     bsub = b.add_subparsers(dest="bb_command", metavar="ACTION")

@@ -25,6 +25,8 @@ fi
 if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   /usr/bin/python3 -m venv --system-site-packages .venv
+  # Ubuntu 20.04's venv pip (20.0) predates editable installs of pyproject projects
+  .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
 fi
 stamp=.venv/.bmtree-installed
 if [ ! -f "$stamp" ] || [ setup.py -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
