@@ -179,3 +179,30 @@ def test_hang_delay_faults_and_module_rejections(sim_defs):
     p = Served(sim_defs["speech"], Picky())
     r = p.result(p.call("say", text="x"))
     assert (r.status, r.error) == ("rejected", "the robot is charging")
+
+
+def test_the_readme_module_example_binds_and_serves(tmp_path):
+    import json
+    import os
+    import runpy
+
+    from modules.definition import parse_definition
+    from tests.conftest import ROOT
+
+    with open(os.path.join(ROOT, "README.md")) as fh:
+        section = fh.read().split("## Writing a basic module", 1)[1]
+    code = section.split("```python", 1)[1].split("```", 1)[0]
+    (tmp_path / "gripper.py").write_text(code)
+    Gripper = runpy.run_path(str(tmp_path / "gripper.py"))["Gripper"]
+    param = lambda n, t: {"Name": n, "Data-type": t, "Description": ""}  # noqa: E731
+    definition = parse_definition(json.loads(json.dumps({
+        "Basic Module": "gripper", "Brief Description": "", "Hardware Required": [],
+        "Functions": [
+            {"Name": "open", "Exec-condition": "", "Description": "", "Input-params": [
+                param("width", "std_msgs/Float64")], "Output-params": [param("success", "std_msgs/Bool")]},
+            {"Name": "close", "Exec-condition": "", "Description": "", "Input-params": [],
+             "Output-params": [param("success", "std_msgs/Bool"), param("holding", "std_msgs/Bool")]}]})))
+    s = Served(definition, Gripper())
+    assert s.result(s.call("open", width=0.2)).error == "the gripper opens 10 cm at most"
+    assert s.result(s.call("open", width=0.05)).status == "succeeded"
+    assert s.result(s.call("close")).values["holding"].data is True
