@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import pytest
+from geometry_msgs.msg import Point
 from py_trees.common import Status
 from std_msgs.msg import Bool, String
 
@@ -225,7 +226,7 @@ root:
     root.setup_with_descendants()
     root.tick_once()
     say, where, find = ctx.calls
-    ctx.dispatch(FunctionResult(["room", "position"], [String("hall"), __import__("geometry_msgs.msg").msg.Point()]))
+    ctx.dispatch(FunctionResult(["room", "position"], [String("hall"), Point()]))
     assert where.result is not None and say.result is None            # by output names
     ctx.dispatch(FunctionResult(["success"], [Bool(True)], basic_mod="speech", function="say"))
     assert say.result is not None                                       # by module and function
@@ -254,7 +255,7 @@ root:
         orig(call)
         if len(first_id) == 2:  # the first call's late answer arrives while the second is pending
             ctx.inbox.put(FunctionResult(["success", "room", "position"], [Bool(True), String("kitchen"),
-                                         __import__("geometry_msgs.msg").msg.Point()], call_id=first_id[0],
+                                         Point()], call_id=first_id[0],
                                          basic_mod="navigation", function="go_to"))
 
     ctx.transport.send_call = spy
