@@ -3,6 +3,7 @@
     python -m bench.nodes echo                 # raw std_msgs/String ping-pong partner
     python -m bench.nodes module               # the 'bench' basic module (runtime, answers at once)
     python -m bench.nodes publish ID RATE SECONDS [COUNT]   # results on /function/output at RATE/s
+    python -m bench.nodes rss-tree TREE        # RSS after imports, then with TREE loaded and ticked
 """
 from __future__ import annotations
 
@@ -72,12 +73,26 @@ def publish(ident: str, rate: float, seconds: float, count: int = 0) -> int:
     return 0
 
 
+def rss_tree(path: str) -> int:
+    """Print this process's RSS (KiB) after the imports, then after loading and ticking ``path``."""
+    from bench.measures import _offline, _rss_kib
+
+    before = _rss_kib()
+    root = _offline(path)
+    for _ in range(50):
+        root.tick_once()
+    print(before, _rss_kib(), flush=True)
+    return 0
+
+
 if __name__ == "__main__":
     verb = sys.argv[1]
     if verb == "echo":
         sys.exit(echo())
     if verb == "module":
         sys.exit(module())
+    if verb == "rss-tree":
+        sys.exit(rss_tree(sys.argv[2]))
     if verb == "publish":
         sys.exit(publish(sys.argv[2], float(sys.argv[3]), float(sys.argv[4]),
                          int(sys.argv[5]) if len(sys.argv) > 5 else 0))
