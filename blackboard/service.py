@@ -138,8 +138,8 @@ class BlackboardService:
 
     def _decode_result(self, text: Any, stamp: float, rows: List[tuple], ids: List[str]) -> None:
         try:
-            result = FunctionResult.decode(text, self.max_bytes)
             raw = load_payload(text, self.max_bytes)
+            result = FunctionResult.from_obj(raw)
         except ProtocolError as exc:
             self.rejected += 1
             log.warning("ignored a malformed result: %s", exc)

@@ -159,7 +159,11 @@ class FunctionCall(_Values):
 
     @classmethod
     def decode(cls, text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> FunctionCall:
-        d = load_payload(text, max_bytes)
+        return cls.from_obj(load_payload(text, max_bytes))
+
+    @classmethod
+    def from_obj(cls, d: Dict[str, Any]) -> FunctionCall:
+        """From an already parsed payload (a reader that looked at its keys first)."""
         basic_mod = _get_str(d, "basic_mod")
         function = _get_str(d, "function")
         call_id = _get_str(d, "call_id", required=False)
@@ -201,7 +205,11 @@ class FunctionResult(_Values):
 
     @classmethod
     def decode(cls, text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> FunctionResult:
-        d = load_payload(text, max_bytes)
+        return cls.from_obj(load_payload(text, max_bytes))
+
+    @classmethod
+    def from_obj(cls, d: Dict[str, Any]) -> FunctionResult:
+        """From an already parsed payload (the Blackboard keeps its raw value texts)."""
         names, msgs = _decode_values(d, names_required=True)
         status = _get_str(d, "status", required=False) or "succeeded"
         if status not in STATUSES:

@@ -206,8 +206,11 @@ class Timeout(py_trees.decorators.Decorator):
         return status
 
 
-class Retry(py_trees.decorators.Decorator):
-    """Re-run a failing child up to ``times`` attempts in all; ticks again at once after a failure."""
+class _Rerun(py_trees.decorators.Decorator):
+    """Run the child again, at most ``times`` runs in all, while it ends in ``again``;
+    ticks again at once instead of waiting for the next period."""
+
+    again = Status.FAILURE
 
     def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: int, ctx: RunContext):
         super().__init__(name=name, child=child)
@@ -215,35 +218,26 @@ class Retry(py_trees.decorators.Decorator):
         self.ctx = ctx
 
     def initialise(self) -> None:
-        self.failures = 0
+        self.runs = 0
 
     def update(self) -> Status:
-        if self.decorated.status == Status.FAILURE:
-            self.failures += 1
-            if self.failures < self.times:
-                self.feedback_message = "attempt %d of %d failed" % (self.failures, self.times)
+        if self.decorated.status == self.again:
+            self.runs += 1
+            if self.runs < self.times:
+                self.feedback_message = "run %d of %d ended in %s" % (self.runs, self.times, self.again.value)
                 self.decorated.stop(Status.INVALID)
                 self.ctx.wake_after(0.0)
                 return Status.RUNNING
         return self.decorated.status
 
 
-class Repeat(py_trees.decorators.Decorator):
+class Retry(_Rerun):
+    """Re-run a failing child up to ``times`` attempts in all."""
+
+    again = Status.FAILURE
+
+
+class Repeat(_Rerun):
     """Run a child ``times`` times in a row; FAILURE as soon as it fails."""
 
-    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: int, ctx: RunContext):
-        super().__init__(name=name, child=child)
-        self.times = times
-        self.ctx = ctx
-
-    def initialise(self) -> None:
-        self.successes = 0
-
-    def update(self) -> Status:
-        if self.decorated.status == Status.SUCCESS:
-            self.successes += 1
-            if self.successes < self.times:
-                self.decorated.stop(Status.INVALID)
-                self.ctx.wake_after(0.0)
-                return Status.RUNNING
-        return self.decorated.status
+    again = Status.SUCCESS

@@ -87,37 +87,25 @@ class SimClock(Clock):
 
     def __init__(self, start: float = 0.0):
         self._now = start
-        self._timers: List[Tuple[float, int, Callable[[], None]]] = []
-        self._seq = itertools.count()
+        self._timers = _Timers()
 
     def now(self) -> float:
         return self._now
 
     def call_later(self, delay: float, fn: Callable[[], None]) -> None:
-        heapq.heappush(self._timers, (self._now + max(0.0, delay), next(self._seq), fn))
-
-    def advance(self, seconds: float) -> None:
-        """Run every timer due within ``seconds`` and move time forward."""
-        end = self._now + seconds
-        while self._timers and self._timers[0][0] <= end:
-            at, _, fn = heapq.heappop(self._timers)
-            self._now = max(self._now, at)
-            fn()
-        self._now = end
+        self._timers.push(self._now + max(0.0, delay), fn)
 
     def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
-        try:
-            return inbox.get_nowait()
-        except queue.Empty:
-            pass
+        """Jump from one due timer to the next until one of them fills the inbox."""
         end = self._now + max(0.0, timeout)
-        while self._timers and self._timers[0][0] <= end:
-            at, _, fn = heapq.heappop(self._timers)
-            self._now = max(self._now, at)
-            fn()
+        while True:
             try:
                 return inbox.get_nowait()
             except queue.Empty:
-                continue
-        self._now = end
-        return None
+                pass
+            nxt = self._timers.next_at()
+            if nxt is None or nxt > end:
+                self._now = end
+                return None
+            self._now = max(self._now, nxt)
+            self._timers.run_due(self._now)

@@ -18,7 +18,7 @@ from comm.messages import (
 )
 from comm.rostypes import from_message
 from coordinator.clock import Clock
-from coordinator.expr import _step, unwrap
+from coordinator.expr import field_of, unwrap
 from coordinator.language import Ref
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
@@ -93,7 +93,7 @@ class RunContext:
         if isinstance(value, Ref):
             v = self.lookup(value.key)
             for step in value.path:
-                v = _step(v, step, value.key)
+                v = field_of(v, step, value.key)
             return v
         if isinstance(value, dict):
             return {k: self.resolve(v) for k, v in value.items()}

@@ -15,7 +15,7 @@ from typing import Any, Callable, List, Optional, Set, Tuple
 
 import genpy
 
-__all__ = ["Expr", "ExprError", "parse", "unwrap"]
+__all__ = ["Expr", "ExprError", "field_of", "parse", "unwrap"]
 
 
 class ExprError(ValueError):
@@ -166,7 +166,7 @@ class Expr:
         if op == "ref":
             value = lookup(node[1])
             for step in node[2]:
-                value = _step(value, step, node[1])
+                value = field_of(value, step, node[1])
             return value
         if op == "not":
             return not unwrap(self._eval(node[1], lookup))
@@ -181,7 +181,8 @@ class Expr:
             raise ExprError("cannot compare %s %s %s" % (type(a).__name__, node[1], type(b).__name__))
 
 
-def _step(value: Any, step: Any, root: str) -> Any:
+def field_of(value: Any, step: Any, root: str) -> Any:
+    """``value.step`` or ``value[step]`` for a message, a mapping or a list; ExprError names ``root``."""
     try:
         if isinstance(step, int):
             return unwrap(value)[step]

@@ -5,12 +5,11 @@ is built, each as ``file:line:column: message``. See ``trees/README.md``.
 """
 from __future__ import annotations
 
-import difflib
 import os
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
-from comm.errors import ProtocolError
+from comm.errors import ProtocolError, did_you_mean
 from coordinator.dataflow import check_flow
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.expr import Expr, ExprError
@@ -54,11 +53,6 @@ KINDS: Dict[str, Kind] = {
     "include": Kind("path", ("args",), doc="a subtree from another file"),
 }
 _COMMON = ("name",)
-
-
-def _hint(word: str, choices: Any) -> str:
-    match = difflib.get_close_matches(str(word), list(choices), n=1)
-    return " (did you mean %r?)" % match[0] if match else ""
 
 
 def _parse_ref(text: str) -> Optional[Ref]:
@@ -131,7 +125,7 @@ class _Parser:
             return None
         for k in data:
             if k not in _TOP_KEYS:
-                self.err(data.key_pos[k], "unknown top-level key %r%s" % (k, _hint(k, _TOP_KEYS)))
+                self.err(data.key_pos[k], "unknown top-level key %r%s" % (k, did_you_mean(k, _TOP_KEYS)))
         if data.get("format") != FORMAT:
             where = data.val_pos.get("format", top)
             self.err(where, "missing or unsupported 'format' (this bmtree reads format: %d)" % FORMAT
@@ -171,7 +165,7 @@ class _Parser:
             for k in spec:
                 if k not in _INPUT_KEYS:
                     self.err(getattr(spec, "key_pos", {}).get(k, raw.val_pos[name]),
-                             "unknown option %r of input %r%s" % (k, name, _hint(k, _INPUT_KEYS)))
+                             "unknown option %r of input %r%s" % (k, name, did_you_mean(k, _INPUT_KEYS)))
             if "default" in spec:
                 inputs[name] = _literal(spec["default"])
             else:
@@ -190,7 +184,7 @@ class _Parser:
         if len(kinds) != 1:
             if not kinds:
                 unknown = [k for k in raw if k not in _COMMON]
-                hint = _hint(unknown[0], KINDS) if unknown else ""
+                hint = did_you_mean(unknown[0], KINDS) if unknown else ""
                 first = unknown[0] if unknown else None
                 self.err(raw.key_pos[first] if first is not None else raw.pos,
                          "unknown node kind %r%s" % (first, hint) if first is not None
@@ -205,7 +199,7 @@ class _Parser:
             raw = self._inline(raw, kind, allowed)
         for k in raw:
             if k != kind and k not in allowed:
-                self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, _hint(k, allowed)))
+                self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
         for k in spec.required:
             if k not in raw:
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, k))
@@ -234,7 +228,7 @@ class _Parser:
                     self.err(src.key_pos[k], "option %r given twice" % k)
                     continue
                 if src is inner and k not in allowed:
-                    self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, _hint(k, allowed + ("children",))))
+                    self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed + ("children",))))
                     continue
                 merged[k] = v
                 merged.key_pos[k], merged.val_pos[k] = src.key_pos[k], src.val_pos[k]
@@ -290,7 +284,7 @@ class _Parser:
     def k_parallel(self, node: Node, raw: LMap, value: Any, at: Pos, stack: Tuple[str, ...]) -> None:
         policy = raw.get("policy", "all")
         if policy not in ("all", "one"):
-            self.err(raw.val_pos["policy"], "policy must be 'all' or 'one'%s" % _hint(policy, ("all", "one")))
+            self.err(raw.val_pos["policy"], "policy must be 'all' or 'one'%s" % did_you_mean(policy, ("all", "one")))
         node.opts["policy"] = policy
         node.opts["synchronise"] = self._bool(node, raw, "synchronise", True)
         self._children(node, raw, value, at, stack)
@@ -327,7 +321,7 @@ class _Parser:
         mod_name, member = value.split(".")
         mod = self.definitions.get(mod_name)
         if mod is None:
-            self.err(at, "unknown module %r%s" % (mod_name, _hint(mod_name, self.definitions)
+            self.err(at, "unknown module %r%s" % (mod_name, did_you_mean(mod_name, self.definitions)
                                                   or " (known: %s)" % ", ".join(sorted(self.definitions))))
             return None
         return mod, member
@@ -350,7 +344,7 @@ class _Parser:
         for name, target in value.items():
             if name not in allowed:
                 self.err(value.key_pos[name], "%s has no %s %r%s" % (node.opts.get("target", node.kind), what, name,
-                                                                    _hint(name, allowed)))
+                                                                    did_you_mean(name, allowed)))
             elif not isinstance(target, str) or not target.isidentifier():
                 self.err(value.val_pos[name], "tree key %r is not an identifier" % (target,))
             else:
@@ -376,14 +370,14 @@ class _Parser:
         mod, fname = found
         fn: Optional[FunctionDefinition] = mod.functions.get(fname)
         if fn is None:
-            self.err(at, "module %r has no function %r%s" % (mod.name, fname, _hint(fname, mod.functions)
+            self.err(at, "module %r has no function %r%s" % (mod.name, fname, did_you_mean(fname, mod.functions)
                                                               or " (functions: %s)" % ", ".join(mod.functions)))
             return
         node.opts["function"] = fn
         params = {p.name: p for p in fn.inputs}
         for k in inputs_raw:
             if k not in params:
-                self.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, _hint(k, params)))
+                self.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, params)))
         for p in fn.inputs:
             if p.name not in inputs_raw:
                 self.err(raw.key_pos.get("inputs", at), "%s needs input %r (%s)" % (value, p.name, p.rostype))
@@ -404,7 +398,7 @@ class _Parser:
         mod, ename = found
         ev = mod.events.get(ename)
         if ev is None:
-            self.err(at, "module %r has no event %r%s" % (mod.name, ename, _hint(ename, mod.events)
+            self.err(at, "module %r has no event %r%s" % (mod.name, ename, did_you_mean(ename, mod.events)
                                                            or " (events: %s)" % (", ".join(mod.events) or "none")))
             return
         node.opts["event"] = ev
@@ -467,7 +461,7 @@ class _Parser:
             node.name = "%s%s" % (sub.name, "(%s)" % ", ".join("%s=%s" % (k, v) for k, v in args.items()) if args else "")
         for k in args:
             if k not in sub.inputs:
-                self.err(args_raw.key_pos[k], "%s has no input %r%s" % (value, k, _hint(k, sub.inputs)
+                self.err(args_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, sub.inputs)
                                                                          or " (inputs: %s)" % (", ".join(sub.inputs) or "none")))
         for k in sorted(sub.required_inputs - set(args)):
             self.err(at, "include of %s needs argument %r" % (value, k))

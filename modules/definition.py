@@ -5,7 +5,6 @@ these objects, so a module is described once, as data.
 """
 from __future__ import annotations
 
-import difflib
 import json
 import os
 from dataclasses import dataclass, field
@@ -13,7 +12,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import jsonschema
 
-from comm.errors import ProtocolError
+from comm.errors import ProtocolError, did_you_mean
 from comm.messages import FunctionCall, FunctionResult, new_id
 from comm.rostypes import resolve_type, rostype_of, suggest_type, to_message
 
@@ -74,8 +73,7 @@ def _convert_values(kind: str, params: Sequence[Param], values: Mapping[str, Any
     unknown = [k for k in values if k not in by_name]
     problems = []
     for k in unknown:
-        hint = difflib.get_close_matches(k, list(by_name), n=1)
-        problems.append("unknown %s %r%s" % (kind, k, " (did you mean %r?)" % hint[0] if hint else ""))
+        problems.append("unknown %s %r%s" % (kind, k, did_you_mean(k, by_name)))
     missing = [p.name for p in params if p.name not in values]
     if missing:
         problems.append("missing %s %s" % (kind, ", ".join(repr(m) for m in missing)))
@@ -146,8 +144,7 @@ class FunctionDefinition:
         for name, msg in values.items():
             p = by_name.get(name)
             if p is None:
-                hint = difflib.get_close_matches(name, list(by_name), n=1)
-                problems.append("unknown %s %r%s" % (kind, name, " (did you mean %r?)" % hint[0] if hint else ""))
+                problems.append("unknown %s %r%s" % (kind, name, did_you_mean(name, by_name)))
             elif rostype_of(msg) != p.rostype:
                 problems.append("%s %r is %s, the definition says %s" % (kind, name, rostype_of(msg), p.rostype))
         missing = [p.name for p in params if p.name not in values]
@@ -192,9 +189,8 @@ class ModuleDefinition:
         """The named function; ProtocolError with a 'did you mean' if there is none."""
         fn = self.functions.get(name)
         if fn is None:
-            hint = difflib.get_close_matches(name, list(self.functions), n=1)
             raise ProtocolError("module %r has no function %r%s" % (
-                self.name, name, " (did you mean %r?)" % hint[0] if hint else ""))
+                self.name, name, did_you_mean(name, self.functions)))
         return fn
 
     def renamed(self, name: str) -> ModuleDefinition:
@@ -223,8 +219,7 @@ def _schema_message(err: jsonschema.ValidationError) -> str:
         extra = [k for k in err.instance if k not in allowed]
         msgs = []
         for k in extra:
-            hint = difflib.get_close_matches(k, allowed, n=1)
-            msgs.append("unknown key %r%s" % (k, " (did you mean %r?)" % hint[0] if hint else ""))
+            msgs.append("unknown key %r%s" % (k, did_you_mean(k, allowed)))
         return "; ".join(msgs)
     if err.validator == "required":
         return err.message.replace("is a required property", "is missing")

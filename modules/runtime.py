@@ -232,7 +232,7 @@ class ModuleServer:
             self._reject(call_id, fname, str(exc))
             return
         try:
-            call = FunctionCall.decode(text, self.max_bytes)
+            call = FunctionCall.from_obj(head)
             inputs = fn.inputs_of(call)
         except ProtocolError as exc:
             self._reject(call_id, fname, "bad inputs: %s" % exc)

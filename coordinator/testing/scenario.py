@@ -28,6 +28,7 @@ import sys
 import time
 from typing import Any, Dict, List, Optional, TextIO
 
+from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
@@ -48,14 +49,8 @@ def _outcome(raw: Any, at: Pos) -> Outcome:
 
 
 def _check_keys(m: LMap, allowed: Any, what: str) -> None:
-    import difflib
-
-    errs = []
-    for k in m:
-        if k not in allowed:
-            hint = difflib.get_close_matches(str(k), list(allowed), n=1)
-            errs.append(TreeError(m.key_pos[k], "unknown %s key %r%s" % (what, k, " (did you mean %r?)" % hint[0]
-                                                                       if hint else "")))
+    errs = [TreeError(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed)))
+            for k in m if k not in allowed]
     if errs:
         raise TreeErrors(errs)
 
