@@ -2,7 +2,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test lint unit integration py38 bench clean
+.PHONY: setup demo test lint unit integration py38 bench reliability clean
 
 setup:
 	@bash scripts/setup.sh
@@ -29,6 +29,17 @@ test: lint
 
 bench: setup
 	$(PY) -m bench
+
+# The fault tests at full scale (several minutes); `make test` runs reduced versions.
+# Every measured figure is printed on a line starting with FIGURE.
+RELIABILITY := tests/reliability tests/unit/test_loader_fuzz.py tests/integration/test_liveness.py \
+	tests/integration/test_fuzz_topics.py tests/integration/test_blackboard_crash.py \
+	tests/integration/test_master_restart.py tests/integration/test_duplicates.py tests/integration/test_start_order.py
+reliability: setup
+	@mkdir -p bench/results
+	BMTREE_RELIABILITY=1 $(PY) -m pytest -q -s -p no:cacheprovider $(RELIABILITY) > bench/results/reliability.txt 2>&1; \
+	  status=$$?; grep -E '^(FIGURE|FAILED|ERROR)|passed|failed' bench/results/reliability.txt; \
+	  echo "(full output: bench/results/reliability.txt)"; exit $$status
 
 clean:
 	rm -rf $(VENV) .venv38 build *.egg-info bench/results

@@ -18,6 +18,7 @@ setup(
     package_data={
         "modules": ["schema/*.json"],
         "modules.sim": ["*.json", "*.yaml"],
+        "coordinator": ["web/*"],
     },
     install_requires=[
         "py_trees>=2.2,<3",
@@ -25,15 +26,17 @@ setup(
         "pyyaml>=5.3",
         "jsonschema>=3.2",
         "pydot>=1.4",
+        "rich>=10",
     ],
     extras_require={
-        "test": ["pytest>=6", "ruff", "vermin"],
+        "test": ["pytest>=6", "ruff", "vermin", "selenium>=4.6"],
     },
     entry_points={
         "console_scripts": [
             "bmtree = coordinator.cli:main",
             "bmtree-module = modules.node:main",
             "bmtree-blackboard = blackboard.node:main",
+            "bmtree-bridge = modules.bridge:main",
         ],
         "pytest11": ["bmtree = coordinator.testing.plugin"],
     },

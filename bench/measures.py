@@ -19,8 +19,8 @@ from coordinator.graph import RosGraph
 from coordinator.language import load_tree
 from coordinator.runner import TreeRunner
 
-__all__ = ["call_latency", "tick_cost", "load_cost", "blackboard_throughput", "blackboard_latency",
-           "mocked_tree_tests", "memory"]
+__all__ = ["call_latency", "cpp_call_latency", "tick_cost", "load_cost", "blackboard_throughput", "blackboard_latency",
+           "mocked_tree_tests", "memory", "record_cost"]
 
 PING_TEXT = "x" * 64
 
@@ -56,6 +56,71 @@ def _raw_pingpong(payload: str, n: int) -> List[float]:
     sub.unregister()
     pub.unregister()
     return out
+
+
+def _action_client() -> Any:
+    """A SimpleActionClient of the bench's action server, connected."""
+    import actionlib
+    from move_base_msgs.msg import MoveBaseAction
+
+    from bench.nodes import ACTION
+
+    client = actionlib.SimpleActionClient(ACTION, MoveBaseAction)
+    if not client.wait_for_server(_ros_duration(30.0)):
+        raise RuntimeError("the actionlib bench server did not come up")
+    return client
+
+
+def _ros_duration(seconds: float) -> Any:
+    import rospy
+
+    return rospy.Duration.from_sec(seconds)
+
+
+def _actionlib_goals(client: Any, n: int) -> List[float]:
+    """Goal round trips: from sending a goal to its DONE transition (the result arrived).
+
+    Sent through the SimpleActionClient's ActionClient with a transition callback, which is
+    what ``SimpleActionClient.send_goal`` does minus its race: it records the goal handle only
+    after publishing the goal, so a result that comes back first is dropped ("a goal handle
+    that we're not tracking") and the goal never ends; with a server that answers at once this
+    hung the first bench run.
+    """
+    from actionlib import CommState
+    from move_base_msgs.msg import MoveBaseGoal
+
+    goal = MoveBaseGoal()
+    goal.target_pose.header.frame_id = "map"
+    goal.target_pose.pose.position.x = 8.6
+    goal.target_pose.pose.orientation.w = 1.0
+    done = threading.Event()
+
+    def transition(gh: Any) -> None:
+        if gh.get_comm_state() == CommState.DONE:
+            done.set()
+
+    out = []
+    for i in range(n + 20):
+        done.clear()
+        t0 = time.perf_counter()
+        handle = client.action_client.send_goal(goal, transition)  # noqa: F841 - kept alive until done
+        if not done.wait(5):
+            raise RuntimeError("the actionlib server did not answer")
+        if i >= 20:
+            out.append(time.perf_counter() - t0)
+    _drain_status(client)
+    return out
+
+
+def _drain_status(client: Any, timeout: float = 15.0) -> None:
+    """Wait until the server's status array is empty again: it lists every goal of the last 5 s and
+    is republished (5 Hz and on every transition), which would load the measures that follow."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        last = client.action_client.last_status_msg
+        if last is not None and not last.status_list:
+            return
+        time.sleep(0.1)
 
 
 def _tree_file(tmp: str, name: str, body: str) -> str:
@@ -98,23 +163,75 @@ def call_latency(graph: RosGraph, tmp: str, n: int) -> List[Row]:
                                              for _ in range(10))
     ten = load_tree(_tree_file(tmp, "ten.yaml", chain), defs)
     _calls_in_running_tree(loop, transport, defs)  # warm-up: connections, caches
-    raw, ours, spans = [], [], []
-    for _ in range(4):  # interleaved, so that machine noise hits all three alike
+    client = _action_client()
+    _actionlib_goals(client, 20)
+    raw, ours, spans, goals = [], [], [], []
+    for _ in range(4):  # interleaved, so that machine noise hits all alike
         raw.extend(_raw_pingpong(payload, block))
         ours.extend(_calls_in_running_tree(loop, transport, defs))
+        goals.extend(_actionlib_goals(client, block))
         for _ in range(max(5, block // 10)):
             calls = _calls_in_running_tree_records(ten, transport, defs)
             spans.append(calls[-1].ended - calls[0].started)
-    r, o, c = summary(raw), summary(ours), summary(spans)
+    r, o, c, a = summary(raw), summary(ours), summary(spans), summary(goals)
     transport.close()  # its subscribers would otherwise also decode the later measures' traffic
     ms = 1000.0
     return [
         Row("call leaf round trip, median", o["median"] * ms, "ms", r["median"] * ms, "<= 1.5x",
-            o["median"] <= 1.5 * r["median"], {"ours": o, "raw": r, "payload_bytes": len(payload)}),
+            o["median"] <= 1.5 * r["median"], {"ours": o, "raw": r, "actionlib": a, "payload_bytes": len(payload)}),
         Row("call leaf round trip, p99", o["p99"] * ms, "ms", r["p99"] * ms, "<= 2x", o["p99"] <= 2 * r["p99"]),
         Row("sequence of 10 calls, median", c["median"] * ms, "ms", 10 * o["median"] * ms, "<= 1.05x",
             c["median"] <= 1.05 * 10 * o["median"], {"chain": c}),
+        Row("call leaf vs actionlib goal round trip, median", o["median"] * ms, "ms", a["median"] * ms, "<= 1x",
+            o["median"] <= a["median"], {"actionlib": a}),
+        Row("call leaf vs actionlib goal round trip, p99", o["p99"] * ms, "ms", a["p99"] * ms, "<= 1x",
+            o["p99"] <= a["p99"]),
     ]
+
+
+def _build_cpp_example() -> str:
+    """The C++ example module, built with cmake (-O2) into build/cpp (incremental)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    build = os.path.join(root, "build", "cpp")
+    for cmd in (["cmake", "-S", os.path.join(root, "modules", "cpp"), "-B", build, "-DBMTREE_WERROR=ON",
+                 "-DCMAKE_BUILD_TYPE=Release"], ["cmake", "--build", build]):
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return os.path.join(build, "gripper")
+
+
+def cpp_call_latency(graph: RosGraph, tmp: str, n: int) -> List[Row]:
+    """A call leaf → bmtree-bridge → the C++ example module (an immediate function) → SUCCESS,
+    against raw ping-pong, interleaved."""
+    from std_msgs.msg import String
+
+    from comm import FunctionCall
+    from coordinator.ros_transport import RosTransport
+    from modules.definition import load_definition
+
+    exe = _build_cpp_example()
+    definition = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "modules", "cpp",
+                              "example", "gripper.json")
+    cpp = graph.start_node([exe], "/gripper")
+    bridge = graph.start_node(["-m", "modules.bridge", "--definition", definition], "/gripper_bridge")
+    defs = {"gripper": load_definition(definition)}
+    transport = RosTransport("bench_coordinator")
+    transport.wait_ready(["gripper"], 30, defs)
+    payload = FunctionCall("bench", "ping", [String(PING_TEXT)], names=["text"]).encode()
+    block = n // 4
+    loop = load_tree(_tree_file(tmp, "cpp_loop.yaml", "root:\n  repeat: %d\n  child:\n    call: gripper.ping\n"
+                                % block), defs)
+    _calls_in_running_tree(loop, transport, defs)  # warm-up
+    raw, ours = [], []
+    for _ in range(4):
+        raw.extend(_raw_pingpong(payload, block))
+        ours.extend(_calls_in_running_tree(loop, transport, defs))
+    transport.close()
+    graph.stop_node(bridge)
+    graph.stop_node(cpp)
+    r, o = summary(raw), summary(ours)
+    ms = 1000.0
+    return [Row("C++ call leaf round trip via bmtree-bridge, median", o["median"] * ms, "ms", r["median"] * ms,
+                "<= 4x", o["median"] <= 4 * r["median"], {"ours": o, "raw": r})]
 
 
 def _hand_tree(n: int) -> py_trees.behaviour.Behaviour:
@@ -135,6 +252,7 @@ def _offline(path: str) -> Any:
     ctx = RunContext(InProcessTransport(Mocks(defs), RealClock()), RealClock(), defs)
     root = build_tree(tree, ctx)
     root.setup_with_descendants()
+    root.bmtree_ctx = ctx
     return root
 
 
@@ -160,6 +278,39 @@ def tick_cost(tmp: str) -> List[Row]:
         o, h = summary(ours)["median"], summary(hand)["median"]
         rows.append(Row("tick, %d-leaf YAML tree" % n, o * 1000, "ms", h * 1000, "<= 1.1x", o <= 1.1 * h))
     return rows
+
+
+def record_cost(tmp: str) -> List[Row]:
+    """A tick of the 1,000-leaf tree by the runner with the run stream writing a run log (fsync'd
+    per tick), against the same runner's tick without them."""
+    from coordinator.runevents import notify
+    from coordinator.runlog import RunLogWriter
+    from coordinator.runstream import RunStream
+
+    path = _tree_file(tmp, "flat1000r.yaml", _yaml_tree_text(1000))
+    writer = RunLogWriter(os.path.join(tmp, "bench-run.jsonl"))
+    runners = []
+    for observers in ([], [RunStream([writer])]):
+        root = _offline(path)
+        runner = TreeRunner(root, root.bmtree_ctx, observers=observers)
+        notify(root.bmtree_ctx.observers, "on_start", None, root, root.bmtree_ctx)
+        runners.append(runner)
+
+    def timed(runner: TreeRunner, ticks: int) -> float:
+        runner.tick()
+        t0 = time.perf_counter()
+        for _ in range(ticks):
+            runner.tick()
+        return (time.perf_counter() - t0) / ticks
+
+    base, ours = [], []
+    for _ in range(40):  # alternate often: this machine's speed drifts within seconds
+        base.append(timed(runners[0], 5))
+        ours.append(timed(runners[1], 5))
+    writer.close()
+    o, b = summary(ours)["median"], summary(base)["median"]
+    return [Row("tick, 1,000-leaf tree, recorded (run log + stream) vs not", o * 1000, "ms", b * 1000, "<= 1.2x",
+                o <= 1.2 * b)]
 
 
 def load_cost(tmp: str) -> List[Row]:

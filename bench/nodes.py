@@ -1,6 +1,7 @@
 """Processes the benchmarks start: a raw rospy echo, a bmtree echo module, a result publisher.
 
     python -m bench.nodes echo                 # raw std_msgs/String ping-pong partner
+    python -m bench.nodes action-server        # actionlib SimpleActionServer that succeeds at once
     python -m bench.nodes module               # the 'bench' basic module (runtime, answers at once)
     python -m bench.nodes publish ID RATE SECONDS [COUNT]   # results on /function/output at RATE/s
     python -m bench.nodes rss-tree TREE        # RSS after imports, then with TREE loaded and ticked
@@ -10,6 +11,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from typing import Any
 
 from modules.runtime import BasicModule
 
@@ -28,6 +30,28 @@ def echo() -> int:
     rospy.init_node("bench_echo")
     pub = rospy.Publisher("/bench/pong", String, queue_size=100, tcp_nodelay=True)
     rospy.Subscriber("/bench/ping", String, pub.publish, queue_size=100, tcp_nodelay=True)
+    rospy.spin()
+    return 0
+
+
+ACTION = "/bench/action"
+
+
+def action_server() -> int:
+    """The peer of a call leaf in py_trees_ros and SMACH: a skill as an actionlib goal
+    (move_base_msgs/MoveBase, the navigation goal) on a SimpleActionServer that succeeds at once."""
+    import actionlib
+    import rospy
+    from move_base_msgs.msg import MoveBaseAction, MoveBaseResult
+
+    rospy.init_node("bench_action_server")
+    server: Any = None
+
+    def execute(goal: Any) -> None:
+        server.set_succeeded(MoveBaseResult())
+
+    server = actionlib.SimpleActionServer(ACTION, MoveBaseAction, execute_cb=execute, auto_start=False)
+    server.start()
     rospy.spin()
     return 0
 
@@ -91,6 +115,8 @@ if __name__ == "__main__":
         sys.exit(echo())
     if verb == "module":
         sys.exit(module())
+    if verb == "action-server":
+        sys.exit(action_server())
     if verb == "rss-tree":
         sys.exit(rss_tree(sys.argv[2]))
     if verb == "publish":

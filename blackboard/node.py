@@ -3,22 +3,43 @@
 Subscribes to ``/function/output`` and ``/blackboard/input``, answers on
 ``/blackboard/output``, and after each commit publishes on ``/blackboard/stored``
 (latched, std_msgs/String JSON ``{"total", "count", "call_ids"}``) which results
-are now durable. Private parameters: ``~db``, ``~keep``, ``~max_bytes`` (payload limit).
+are now durable. It also listens to ``/master/output`` and ``/master/cancel`` and reads
+the module announcements, to store an original module's result (no call id) under its
+module, function and call (:mod:`blackboard.attribution`). Private parameters: ``~db``, ``~keep``, ``~max_bytes`` (payload limit).
 """
 from __future__ import annotations
 
 import argparse
 import sys
-from typing import List, Optional
+from typing import Any, List, Optional
 
+from blackboard.attribution import Attribution
 from blackboard.service import BlackboardService
 from blackboard.store import DEFAULT_KEEP, Store, default_db_path
-from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_RESULT, sync_publisher
+from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TOPIC_RESULT, sync_publisher
+from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES
+from comm.nodeopts import parse_node_args
+from comm.roslog import log_to_rosout
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 
 TOPIC_STORED = "/blackboard/stored"
+ANNOUNCEMENTS = "/bmtree/modules"  # modules.discovery.PARAM_ROOT (the Blackboard does not import modules)
+
+
+def _callerid(msg: Any) -> Optional[str]:
+    return getattr(msg, "_connection_header", {}).get("callerid")
+
+
+def _announcements() -> Any:
+    """The module announcements (``/bmtree/modules``), for attributing original modules' results."""
+    import rosgraph
+
+    try:
+        return rosgraph.Master("/blackboard").getParam(ANNOUNCEMENTS)
+    except rosgraph.masterapi.Error:
+        return {}
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -32,10 +53,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     import rospy
     from std_msgs.msg import String
 
-    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    args = parse_node_args(make_parser(), (argv if argv is not None else sys.argv)[1:], "blackboard")
     rospy.init_node("blackboard")
+    log_to_rosout()
     path = args.db or rospy.get_param("~db", "") or default_db_path()
-    keep = args.keep or int(rospy.get_param("~keep", DEFAULT_KEEP))
+    try:
+        keep = args.keep or int(rospy.get_param("~keep", DEFAULT_KEEP))
+        max_bytes = int(rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
+    except (TypeError, ValueError) as exc:
+        sys.stderr.write("error: parameters ~keep and ~max_bytes must be integers: %s\n" % exc)
+        return 2
     try:
         store = Store(path, keep=keep)
     except Exception as exc:
@@ -43,12 +70,15 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 3
     answer_pub = sync_publisher(TOPIC_BB_ANSWER, String)  # from the writer thread, in request order
     ack_pub = rospy.Publisher(TOPIC_STORED, String, queue_size=1000, latch=True)
-    max_bytes = int(rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
     service = BlackboardService(store, lambda t: answer_pub.publish(String(t)), lambda t: ack_pub.publish(String(t)),
-                                max_bytes=max_bytes)
-    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data), queue_size=10000, tcp_nodelay=True)
+                                max_bytes=max_bytes, attribution=Attribution(_announcements))
+    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data, None, _callerid(m)), queue_size=10000,
+                     tcp_nodelay=True)
+    rospy.Subscriber(TOPIC_CALL, String, lambda m: service.on_call(m.data), queue_size=1000, tcp_nodelay=True)
+    rospy.Subscriber(TOPIC_CANCEL, String, lambda m: service.on_cancel(m.data), queue_size=1000, tcp_nodelay=True)
     rospy.Subscriber(TOPIC_BB_REQUEST, String, lambda m: service.on_request(m.data), queue_size=1000,
                      tcp_nodelay=True)
+    watch_master()
     rospy.loginfo("blackboard storing in %s (%d values, keeping %d per name)", path, service.total, keep)
     rospy.spin()
     service.stop()

@@ -10,8 +10,10 @@ import logging
 import queue
 import threading
 import time
-from typing import Any, Callable, List, Optional, Set
+from collections import OrderedDict
+from typing import Any, Callable, List, Optional, Set, Tuple
 
+from blackboard.attribution import Attribution
 from blackboard.store import Store, rows_of
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
@@ -30,11 +32,17 @@ class BlackboardService:
         publish_ack: sends ``{"total": N, "call_ids": [...], "count": k}`` after each commit:
             the results named there are durable.
         prune_every: apply retention after this many stored values.
+        attribution: tells the module, function and call of a result without call_id
+            (an original module's) from the node that published it; without it such
+            results are stored with the module and function they name, if any.
+        after_wait: longest time a request naming calls in ``after`` waits for their results
+            to be committed before it is answered with what is there.
     """
 
     def __init__(self, store: Store, publish_answer: Callable[[str], None],
                  publish_ack: Optional[Callable[[str], None]] = None, max_bytes: int = DEFAULT_MAX_BYTES,
-                 prune_every: int = 2000, batch: int = 500, threaded: bool = True):
+                 prune_every: int = 2000, batch: int = 500, threaded: bool = True, after_wait: float = 2.0,
+                 attribution: Optional[Attribution] = None):
         self.store = store
         self._publish_answer = publish_answer
         self._publish_ack = publish_ack
@@ -47,6 +55,10 @@ class BlackboardService:
         self._since_prune = 0
         self._touched: Set[str] = set()
         self.threaded = threaded
+        self.attribution = attribution
+        self.after_wait = after_wait
+        self._deferred: List[Tuple[float, BlackboardRequest]] = []
+        self._recent: OrderedDict = OrderedDict()  # call ids committed lately
         # Items received but not yet handled, and the store's lock: a request arriving when
         # nothing is pending is answered at once in the caller's thread (one hand-off less),
         # which keeps "a request that follows a result sees it".
@@ -59,15 +71,37 @@ class BlackboardService:
             self._thread.start()
 
     # called from any thread (threaded), or inline (threaded=False, for in-process runs)
-    def on_result(self, text: Any, stamp: Optional[float] = None) -> None:
+    def on_result(self, text: Any, stamp: Optional[float] = None, publisher: Optional[str] = None) -> None:
+        """A ``/function/output`` payload; ``publisher`` is the node that sent it (callerid)."""
         stamp = time.time() if stamp is None else stamp
         if not self.threaded:
             rows: List[tuple] = []
             ids: List[str] = []
-            self._decode_result(text, stamp, rows, ids)
+            self._decode_result((text, publisher), stamp, rows, ids)
             self._commit(rows, ids)
             return
-        self._enqueue((_RESULT, text, stamp))
+        self._enqueue((_RESULT, (text, publisher), stamp))
+
+    def on_call(self, text: Any) -> None:
+        """A ``/master/output`` payload: a call that a legacy result may answer."""
+        if self.attribution is None:
+            return
+        try:
+            self.attribution.on_call(load_payload(text, self.max_bytes))
+        except ProtocolError as exc:
+            log.debug("ignored a malformed call: %s", exc)
+
+    def on_cancel(self, text: Any) -> None:
+        """A ``/master/cancel`` payload: that call is answered by nobody any more."""
+        if self.attribution is None:
+            return
+        try:
+            call_id = load_payload(text, self.max_bytes).get("call_id")
+        except ProtocolError as exc:
+            log.debug("ignored a malformed cancel: %s", exc)
+            return
+        if isinstance(call_id, str):
+            self.attribution.done(call_id)
 
     def on_request(self, text: Any) -> None:
         if not self.threaded:
@@ -102,14 +136,23 @@ class BlackboardService:
     # worker
     def _work(self) -> None:
         while True:
-            items = [self._queue.get()]
+            try:
+                items = [self._queue.get(timeout=self._next_deadline())]
+            except queue.Empty:
+                with self._store_lock:
+                    self._serve_deferred()
+                continue
             while len(items) < self.batch:
                 try:
                     items.append(self._queue.get_nowait())
                 except queue.Empty:
                     break
             with self._store_lock:
-                stop = self._handle(items)
+                try:
+                    stop = self._handle(items)
+                except Exception as exc:  # last line of defence: the writer thread must live on
+                    log.error("could not handle %d items (%s: %s)", len(items), type(exc).__name__, exc)
+                    stop = any(kind == _STOP for kind, _, _ in items)
                 with self._pending_lock:
                     self._pending -= len(items)
             if stop:
@@ -136,7 +179,9 @@ class BlackboardService:
             self._prune()
         return False
 
-    def _decode_result(self, text: Any, stamp: float, rows: List[tuple], ids: List[str]) -> None:
+    def _decode_result(self, item: Any, stamp: float, rows: List[tuple], ids: List[str]) -> None:
+        """Decode one result (``text`` or ``(text, publisher)``) into rows to store."""
+        text, publisher = item if isinstance(item, tuple) else (item, None)
         try:
             raw = load_payload(text, self.max_bytes)
             result = FunctionResult.from_obj(raw)
@@ -144,22 +189,45 @@ class BlackboardService:
             self.rejected += 1
             log.warning("ignored a malformed result: %s", exc)
             return
-        if result.call_id is not None:
-            ids.append(result.call_id)
-        rows.extend(rows_of(result.names, raw["rostypes"], raw["msgs"], result.basic_mod, result.function,
-                            result.call_id, stamp))
+        except Exception as exc:  # nothing a sender writes may stop the writer thread
+            self.rejected += 1
+            log.warning("ignored a malformed result (%s: %s)", type(exc).__name__, exc)
+            return
+        module, function, call_id = result.basic_mod, result.function, result.call_id
+        if self.attribution is not None:
+            if call_id is not None:
+                self.attribution.done(call_id)
+            elif module is None or function is None:
+                module, found, call_id = self.attribution.attribute(publisher, result.names, module)
+                function = function or found
+        if call_id is not None:
+            ids.append(call_id)
+        rows.extend(rows_of(result.names, raw["rostypes"], raw["msgs"], module, function, call_id, stamp))
 
     def _commit(self, rows: List[tuple], ids: List[str]) -> None:
         if not rows and not ids:
             return
         try:
             n = self.store.add(rows)
-        except Exception:
-            log.exception("could not store %d values", len(rows))
-            return
+        except Exception as exc:
+            # One bad row must not cost its neighbours: store the batch row by row.
+            log.warning("batch of %d values failed (%s: %s); storing them one by one", len(rows),
+                        type(exc).__name__, exc)
+            n, bad = self.store.add_each(rows)
+            for row, err in bad:
+                self.rejected += 1
+                log.warning("could not store value %r of call %s: %s", row[0], row[5], err)
+            bad_ids = {row[5] for row, _ in bad}
+            ids = [i for i in ids if i not in bad_ids]
         self.total += n
         self._since_prune += n
         self._touched.update(r[0] for r in rows)
+        for call_id in ids:
+            self._recent[call_id] = None
+        while len(self._recent) > 10000:
+            self._recent.popitem(last=False)
+        if self._deferred:
+            self._serve_deferred()
         if self._publish_ack is not None:
             try:
                 self._publish_ack(json.dumps({"total": self.total, "count": n, "call_ids": ids}))
@@ -178,6 +246,13 @@ class BlackboardService:
 
     def _answer(self, text: Any) -> None:
         try:
+            self._answer_one(text)
+        except Exception as exc:  # a request must never stop the Blackboard
+            self.rejected += 1
+            log.warning("could not answer a request (%s: %s)", type(exc).__name__, exc)
+
+    def _answer_one(self, text: Any) -> None:
+        try:
             req = BlackboardRequest.decode(text, self.max_bytes)
         except ProtocolError as exc:
             self.rejected += 1
@@ -191,6 +266,37 @@ class BlackboardService:
             if request_id is not None:
                 self._publish_answer(BlackboardAnswer.encode_raw([], [], [], request_id, [], "bad request: %s" % exc))
             return
+        if req.after and self.threaded and not self._all_stored(req.after):
+            # The results this request must see are still on their way (they travel on
+            # another connection than the request): answer once they are committed.
+            self._deferred.append((time.monotonic() + self.after_wait, req))
+            self._enqueue((_REQUEST, threading.Event(), 0.0))  # wakes the worker to set its timer
+            return
+        self._reply(req)
+
+    def _all_stored(self, call_ids: List[str]) -> bool:
+        return all(c in self._recent or self.store.has_call(c) for c in call_ids)
+
+    def _next_deadline(self) -> Optional[float]:
+        if not self._deferred:
+            return None
+        return max(0.0, min(d for d, _ in self._deferred) - time.monotonic())
+
+    def _serve_deferred(self) -> None:
+        """Answer the waiting requests whose results are committed, or whose wait is over."""
+        now = time.monotonic()
+        waiting = []
+        for deadline, req in self._deferred:
+            if now >= deadline or self._all_stored(req.after):
+                try:
+                    self._reply(req)
+                except Exception as exc:
+                    log.warning("could not answer a request (%s: %s)", type(exc).__name__, exc)
+            else:
+                waiting.append((deadline, req))
+        self._deferred = waiting
+
+    def _reply(self, req: BlackboardRequest) -> None:
         names: List[str] = []
         types: List[str] = []
         texts: List[str] = []

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import sqlite3
-import time
 from dataclasses import dataclass
 from typing import Iterable, List, Optional, Sequence, Tuple
 
@@ -93,6 +92,16 @@ class Store:
                 " VALUES (?, ?, ?, ?, ?, ?, ?)", rows)
         return len(rows)
 
+    def add_each(self, rows: Iterable[tuple]) -> Tuple[int, List[Tuple[tuple, str]]]:
+        """Insert rows one transaction each: (stored count, [(row, error)] of the refused)."""
+        stored, bad = 0, []
+        for row in rows:
+            try:
+                stored += self.add([row])
+            except (sqlite3.Error, UnicodeError, ValueError, OverflowError) as exc:
+                bad.append((row, "%s: %s" % (type(exc).__name__, exc)))
+        return stored, bad
+
     def prune(self, names: Iterable[str]) -> int:
         """Apply the retention policy (keep the newest ``keep`` values) to the given names."""
         removed = 0
@@ -122,16 +131,15 @@ class Store:
                               " WHERE call_id = ? ORDER BY id", (call_id,))
         return [StoredValue(*row) for row in cur]
 
+    def has_call(self, call_id: str) -> bool:
+        return self.db.execute("SELECT 1 FROM value WHERE call_id = ? LIMIT 1", (call_id,)).fetchone() is not None
+
     def names(self) -> List[Tuple[str, int, float]]:
         """(name, count, newest stamp) of every name stored."""
         return list(self.db.execute("SELECT name, COUNT(*), MAX(stamp) FROM value GROUP BY name ORDER BY name"))
 
     def count(self) -> int:
         return int(self.db.execute("SELECT COUNT(*) FROM value").fetchone()[0])
-
-
-def now() -> float:
-    return time.time()
 
 
 def rows_of(names: Sequence[str], rostypes: Sequence[str], texts: Sequence[str], basic_mod: Optional[str],

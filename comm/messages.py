@@ -9,15 +9,20 @@ from __future__ import annotations
 
 import json
 import os
+import random
+import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
 from comm.errors import ProtocolError
+from comm.limits import MAX_DEPTH, check_depth
 from comm.rostypes import from_message, message_from_json, resolve_type, rostype_of, unknown_type_error
+from comm.textenum import TextEnum
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
     "STATUSES",
+    "CallStatus",
     "FunctionCall",
     "FunctionResult",
     "CancelRequest",
@@ -26,19 +31,39 @@ __all__ = [
     "BlackboardAnswer",
     "new_id",
     "load_payload",
+    "check_depth",
+    "MAX_DEPTH",
 ]
 
 DEFAULT_MAX_BYTES = 1 << 20
-STATUSES = ("succeeded", "failed", "rejected", "cancelled")
+_SURROGATE = re.compile(r"\\u[dD][89a-fA-F]")
+
+
+class CallStatus(TextEnum):
+    """The status of a call's result; a ``str`` equal to its wire text (:class:`TextEnum`)."""
+
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    REJECTED = "rejected"
+    CANCELLED = "cancelled"
+
+
+STATUSES = tuple(s.value for s in CallStatus)
+_STATUS = {s.value: s for s in CallStatus}
+
+
+_IDS = random.Random(os.urandom(16))  # os.urandom per id gives the GIL away: 0.2 ms a call under load
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=lambda: _IDS.seed(os.urandom(16)))
 
 
 def new_id() -> str:
     """A random 64-bit id as 16 hex digits (unique enough for calls and requests in flight)."""
-    return os.urandom(8).hex()
+    return "%016x" % _IDS.getrandbits(64)
 
 
 def load_payload(text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> Dict[str, Any]:
-    """Parse a payload into a JSON object, enforcing the size limit first."""
+    """Parse a payload into a JSON object: size limit, then depth limit, then parsing."""
     if isinstance(text, (bytes, bytearray)):
         if len(text) > max_bytes:
             raise ProtocolError("payload of %d bytes exceeds the limit of %d bytes" % (len(text), max_bytes))
@@ -52,13 +77,24 @@ def load_payload(text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> Dict[str, Any
         raise ProtocolError(
             "payload of %d bytes exceeds the limit of %d bytes" % (len(text.encode("utf-8")), max_bytes)
         )
+    check_depth(text)
     try:
         data = json.loads(text)
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         raise ProtocolError("payload is not valid JSON: %s" % exc)
     if not isinstance(data, dict):
         raise ProtocolError("payload is not a JSON object (got %s)" % type(data).__name__)
+    if _SURROGATE.search(text):
+        _check_unicode(data)
     return data
+
+
+def _check_unicode(data: Any) -> None:
+    """JSON may escape lone surrogates, which no ROS string, log or SQLite row can hold."""
+    try:
+        json.dumps(data, ensure_ascii=False).encode("utf-8")
+    except UnicodeError:
+        raise ProtocolError("payload holds a lone surrogate escape (not valid Unicode text)")
 
 
 def _get_str(d: Dict[str, Any], key: str, required: bool = True) -> Optional[str]:
@@ -184,16 +220,22 @@ class FunctionResult(_Values):
     call_id: Optional[str] = None
     basic_mod: Optional[str] = None
     function: Optional[str] = None
-    status: str = "succeeded"
+    status: CallStatus = CallStatus.SUCCEEDED
     error: str = ""
+    #: The node that published it (ROS connection header ``callerid``), set by the receiver;
+    #: never encoded. It identifies the module of a legacy result (DESIGN §2).
+    publisher: Optional[str] = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.status = _STATUS.get(self.status, self.status)  # type: ignore[call-overload]
 
     @property
     def legacy(self) -> bool:
         return self.call_id is None
 
     def encode(self) -> str:
-        if self.status not in STATUSES:
-            raise ProtocolError("status %r is not one of %s" % (self.status, ", ".join(STATUSES)))
+        if self.status not in _STATUS:
+            raise ProtocolError("status %r is not one of %s" % (str(self.status), ", ".join(STATUSES)))
         out: Dict[str, Any] = {}
         _encode_values(out, self.names, self.msgs)
         for key in ("call_id", "basic_mod", "function"):
@@ -211,9 +253,10 @@ class FunctionResult(_Values):
     def from_obj(cls, d: Dict[str, Any]) -> FunctionResult:
         """From an already parsed payload (the Blackboard keeps its raw value texts)."""
         names, msgs = _decode_values(d, names_required=True)
-        status = _get_str(d, "status", required=False) or "succeeded"
-        if status not in STATUSES:
-            raise ProtocolError("status %r is not one of %s" % (status, ", ".join(STATUSES)))
+        text = _get_str(d, "status", required=False) or "succeeded"
+        status = _STATUS.get(text)
+        if status is None:
+            raise ProtocolError("status %r is not one of %s" % (text, ", ".join(STATUSES)))
         return cls(
             names=names or [],
             msgs=msgs,
@@ -273,13 +316,15 @@ class BlackboardRequest:
     ``var_names`` holds plain names (``success``) or qualified ones
     (``module/function/name``). ``history`` asks for the last N values of each
     name; ``call_id`` asks for everything one call produced (``var_names`` may
-    then be empty).
+    then be empty). ``after`` lists calls whose results the answer must include: the
+    Blackboard answers once they are committed (or after a bounded wait).
     """
 
     var_names: List[str] = field(default_factory=list)
     request_id: Optional[str] = field(default_factory=new_id)
     history: int = 1
     call_id: Optional[str] = None
+    after: List[str] = field(default_factory=list)
 
     def encode(self) -> str:
         out: Dict[str, Any] = {"var_names": list(self.var_names)}
@@ -289,6 +334,8 @@ class BlackboardRequest:
             out["history"] = self.history
         if self.call_id is not None:
             out["call_id"] = self.call_id
+        if self.after:
+            out["after"] = list(self.after)
         return _dumps(out)
 
     @classmethod
@@ -297,10 +344,13 @@ class BlackboardRequest:
         call_id = _get_str(d, "call_id", required=False)
         names = _get_str_list(d, "var_names", required=call_id is None) or []
         history = d.get("history", 1)
-        if isinstance(history, bool) or not isinstance(history, int) or history < 1:
-            raise ProtocolError("key 'history' must be a positive integer, got %r" % (history,))
+        if isinstance(history, bool) or not isinstance(history, int) or not 1 <= history <= 1000000:
+            raise ProtocolError("key 'history' must be an integer from 1 to 1000000, got %.40r" % (history,))
+        after = _get_str_list(d, "after", required=False) or []
+        if len(after) > 10000:
+            raise ProtocolError("key 'after' lists %d calls (at most 10000)" % len(after))
         return cls(var_names=names, request_id=_get_str(d, "request_id", required=False),
-                   history=history, call_id=call_id)
+                   history=history, call_id=call_id, after=after)
 
 
 @dataclass

@@ -4,4 +4,6 @@ from __future__ import annotations
 from coordinator.errors import TreeError, TreeErrors
 from coordinator.language import load_tree
 
-__all__ = ["TreeError", "TreeErrors", "load_tree"]
+__all__ = ["TreeError", "TreeErrors", "load_tree", "__version__"]
+
+__version__ = "0.1.0"  # also in setup.py and package.xml (a test keeps the three equal)

@@ -17,13 +17,15 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.rostypes import from_message
+from comm.textenum import TextEnum
 from coordinator.clock import Clock
-from coordinator.expr import field_of, unwrap
-from coordinator.language import Ref
+from coordinator.liveness import BlackboardLost, ModuleLost
+from coordinator.refs import resolve, unwrap
+from coordinator.runevents import RunObserver, notify
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["CallRecord", "RunContext", "WAKE", "plain"]
+__all__ = ["CallRecord", "RecordStatus", "RunContext", "WAKE", "plain"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -38,6 +40,19 @@ def plain(value: Any) -> Any:
     return v
 
 
+class RecordStatus(TextEnum):
+    """How a call of the tree ended: a result's status, or the coordinator's own verdict."""
+
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    REJECTED = "rejected"
+    CANCELLED = "cancelled"
+    TIMEOUT = "timeout"            # no answer within the call's timeout
+    HALTED = "halted"              # the tree stopped the call (a parent ended it)
+    MODULE_LOST = "module_lost"    # the module's node died or restarted during the call
+
+
 @dataclass
 class CallRecord:
     """One call made by the tree, for the run report and the testing kit."""
@@ -47,11 +62,12 @@ class CallRecord:
     messages: Dict[str, Any]      # the inputs as sent (ROS messages)
     started: float
     ended: Optional[float] = None
-    status: str = "running"      # running, succeeded, failed, rejected, cancelled, timeout, halted
+    status: RecordStatus = RecordStatus.RUNNING
     error: str = ""
     outputs: Dict[str, Any] = field(default_factory=dict)
     function: Optional[FunctionDefinition] = None
     result: Optional[FunctionResult] = None
+    owner: Any = None             # the behaviour that made the call
 
     @property
     def inputs(self) -> Dict[str, Any]:
@@ -67,7 +83,8 @@ class RunContext:
     """Shared by every behaviour of one run; only touched from the ticking thread."""
 
     def __init__(self, transport: Transport, clock: Clock, definitions: Mapping[str, ModuleDefinition],
-                 default_timeout: float = 30.0, recall_timeout: float = 5.0):
+                 default_timeout: float = 30.0, recall_timeout: float = 5.0,
+                 observers: Optional[List[RunObserver]] = None):
         self.transport = transport
         self.clock = clock
         self.definitions = dict(definitions)
@@ -77,10 +94,11 @@ class RunContext:
         self.calls: List[CallRecord] = []
         self.pending: typing.OrderedDict[str, CallRecord] = OrderedDict()
         self.events: List[Event] = []
-        self.event_times: List[float] = []
+        self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
         self.dropped: List[FunctionResult] = []
         self.inbox: queue.Queue = queue.Queue()
+        self.unstored: List[str] = []  # calls whose results the next recall must see stored
 
     # values ------------------------------------------------------------------------
     def lookup(self, key: str) -> Any:
@@ -90,27 +108,26 @@ class RunContext:
 
     def resolve(self, value: Any) -> Any:
         """A YAML literal with every Ref replaced by the current tree-blackboard value."""
-        if isinstance(value, Ref):
-            v = self.lookup(value.key)
-            for step in value.path:
-                v = field_of(v, step, value.key)
-            return v
-        if isinstance(value, dict):
-            return {k: self.resolve(v) for k, v in value.items()}
-        if isinstance(value, list):
-            return [self.resolve(v) for v in value]
-        return value
+        return resolve(value, self.lookup)
+
+    def write(self, key: str, value: Any) -> None:
+        """Set a tree-blackboard key (behaviours write only through here, so observers see it)."""
+        self.blackboard[key] = value
+        if self.observers:
+            notify(self.observers, "on_blackboard_write", key, value, self.clock.now())
 
     def wake_after(self, delay: float) -> None:
         """Make the runner tick again after ``delay`` (timeouts, waits, retries)."""
         self.clock.call_later(delay, lambda: self.inbox.put(WAKE))
 
     # calls -------------------------------------------------------------------------
-    def start_call(self, fn: FunctionDefinition, call: FunctionCall) -> CallRecord:
+    def start_call(self, fn: FunctionDefinition, call: FunctionCall, owner: Any = None) -> CallRecord:
         rec = CallRecord(target=fn.qualified, call_id=call.call_id or "", function=fn, started=self.clock.now(),
-                         messages=dict(zip(call.names or [], call.msgs)))
+                         messages=dict(zip(call.names or [], call.msgs)), owner=owner)
         self.calls.append(rec)
         self.pending[rec.call_id] = rec
+        if self.observers:  # before sending: a record of the call precedes any of its answer
+            notify(self.observers, "on_call_start", rec)
         self.transport.send_call(call)
         return rec
 
@@ -118,11 +135,13 @@ class RunContext:
         if rec.ended is not None:
             return
         rec.ended = self.clock.now()
-        rec.status = status
+        rec.status = RecordStatus(status)
         rec.error = error
         self.pending.pop(rec.call_id, None)
+        if self.observers:
+            notify(self.observers, "on_call_end", rec)
 
-    def cancel(self, rec: CallRecord, status: str = "halted", error: str = "") -> None:
+    def cancel(self, rec: CallRecord, status: str = RecordStatus.HALTED, error: str = "") -> None:
         """Stop waiting for ``rec`` and ask its module to stop it."""
         if rec.ended is not None:
             return
@@ -132,7 +151,10 @@ class RunContext:
         self.transport.send_cancel(CancelRequest(call_id=rec.call_id, basic_mod=fn.module, function=fn.name))
 
     def request(self, names: List[str]) -> str:
-        req = BlackboardRequest(var_names=list(names))
+        # The Blackboard answers only once the results received since the last request are
+        # committed: they reach it on another connection than the request, maybe later.
+        req = BlackboardRequest(var_names=list(names), after=self.unstored)
+        self.unstored = []
         self.transport.send_request(req)
         return req.request_id or ""
 
@@ -142,38 +164,62 @@ class RunContext:
             rec = self.correlate(item)
             if rec is None:
                 self.dropped.append(item)
-                log.debug("result matched no pending call: %s", item.call_id)
+                log.warning("dropped a result that matches no pending call (call_id %s, module %s, function %s, "
+                            "outputs %s, from node %s)", item.call_id, item.basic_mod, item.function,
+                            ", ".join(item.names), item.publisher)
                 return
             self.pending.pop(rec.call_id, None)
             rec.result = item
+            if item.names and rec.call_id:  # an original module's result is stored under the call it answers
+                self.unstored.append(rec.call_id)
+                del self.unstored[:-1000]  # a long run without recalls: the old ones are stored by now
         elif isinstance(item, Event):
             self.events.append(item)
-            self.event_times.append(self.clock.now())
+            if self.observers:
+                notify(self.observers, "on_event", item, self.clock.now())
         elif isinstance(item, BlackboardAnswer):
             if item.request_id:
                 self.answers[item.request_id] = item
+        elif isinstance(item, ModuleLost):
+            for call_id in item.call_ids:
+                rec = self.pending.get(call_id)
+                if rec is not None:
+                    self.finish(rec, RecordStatus.MODULE_LOST, "module %s lost: %s" % (item.module, item.reason))
+        elif isinstance(item, BlackboardLost):
+            for request_id in item.request_ids:
+                self.answers.setdefault(request_id, BlackboardAnswer(
+                    request_id=request_id, error="Blackboard node lost: %s" % item.reason))
 
     def correlate(self, result: FunctionResult) -> Optional[CallRecord]:
-        """The pending call a result answers (DESIGN §2).
+        """The pending call a result answers (DESIGN §2, README "Correlation").
 
-        By ``call_id`` when present (a late answer to a call that is no longer
-        pending matches nothing); a legacy result is matched by module and function
-        when present, else by the output names of the pending calls' definitions,
-        else to the oldest pending call.
+        By ``call_id`` when present (a late answer to a call that is no longer pending
+        matches nothing). A result without one (an original module) belongs to the module
+        it names, else to the module whose node published it (``publisher``, mapped by the
+        transport); a result from a node of no module of this run matches nothing. Within
+        that module (or among all pending calls when the publisher is unknown, as in
+        process), it answers the oldest pending call of the function it names, else the
+        oldest whose definition's output names equal the result's names; else nothing.
         """
         if result.call_id is not None:
-            return self.pending.get(result.call_id)
-        if not self.pending:
+            rec = self.pending.get(result.call_id)
+            fn = rec.function if rec is not None else None
+            if fn is not None and (result.basic_mod not in (None, fn.module) or result.function not in (None, fn.name)):
+                log.warning("ignored a result of %s.%s carrying the id of call %s to %s", result.basic_mod,
+                            result.function, result.call_id, fn.qualified)
+                return None
+            return rec
+        module = result.basic_mod
+        if module is None and result.publisher is not None:
             return None
-        if result.basic_mod is not None and result.function is not None:
-            for rec in self.pending.values():
-                fn = rec.function
-                if fn is not None and fn.module == result.basic_mod and fn.name == result.function:
-                    return rec
-            return None
-        names = set(result.names)
         for rec in self.pending.values():
             fn = rec.function
-            if fn is not None and {p.name for p in fn.outputs} == names:
+            if fn is None or (module is not None and fn.module != module):
+                continue
+            if result.function is not None:
+                if fn.name == result.function:
+                    return rec
+            elif [p.name for p in fn.outputs] == list(result.names) or (
+                    {p.name for p in fn.outputs} == set(result.names) and len(fn.outputs) == len(result.names)):
                 return rec
-        return next(iter(self.pending.values()))
+        return None

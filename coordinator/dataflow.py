@@ -1,68 +1,42 @@
-"""Data flow: every key a node reads is written earlier on every path, or is a declared input."""
+"""Checks over a whole tree, asked of each node's kind (``coordinator.nodes``).
+
+Data flow: every key a node reads is written earlier on every path, or is a declared input.
+Types: a ``$reference`` whose value's ROS type (known from the definitions of the nodes that
+write the key) cannot be converted to the input it is passed to.
+"""
 from __future__ import annotations
 
-from typing import Any, FrozenSet, List, Optional
+from typing import Dict, FrozenSet, List, Optional, Sequence, Set
 
 from coordinator.errors import TreeError
-from coordinator.treeast import REQUIRED, Node, TreeFile, refs_in
+from coordinator.nodes.base import Flow
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, walk
 
-__all__ = ["check_flow", "flow"]
-
-
-def flow(node: Node, avail: FrozenSet[str], errors: List[TreeError], tree: TreeFile) -> FrozenSet[str]:
-    """Keys surely written when ``node`` succeeds; reports reads of keys not surely written."""
-
-    def need(keys: Any) -> None:
-        for k in sorted(keys):
-            if k not in avail:
-                errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
-                                                   "node (write it earlier or declare it under 'inputs:')" % k))
-
-    k, o = node.kind, node.opts
-    if k == "sequence":
-        cur = avail
-        for c in node.children:
-            cur = cur | flow(c, cur, errors, tree)
-        return cur - avail
-    if k in ("selector", "parallel"):
-        ws = [flow(c, avail, errors, tree) for c in node.children]
-        if not ws:
-            return frozenset()
-        if k == "parallel" and o.get("policy") == "all":
-            return frozenset().union(*ws)
-        return frozenset.intersection(*ws)
-    if k in ("retry", "repeat", "timeout"):
-        return flow(node.children[0], avail, errors, tree) if node.children else frozenset()
-    if k in ("inverter", "force_success", "force_failure"):
-        for c in node.children:
-            flow(c, avail, errors, tree)
-        return frozenset()
-    if k == "call":
-        need({r.key for r in refs_in(o.get("inputs", {}))})
-        return frozenset(o.get("outputs", {}).values())
-    if k == "wait_event":
-        return frozenset(o.get("outputs", {}).values())
-    if k == "recall":
-        return frozenset(o.get("names", {}))
-    if k == "set":
-        need({r.key for r in refs_in(o.get("values", {}))})
-        return frozenset(o.get("values", {}))
-    if k == "check":
-        need(o["expr"].keys if "expr" in o else ())
-        return frozenset()
-    if k == "include":
-        need({r.key for r in refs_in(o.get("args", {}))})
-        sub: Optional[TreeFile] = o.get("tree")
-        if sub is None:
-            return frozenset()
-        bound = frozenset(o.get("args", {})) | frozenset(k2 for k2, v in sub.inputs.items() if v is not REQUIRED)
-        return bound | flow(sub.root, bound | avail, errors, sub)
-    return frozenset()
+__all__ = ["check_flow", "check_types", "key_types"]
 
 
 def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[TreeError]:
     """Every read of a key not surely written before it, for a whole tree."""
     errors: List[TreeError] = []
     avail = frozenset(k for k, v in tree.inputs.items() if v is not REQUIRED) | given | tree.required_inputs
-    flow(tree.root, avail, errors, tree)
+    Flow(errors).of(tree.root, avail)
+    return errors
+
+
+def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dict[str, Set[Optional[str]]]:
+    """For each tree key, the ROS types written to it (None: not known statically)."""
+    types: Dict[str, Set[Optional[str]]] = {k: {None} for k in tree.inputs}
+    for n in nodes if nodes is not None else walk(tree.root):
+        for key, rostype in n.nodekind.writes(n).items():
+            types.setdefault(key, set()).add(rostype)
+    return types
+
+
+def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> List[TreeError]:
+    """References that cannot fit the input they are passed to."""
+    errors: List[TreeError] = []
+    nodes = list(walk(tree.root)) if nodes is None else nodes
+    types = key_types(tree, nodes)
+    for n in nodes:
+        n.nodekind.check_types(n, types, errors)
     return errors

@@ -1,10 +1,15 @@
-"""Errors of tree files: every one is ``file:line:column: message``."""
+"""Errors of the coordinator: the two shapes (invalid input, environment) and tree-file errors.
+
+Every tree error is ``file:line:column: message``.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import List, NamedTuple, Sequence
 
-__all__ = ["TreeError", "TreeErrors", "Pos"]
+from comm.errors import EnvironmentProblem, InvalidInput
+
+__all__ = ["EnvironmentProblem", "InvalidInput", "Pos", "TreeError", "TreeErrors", "UsageError"]
 
 
 class Pos(NamedTuple):
@@ -27,9 +32,13 @@ class TreeError:
         return "%s: %s" % (self.pos, self.message)
 
 
-class TreeErrors(Exception):
+class TreeErrors(InvalidInput):
     """All the problems found in a tree (and its includes), in file order."""
 
     def __init__(self, errors: Sequence[TreeError]):
         self.errors: List[TreeError] = sorted(set(errors), key=lambda e: (e.pos.file, e.pos.line, e.pos.column))
         super().__init__("\n".join(str(e) for e in self.errors))
+
+
+class UsageError(InvalidInput):
+    """A wrong command-line argument or API argument (a tree input not given, a bad option value)."""

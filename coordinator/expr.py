@@ -1,50 +1,73 @@
-"""The ``check`` leaf's expressions: a small grammar, parsed and evaluated without eval.
+"""Expressions: a small grammar, parsed and evaluated without eval.
 
     expr  := or ;  or := and ('or' and)* ;  and := not ('and' not)*
-    not   := 'not' not | cmp ;  cmp := value (('=='|'!='|'<'|'<='|'>'|'>='|'in') value)?
-    value := number | string | true | false | null | ref | '(' expr ')'
+    not   := 'not' not | cmp ;  cmp := sum (('=='|'!='|'<'|'<='|'>'|'>='|'in') sum)?
+    sum   := term (('+'|'-') term)* ;  term := unary (('*'|'/') unary)* ;  unary := '-' unary | value
+    value := number | string | true | false | null | ref | func '(' [expr (',' expr)*] ')' | '(' expr ')'
     ref   := ['$'] name ('.' field | '[' index ']')*
 
-A one-field ROS message (``std_msgs/String``, ``std_msgs/Bool``…) stands for its
-value, so ``answer == "yes"`` works on the output of ``speech.listen``.
+``check`` holds one; a ``$( … )`` value and a template's ``{ … }`` hold one too. A one-field ROS
+message (``std_msgs/String``…) stands for its value, so ``answer == "yes"`` works on the output
+of ``speech.listen``. :meth:`Expr.type_errors` finds operands of the wrong type before running,
+for the keys whose types the module definitions give.
 """
 from __future__ import annotations
 
 import re
-from typing import Any, Callable, List, Optional, Set, Tuple
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-import genpy
+from comm.errors import did_you_mean
+from coordinator.refs import Ref, RefError, scan_ref, unwrap
 
-__all__ = ["Expr", "ExprError", "field_of", "parse", "unwrap"]
+__all__ = ["Expr", "ExprError", "FUNCTIONS", "kind_of", "text_of"]
 
 
-class ExprError(ValueError):
-    def __init__(self, message: str, offset: int = 0):
-        super().__init__(message)
-        self.offset = offset
+class ExprError(RefError):
+    """A malformed expression (``offset``: where in its text), or one that cannot be evaluated."""
 
 
 _TOKEN = re.compile(r"""\s*(?:
-    (?P<num>-?\d+\.\d*(?:[eE][-+]?\d+)?|-?\d*\.\d+(?:[eE][-+]?\d+)?|-?\d+)|
+    (?P<num>\d+\.\d*(?:[eE][-+]?\d+)?|\d*\.\d+(?:[eE][-+]?\d+)?|\d+)|
     (?P<str>"(?:[^"\\]|\\.)*"|'(?:[^'\\]|\\.)*')|
-    (?P<op>==|!=|<=|>=|<|>|\(|\)|\.|\[|\])|
+    (?P<op>==|!=|<=|>=|<|>|\(|\)|\.|\[|\]|\+|-|\*|/|,)|
     (?P<name>\$?[A-Za-z_][A-Za-z0-9_]*)|
     (?P<bad>\S))""", re.X)
+_OPEN_PAREN = re.compile(r"\s*\(")
 
 _KEYWORDS = {"and", "or", "not", "in", "true", "false", "null", "True", "False", "None"}
 _CMP = {"==", "!=", "<", "<=", ">", ">=", "in"}
+_ORDER = {"<", "<=", ">", ">="}
+
+# name -> (arity (min, max), argument kind or "" for any, result kind)
+FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
+    "len": ((1, 1), "", "number"),
+    "lower": ((1, 1), "string", "string"),
+    "upper": ((1, 1), "string", "string"),
+    "str": ((1, 1), "", "string"),
+    "abs": ((1, 1), "number", "number"),
+    "round": ((1, 1), "number", "number"),
+    "min": ((1, 8), "number", "number"),
+    "max": ((1, 8), "number", "number"),
+}
 
 
-def unwrap(value: Any) -> Any:
-    """The plain value of a one-field message; other values unchanged."""
-    if isinstance(value, genpy.Message):
-        slots = value.__slots__
-        if len(slots) == 1:
-            return unwrap(getattr(value, slots[0]))
-    return value
+def kind_of(value: Any) -> str:
+    """The expression-level type of a run-time value: number, string, bool, list, message, null."""
+    value = unwrap(value)
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, (int, float)):
+        return "number"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, (list, tuple, bytes)):
+        return "list"
+    if value is None:
+        return "null"
+    return "message"
 
 
-def _tokens(text: str) -> List[Tuple[str, str, int]]:
+def _tokens(text: str) -> List[Tuple[str, Any, int]]:
     out = []
     pos = 0
     while pos < len(text):
@@ -58,30 +81,66 @@ def _tokens(text: str) -> List[Tuple[str, str, int]]:
             raise ExprError("unexpected character %r" % value, start)
         if kind == "name" and value in _KEYWORDS:
             kind = "kw"
+        elif kind == "name" and not value.startswith("$") and _OPEN_PAREN.match(text, m.end()):
+            if value not in FUNCTIONS:
+                raise ExprError("unknown function %r%s" % (value, did_you_mean(value, FUNCTIONS)
+                                                           or " (functions: %s)" % ", ".join(FUNCTIONS)), start)
+            kind = "func"
+        elif kind == "name":  # a reference: the one grammar of coordinator.refs, '$' optional here
+            try:
+                ref, end = scan_ref(text, start, dollar=False, spaces=True)
+            except RefError as exc:
+                raise ExprError(str(exc), exc.offset)
+            out.append(("ref", (ref, text[start:end]), start))
+            pos = end
+            continue
         out.append((kind, value, start))
         pos = m.end()
     out.append(("end", "", len(text)))
     return out
 
 
+def _shown(tok: Tuple[str, Any, int]) -> str:
+    return tok[1][1] if tok[0] == "ref" else tok[1]
+
+
 class Expr:
-    """A parsed expression: ``keys`` are the tree-blackboard keys it reads."""
+    """A parsed expression: ``keys`` are the tree-blackboard keys it reads, ``refs`` its references.
+
+    Immutable once parsed, so :meth:`parse` shares one object per text (trees repeat their checks).
+    """
+
+    _cache: Dict[str, Expr] = {}
+
+    @classmethod
+    def parse(cls, text: str) -> Expr:
+        """The parsed expression of ``text`` (ExprError if malformed), shared with earlier parses."""
+        e = cls._cache.get(text)
+        if e is None:
+            e = cls(text)
+            if len(cls._cache) < 4096:
+                cls._cache[text] = e
+        return e
 
     def __init__(self, text: str):
+        if len(text) > 2000:
+            raise ExprError("expression longer than 2000 characters", 0)
         self.text = text
         self.keys: Set[str] = set()
+        self.refs: List[Ref] = []
         self._toks = _tokens(text)
         self._i = 0
+        self._depth = 0
         self.tree = self._or()
         if self._peek()[0] != "end":
-            raise ExprError("unexpected %r" % self._peek()[1], self._peek()[2])
+            raise ExprError("unexpected %r" % _shown(self._peek()), self._peek()[2])
         del self._toks
 
     # parsing
-    def _peek(self) -> Tuple[str, str, int]:
+    def _peek(self) -> Tuple[str, Any, int]:
         return self._toks[self._i]
 
-    def _take(self) -> Tuple[str, str, int]:
+    def _take(self) -> Tuple[str, Any, int]:
         tok = self._toks[self._i]
         self._i += 1
         return tok
@@ -89,13 +148,17 @@ class Expr:
     def _expect(self, value: str) -> None:
         tok = self._take()
         if tok[1] != value:
-            raise ExprError("expected %r, found %r" % (value, tok[1] or "end of expression"), tok[2])
+            raise ExprError("expected %r, found %r" % (value, _shown(tok) or "end of expression"), tok[2])
 
     def _or(self) -> Any:
+        self._depth += 1
+        if self._depth > 50:
+            raise ExprError("expression nested too deeply", self._peek()[2])
         node = self._and()
         while self._peek()[1] == "or":
             self._take()
             node = ("or", node, self._and())
+        self._depth -= 1
         return node
 
     def _and(self) -> Any:
@@ -112,12 +175,36 @@ class Expr:
         return self._cmp()
 
     def _cmp(self) -> Any:
-        left = self._value()
+        left = self._sum()
         tok = self._peek()
         if tok[1] in _CMP and tok[0] in ("op", "kw"):
             self._take()
-            return ("cmp", tok[1], left, self._value())
+            return ("cmp", tok[1], left, self._sum(), tok[2])
         return left
+
+    def _sum(self) -> Any:
+        node = self._term()
+        while self._peek()[0] == "op" and self._peek()[1] in ("+", "-"):
+            tok = self._take()
+            node = ("arith", tok[1], node, self._term(), tok[2])
+        return node
+
+    def _term(self) -> Any:
+        node = self._unary()
+        while self._peek()[0] == "op" and self._peek()[1] in ("*", "/"):
+            tok = self._take()
+            node = ("arith", tok[1], node, self._unary(), tok[2])
+        return node
+
+    def _unary(self) -> Any:
+        tok = self._peek()
+        if tok[0] == "op" and tok[1] == "-":
+            self._take()
+            inner = self._unary()
+            if inner[0] == "lit" and kind_of(inner[1]) == "number":
+                return ("lit", -inner[1])
+            return ("neg", inner, tok[2])
+        return self._value()
 
     def _value(self) -> Any:
         kind, value, at = self._take()
@@ -131,68 +218,142 @@ class Expr:
             return ("lit", False)
         if kind == "kw" and value in ("null", "None"):
             return ("lit", None)
-        if value == "(":
+        if value == "(" and kind == "op":
             node = self._or()
             self._expect(")")
             return node
-        if kind == "name":
-            name = value.lstrip("$")
-            self.keys.add(name)
-            path: List[Any] = []
-            while self._peek()[1] in (".", "["):
-                if self._take()[1] == ".":
-                    k, field, fat = self._take()
-                    if k not in ("name", "kw"):
-                        raise ExprError("expected a field name after '.'", fat)
-                    path.append(field)
-                else:
-                    k, idx, iat = self._take()
-                    if k != "num" or not idx.lstrip("-").isdigit():
-                        raise ExprError("expected an integer index", iat)
-                    path.append(int(idx))
-                    self._expect("]")
-            return ("ref", name, tuple(path), at)
+        if kind == "func":
+            return self._call(value, at)
+        if kind == "ref":
+            self.keys.add(value[0].key)
+            self.refs.append(value[0])
+            return ("ref", value[0], at)
         raise ExprError("expected a value, found %r" % (value or "end of expression"), at)
+
+    def _call(self, name: str, at: int) -> Any:
+        self._expect("(")
+        args = []
+        if self._peek()[1] != ")":
+            args.append(self._or())
+            while self._peek()[1] == ",":
+                self._take()
+                args.append(self._or())
+        self._expect(")")
+        (lo, hi), _, _ = FUNCTIONS[name]
+        if not lo <= len(args) <= hi:
+            raise ExprError("%s() takes %s, got %d" % (name, "1 argument" if hi == 1 else "%d to %d arguments"
+                                                       % (lo, hi), len(args)), at)
+        return ("call", name, tuple(args), at)
 
     # evaluation
     def evaluate(self, lookup: Callable[[str], Any]) -> bool:
         """Truth of the expression; ``lookup(key)`` raises KeyError for unset keys."""
         return bool(unwrap(self._eval(self.tree, lookup)))
 
+    def value(self, lookup: Callable[[str], Any]) -> Any:
+        """The expression's value (a one-field message stands for its value)."""
+        return unwrap(self._eval(self.tree, lookup))
+
     def _eval(self, node: Any, lookup: Callable[[str], Any]) -> Any:
         op = node[0]
         if op == "lit":
             return node[1]
         if op == "ref":
-            value = lookup(node[1])
-            for step in node[2]:
-                value = field_of(value, step, node[1])
-            return value
+            try:
+                return node[1].resolve(lookup)
+            except ExprError:
+                raise
+            except RefError as exc:
+                raise ExprError(str(exc))
         if op == "not":
             return not unwrap(self._eval(node[1], lookup))
         if op == "and":
             return unwrap(self._eval(node[1], lookup)) and unwrap(self._eval(node[2], lookup))
         if op == "or":
             return unwrap(self._eval(node[1], lookup)) or unwrap(self._eval(node[2], lookup))
+        if op == "neg":
+            v = unwrap(self._eval(node[1], lookup))
+            if kind_of(v) != "number":
+                raise ExprError("cannot negate %s" % _described(v))
+            return -v
+        if op == "arith":
+            return _arith(node[1], unwrap(self._eval(node[2], lookup)), unwrap(self._eval(node[3], lookup)))
+        if op == "call":
+            return _apply(node[1], [unwrap(self._eval(a, lookup)) for a in node[2]])
         a, b = unwrap(self._eval(node[2], lookup)), unwrap(self._eval(node[3], lookup))
         try:
             return _compare(node[1], a, b)
         except TypeError:
             raise ExprError("cannot compare %s %s %s" % (type(a).__name__, node[1], type(b).__name__))
 
+    # static types
+    def type_errors(self, key_kind: Callable[[Ref], Optional[str]]) -> List[Tuple[int, str]]:
+        """(offset, message) for each operand whose kind, known before running, cannot fit.
 
-def field_of(value: Any, step: Any, root: str) -> Any:
-    """``value.step`` or ``value[step]`` for a message, a mapping or a list; ExprError names ``root``."""
-    try:
-        if isinstance(step, int):
-            return unwrap(value)[step]
-        if isinstance(value, dict):
-            return value[step]
-        if isinstance(value, genpy.Message) and step in value.__slots__:
-            return getattr(value, step)
-    except (IndexError, KeyError, TypeError):
-        pass
-    raise ExprError("%s has no %s %r" % (root, "index" if isinstance(step, int) else "field", step))
+        ``key_kind(ref)`` is the kind a reference will hold (see :func:`kind_of`), None if unknown.
+        """
+        errors: List[Tuple[int, str]] = []
+        _static(self.tree, key_kind, errors)
+        return errors
+
+
+def _described(v: Any) -> str:
+    return "%s %r" % (kind_of(v), v) if kind_of(v) in ("number", "string", "bool") else kind_of(v)
+
+
+def _arith(op: str, a: Any, b: Any) -> Any:
+    ka, kb = kind_of(a), kind_of(b)
+    if op == "+" and ka == kb == "string":
+        return a + b
+    if ka != "number" or kb != "number":
+        raise ExprError("cannot %s %s and %s" % (_VERB[op], _described(a), _described(b)))
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if b == 0:
+        raise ExprError("division by zero")
+    return a / b
+
+
+_VERB = {"+": "add", "-": "subtract", "*": "multiply", "/": "divide"}
+
+
+def _apply(name: str, args: List[Any]) -> Any:
+    want = FUNCTIONS[name][1]
+    for a in args:
+        if want and kind_of(a) != want:
+            raise ExprError("%s() takes a %s, got %s" % (name, want, _described(a)))
+    a = args[0]
+    if name == "len":
+        if kind_of(a) not in ("string", "list"):
+            raise ExprError("len() takes a string or a list, got %s" % _described(a))
+        return len(a)
+    if name == "lower":
+        return a.lower()
+    if name == "upper":
+        return a.upper()
+    if name == "str":
+        return a if isinstance(a, str) else text_of(a)
+    if name == "abs":
+        return abs(a)
+    if name == "round":
+        return int(round(a))
+    return min(args) if name == "min" else max(args)
+
+
+def text_of(v: Any) -> str:
+    """A value as a template or ``str()`` writes it (``3`` for 3.0, ``true``, ``null``)."""
+    v = unwrap(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if v is None:
+        return "null"
+    if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
+        return str(int(v))
+    return str(v)
 
 
 def _compare(op: str, a: Any, b: Any) -> bool:
@@ -200,6 +361,8 @@ def _compare(op: str, a: Any, b: Any) -> bool:
         return a == b
     if op == "!=":
         return a != b
+    if op in _ORDER and (kind_of(a) == "bool") != (kind_of(b) == "bool"):
+        raise TypeError(op)
     if op == "<":
         return a < b
     if op == "<=":
@@ -213,5 +376,46 @@ def _compare(op: str, a: Any, b: Any) -> bool:
     return a in b
 
 
-def parse(text: str) -> Optional[Expr]:
-    return Expr(text)
+def _static(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tuple[int, str]]) -> Optional[str]:
+    """The kind of ``node``'s value when known, after recording misfits below it."""
+    op = node[0]
+    if op == "lit":
+        return kind_of(node[1])
+    if op == "ref":
+        return key_kind(node[1])
+    if op in ("and", "or"):
+        _static(node[1], key_kind, errors)
+        _static(node[2], key_kind, errors)
+        return None
+    if op == "not":
+        _static(node[1], key_kind, errors)
+        return "bool"
+    if op == "neg":
+        k = _static(node[1], key_kind, errors)
+        if k is not None and k != "number":
+            errors.append((node[2], "cannot negate a %s" % k))
+        return "number"
+    if op == "arith":
+        a, b = _static(node[2], key_kind, errors), _static(node[3], key_kind, errors)
+        if a is None or b is None:
+            return None
+        if node[1] == "+" and a == b == "string":
+            return "string"
+        if a != "number" or b != "number":
+            errors.append((node[4], "cannot %s a %s and a %s" % (_VERB[node[1]], a, b)))
+            return None
+        return "number"
+    if op == "call":
+        name, args, at = node[1], node[2], node[3]
+        want = FUNCTIONS[name][1]
+        for arg in args:
+            k = _static(arg, key_kind, errors)
+            if k is None:
+                continue
+            if (want and k != want) or (name == "len" and k not in ("string", "list")):
+                errors.append((at, "%s() takes a %s, not a %s" % (name, want or "string or a list", k)))
+        return FUNCTIONS[name][2]
+    a, b = _static(node[2], key_kind, errors), _static(node[3], key_kind, errors)
+    if node[1] in _ORDER and a is not None and b is not None and a != b:
+        errors.append((node[4], "cannot compare a %s %s a %s" % (a, node[1], b)))
+    return "bool"

@@ -14,20 +14,25 @@ import sys
 import tempfile
 import time
 import xmlrpc.client
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
+from comm.errors import EnvironmentProblem
 from modules.discovery import node_alive
 
-__all__ = ["RosGraph", "GraphError", "free_port"]
+__all__ = ["RosGraph", "GraphError", "free_port", "LOOPBACK"]
+
+#: Address every process of a private graph advertises: the graph works where the machine's
+#: hostname does not resolve (minimal images, containers, chroots) and exposes nothing.
+LOOPBACK = "127.0.0.1"
 
 
-class GraphError(EnvironmentError):
+class GraphError(EnvironmentProblem):
     """A process of the graph did not start or register in time."""
 
 
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
+        s.bind((LOOPBACK, 0))
         return s.getsockname()[1]
 
 
@@ -38,9 +43,12 @@ class RosGraph:
         ros_home: ROS_HOME for every process (logs, the Blackboard's store); a
             temporary directory (removed at close) when not given.
         master_uri: an already running master to start nodes against.
+        address: the ROS_IP of every process (default loopback: nothing is reachable from other
+            machines; ROS 1 has no authentication). Another address opens the graph to that network.
     """
 
-    def __init__(self, ros_home: Optional[str] = None, master_uri: str = ""):
+    def __init__(self, ros_home: Optional[str] = None, master_uri: str = "", address: str = ""):
+        self.address = address or LOOPBACK
         self._tmp = None if ros_home else tempfile.mkdtemp(prefix="bmtree-ros-")
         self.ros_home = ros_home or self._tmp or ""
         os.makedirs(self.ros_home, exist_ok=True)
@@ -52,10 +60,35 @@ class RosGraph:
     @property
     def env(self) -> Dict[str, str]:
         env = dict(os.environ)
-        env.update(ROS_MASTER_URI=self.uri, ROS_HOME=self.ros_home, ROS_LOG_DIR=os.path.join(self.ros_home, "log"),
-                   PYTHONUNBUFFERED="1", ROS_IP="127.0.0.1")
+        env.update(self.ros_env(), PYTHONUNBUFFERED="1")
         env.pop("ROS_HOSTNAME", None)
         return env
+
+    def ros_env(self) -> Dict[str, str]:
+        """The ROS variables of a process that joins this graph (loopback addressing)."""
+        return {"ROS_MASTER_URI": self.uri, "ROS_HOME": self.ros_home,
+                "ROS_LOG_DIR": os.path.join(self.ros_home, "log"), "ROS_IP": self.address}
+
+    def adopt(self, home: bool = False) -> Callable[[], None]:
+        """Make this process a member of the graph (before ``rospy.init_node``): its master and
+        loopback addressing, so nodes can connect back to it whatever the hostname; with
+        ``home``, its ``ROS_HOME`` too. Returns a function that restores the environment."""
+        keys = ("ROS_MASTER_URI", "ROS_HOME", "ROS_LOG_DIR", "ROS_IP", "ROS_HOSTNAME")
+        saved = {k: os.environ.get(k) for k in keys}
+        os.environ.pop("ROS_HOSTNAME", None)
+        env = self.ros_env()
+        if not home:
+            env.pop("ROS_HOME")
+            env.pop("ROS_LOG_DIR")
+        os.environ.update(env)
+
+        def restore() -> None:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+        return restore
 
     def _log(self, name: str):
         path = os.path.join(self.ros_home, "%s.out" % name.strip("/").replace("/", "_"))
@@ -69,7 +102,7 @@ class RosGraph:
             raise GraphError("rosmaster is not installed (run 'make setup' or install python3-rosmaster)")
         for _attempt in range(3):
             port = free_port()
-            self.uri = "http://127.0.0.1:%d/" % port
+            self.uri = "http://%s:%d/" % (self.address, port)
             log = self._log("rosmaster")
             self.master = subprocess.Popen([exe, "--core", "-p", str(port), "-w", "3"], env=self.env,
                                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,

@@ -1,10 +1,26 @@
-"""The transport over real ROS topics (DESIGN §2). The only coordinator part that talks to ROS."""
+"""The transport over real ROS topics (DESIGN §2). The only coordinator part that talks to ROS.
+
+Calls and cancels go to a module's own call topic when its announcement names one (a
+cancel there, marked ``"cancel": true``, can never overtake its call), else to the shared
+``/master/output`` and ``/master/cancel`` (README, "Addressed calls").
+Sending never blocks the ticking thread: a module's own topics are written by a thread
+each (:class:`coordinator.sender.TopicSender`), the shared topics by rospy's queued
+publishers (a queue and writer thread per subscriber connection), so a subscriber that
+stops reading (a stopped process) fills only its own queue (then loses its oldest messages).
+"""
 from __future__ import annotations
 
 import logging
+import os
+import socket
+import threading
 import time
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional
+import typing
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
+from blackboard.node import TOPIC_STORED
 from comm import (
     TOPIC_BB_ANSWER,
     TOPIC_BB_REQUEST,
@@ -14,7 +30,8 @@ from comm import (
     TOPIC_RESULT,
     sync_publisher,
 )
-from comm.errors import ProtocolError
+from comm.addressing import PING_FUNCTION, cancel_on_call_topic
+from comm.errors import EnvironmentProblem, ProtocolError
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
@@ -23,14 +40,30 @@ from comm.messages import (
     Event,
     FunctionCall,
     FunctionResult,
+    new_id,
 )
+from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, Watchdog
+from coordinator.runstream import CHANNELS, Sink
+from coordinator.sender import TopicSender
 from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
-from modules.discovery import LiveModule, live_modules
+from modules.discovery import (
+    PARAM_ROOT,
+    LiveModule,
+    announced_modules,
+    legacy_announcement,
+    live_modules,
+    node_alive,
+)
 
-__all__ = ["RosTransport", "diff_definitions"]
+__all__ = ["RosTransport", "RosStreamSink", "diff_definitions", "address_problem", "SEND_QUEUE"]
 
 log = logging.getLogger("bmtree.coordinator")
+
+SEND_QUEUE = 10000  # messages queued per subscriber connection before the oldest is dropped
+PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
+ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
+PING_PATIENCE = 1.0  # seconds after which a module without its own topics may do with connections alone
 
 
 def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[str]:
@@ -41,6 +74,9 @@ def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[st
         if other is None:
             out.append("function %r is not served by the running module" % name)
             continue
+        if fn.concurrent != other.concurrent:  # checks and mocks assumed the local one
+            out.append("function %r is %sconcurrent here, %sconcurrent in the running module" % (
+                name, "" if fn.concurrent else "not ", "" if other.concurrent else "not "))
         for kind, a, b in (("input", fn.inputs, other.inputs), ("output", fn.outputs, other.outputs)):
             if [(p.name, p.rostype) for p in a] != [(p.name, p.rostype) for p in b]:
                 out.append("%s %ss differ: here %s, running %s" % (name, kind, ", ".join(
@@ -52,20 +88,54 @@ def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[st
     return out
 
 
+def address_problem() -> str:
+    """Why nodes may be unable to connect back to this process (empty when nothing is wrong).
+
+    rospy advertises ``http://HOST:PORT/`` with HOST from ``ROS_IP``/``ROS_HOSTNAME`` or else the
+    machine's hostname; a name that does not resolve (minimal images, containers, chroots) leaves
+    every publisher and subscriber of this process unreachable.
+    """
+    import rosgraph.network
+
+    host = rosgraph.network.get_host_name()
+    if os.environ.get("ROS_IP"):
+        return ""
+    try:
+        socket.getaddrinfo(host, None)
+        return ""
+    except (OSError, UnicodeError):
+        pass
+    what = "ROS_HOSTNAME=%s" % host if os.environ.get("ROS_HOSTNAME") else "this machine's name %r" % host
+    return ("%s does not resolve, so other nodes cannot connect back to this process: set ROS_IP to "
+            "this machine's address on the ROS network (export ROS_IP=127.0.0.1 when every node runs "
+            "here) or ROS_HOSTNAME to a name the other machines resolve" % what)
+
+
 class RosTransport(Transport):
     """Publishes calls/cancels/requests; decodes results/events/answers in rospy's threads."""
 
-    def __init__(self, node_name: str = "bmtree", max_bytes: int = DEFAULT_MAX_BYTES):
+    def __init__(self, node_name: str = "bmtree", max_bytes: int = DEFAULT_MAX_BYTES,
+                 liveness: float = DEFAULT_PERIOD):
         self.node_name = node_name
         self.max_bytes = max_bytes
-        self._deliver: Callable[[Any], None] = lambda item: None
+        self._early: List[Event] = []  # events that came during the preflight, for the run
+        self._deliver: Callable[[Any], None] = self._hold
+        self.watchdog = Watchdog(lambda item: self._deliver(item), self._node_of, self._uri_of, period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._String: Any = None
+        self._answered: typing.OrderedDict[str, str] = OrderedDict()  # call_id -> node that answered
+        #: node -> module of every module the run uses (announced, found by name, or --legacy):
+        #: a result without call_id belongs to the module whose node published it
+        self.node_modules: Dict[str, str] = {}
+        self._routes: Dict[str, TopicSender] = {}  # module -> its own call topic
+        self._pings: Dict[str, str] = {}  # ping call_id -> module
+        self._ponged: Set[str] = set()  # modules that answered a ping
+        self._cond = threading.Condition()
 
     def open(self) -> None:
         """Init the rospy node (once per process) and the topics."""
-        if self._pubs:
+        if self._subs:
             return
         import rospy
         from std_msgs.msg import String
@@ -73,124 +143,440 @@ class RosTransport(Transport):
         self._String = String
         if not rospy.core.is_initialized():
             rospy.init_node(self.node_name, anonymous=True, disable_signals=True)
-        self._pubs = {  # synchronous: lowest latency, and calls are small and few
-            "call": sync_publisher(TOPIC_CALL, String),
-            "cancel": sync_publisher(TOPIC_CANCEL, String),
-            "request": sync_publisher(TOPIC_BB_REQUEST, String),
-        }
+        from comm.masterwatch import watch_master
+
+        watch_master()  # a restarted master gets this node's topics again; the run goes on
+        # the shared call and cancel topics only when a module needs them (_shared): every module
+        # listens there, so each publisher costs one connection per module
+        self._pubs = {"request": self._publisher(TOPIC_BB_REQUEST)}
         self._subs = [
-            rospy.Subscriber(TOPIC_RESULT, String, self._on(FunctionResult), queue_size=1000, tcp_nodelay=True),
+            rospy.Subscriber(TOPIC_RESULT, String, self._on(FunctionResult, self._take_ping), queue_size=1000,
+                             tcp_nodelay=True),
             rospy.Subscriber(TOPIC_EVENT, String, self._on(Event), queue_size=1000, tcp_nodelay=True),
             rospy.Subscriber(TOPIC_BB_ANSWER, String, self._on(BlackboardAnswer), queue_size=100, tcp_nodelay=True),
         ]
 
-    def _on(self, cls: Any) -> Callable[[Any], None]:
+    def _publisher(self, topic: str) -> Any:
+        """Queued (non-blocking, see the module docstring), Nagle off: calls are small."""
+        import rospy
+
+        return rospy.Publisher(topic, self._String, queue_size=SEND_QUEUE, tcp_nodelay=True)
+
+    def _sender(self, topic: str) -> TopicSender:
+        """A module's own call topic (one subscriber): its own writer thread, no GIL hand-off per
+        call. One publisher per module, not two: registering publishers one at a time with the
+        master is most of the preflight's time."""
+        return TopicSender(topic, self._String, SEND_QUEUE)
+
+    def _on(self, cls: Any, intercept: Optional[Callable[[Any], bool]] = None) -> Callable[[Any], None]:
         def callback(msg: Any) -> None:
             try:
                 item = cls.decode(msg.data, self.max_bytes)
             except ProtocolError as exc:
                 log.warning("ignored a malformed %s: %s", cls.__name__, exc)
                 return
+            except Exception as exc:  # nothing a sender writes may stop a subscriber
+                log.warning("ignored a malformed %s (%s: %s)", cls.__name__, type(exc).__name__, exc)
+                return
+            if intercept is not None and intercept(item):
+                return
+            if cls is FunctionResult:
+                header = getattr(msg, "_connection_header", None) or {}
+                item.publisher = header.get("callerid")
+                if item.call_id is None and item.basic_mod is None:
+                    item.basic_mod = self.node_modules.get(item.publisher or "")
+                self.watchdog.call_done(item.call_id)
+                self._check_twice(item, header)
+            elif cls is BlackboardAnswer:
+                self.watchdog.request_done(item.request_id)
             self._deliver(item)
         return callback
 
+    def _check_twice(self, result: FunctionResult, header: Mapping[str, str]) -> None:
+        """Report a call answered by two nodes: two nodes serve one module, every call runs twice."""
+        node = header.get("callerid", "")
+        if result.call_id is None or not node:
+            return
+        first = self._answered.setdefault(result.call_id, node)
+        if first != node:
+            log.error("call %s of %s.%s was answered by two nodes, %s and %s: two nodes serve module %r and run "
+                      "every call twice; stop one of them", result.call_id, result.basic_mod, result.function,
+                      first, node, result.basic_mod)
+        while len(self._answered) > 10000:
+            self._answered.popitem(last=False)
+
+    def _take_ping(self, result: FunctionResult) -> bool:
+        """A ping's answer (``rejected`` from a module too old to know pings) is consumed here."""
+        if result.function != PING_FUNCTION:
+            return False
+        with self._cond:
+            module = self._pings.get(result.call_id or "")
+            if module is not None and module == result.basic_mod:
+                self._ponged.add(module)
+                self._cond.notify_all()
+        return True
+
+    def _hold(self, item: Any) -> None:
+        """Before the run connects: keep events (a module may announce something while the
+        preflight runs), drop the rest (nothing was called yet)."""
+        with self._cond:
+            if isinstance(item, Event) and len(self._early) < 1000:
+                self._early.append(item)
+
     def connect(self, deliver: Callable[[Any], None]) -> None:
         self.open()
-        self._deliver = deliver
+        with self._cond:
+            early, self._early = self._early, []
+            self._deliver = deliver
+        for item in early:
+            deliver(item)
+        self.watchdog.start()
 
-    def _publish(self, which: str, text: str) -> None:
-        self._pubs[which].publish(self._String(text))
+    @staticmethod
+    def _node_of(module: str) -> Optional[str]:
+        """The node serving ``module`` (announced, else a legacy node named after it), or the Blackboard's."""
+        import rosgraph
+
+        master = rosgraph.Master("/bmtree_liveness")
+        if module == BLACKBOARD:  # the live node publishing answers and acknowledgements
+            pubs, _, _ = master.getSystemState()
+            pubs_of = {t: list(n) for t, n in pubs}
+            answering = pubs_of.get(TOPIC_BB_ANSWER, [])
+            nodes = [n for n in answering if n in pubs_of.get(TOPIC_STORED, [])] or answering
+            for node in nodes:
+                try:
+                    if node_alive(master.lookupNode(node), 0.5):
+                        return node
+                except rosgraph.masterapi.MasterError:
+                    continue
+            return nodes[0] if nodes else None
+        try:
+            entry = master.getParam("%s/%s" % (PARAM_ROOT, module))
+            if isinstance(entry, dict) and isinstance(entry.get("node"), str):
+                return entry["node"]
+        except rosgraph.masterapi.MasterError:
+            pass
+        found = RosTransport._legacy_nodes([module]).get(module)
+        return found[0] if found else None
+
+    @staticmethod
+    def _uri_of(node: str) -> Optional[str]:
+        import rosgraph
+
+        try:
+            return rosgraph.Master("/bmtree_liveness").lookupNode(node)
+        except rosgraph.masterapi.MasterError:
+            return None
+
+    def _route(self, module: str) -> Any:
+        route = self._routes.get(module)
+        return route if route is not None else self._shared("call")
+
+    def _shared(self, which: str) -> Any:
+        pub = self._pubs.get(which)
+        if pub is None:
+            pub = self._pubs[which] = self._publisher(TOPIC_CALL if which == "call" else TOPIC_CANCEL)
+        return pub
+
+    def topics_of(self, module: str) -> Tuple[str, str]:
+        """Where calls and cancels for ``module`` go now."""
+        route = self._routes.get(module)
+        if route is not None:
+            return route.resolved_name, route.resolved_name
+        return self._shared("call").resolved_name, self._shared("cancel").resolved_name
 
     def send_call(self, call: FunctionCall) -> None:
-        self._publish("call", call.encode())
+        if call.call_id:
+            self.watchdog.call_sent(call.call_id, call.basic_mod)
+        self._route(call.basic_mod).publish(self._String(call.encode()))
 
     def send_cancel(self, cancel: CancelRequest) -> None:
-        self._publish("cancel", cancel.encode())
+        route = self._routes.get(cancel.basic_mod)
+        if route is not None:
+            route.publish(self._String(cancel_on_call_topic(cancel.call_id, cancel.basic_mod, cancel.function)))
+        else:
+            self._shared("cancel").publish(self._String(cancel.encode()))
 
     def send_request(self, request: BlackboardRequest) -> None:
-        self._publish("request", request.encode())
+        if request.request_id:
+            self.watchdog.request_sent(request.request_id)
+        self._pubs["request"].publish(self._String(request.encode()))
 
     def live(self, timeout: float = 1.0) -> Dict[str, LiveModule]:
         return live_modules(timeout=timeout)
 
     def wait_ready(self, modules: Iterable[str], timeout: float,
-                   definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False) -> None:
-        """Wait (bounded) until every module runs with a matching definition and is connected.
+                   definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
+                   legacy: Optional[Mapping[str, str]] = None) -> None:
+        """Wait (bounded) until a first call to every module would be taken and answered.
+
+        All modules at once: one master query for the announcements, then each announced
+        module is pinged where its calls will go, as soon as both its call topic and its
+        results are connected; the answer on ``/function/output`` proves both directions.
+        An original module (not announced: a node ``/<module>`` listening on
+        ``/master/output``) must be connected both ways to this node.
+
+        ``legacy`` names the node of an original module (``{"DEMO_BM": "/some/node"}``) whose
+        node is not called ``/<module>``. Original modules found are announced on their behalf
+        (marked legacy), so ``bmtree modules --live`` and the Blackboard know their node; such
+        an announcement is treated as an original module's (no ping) by later runs.
 
         Raises:
-            EnvironmentError: what is missing or different, after ``timeout`` seconds.
+            EnvironmentProblem: what is missing or different, after ``timeout`` seconds.
         """
-        import rosgraph
-
         self.open()
         wanted = sorted(set(modules))
+        with self._cond:  # a fresh proof each time: a module may have restarted since
+            self._ponged.difference_update(wanted)
         end = time.monotonic() + timeout
-        problems: List[str] = []
-        master = rosgraph.Master("/bmtree_ready")
+        given = {m: n for m, n in (legacy or {}).items() if m in wanted}
+        announced: Dict[str, LiveModule] = {}
+        originals: Dict[str, Tuple[str, str]] = {}
+        blackboards: List[str] = []
+        pinged: Dict[str, float] = {}
+        first_ping: Dict[str, float] = {}
+        next_look = 0.0
         while True:
-            problems = []
-            live = self.live()
-            nodes = []
-            legacy = self._legacy_nodes(master, [n for n in wanted if n not in live])
+            now = time.monotonic()
+            with self._cond:
+                answered = set(self._ponged)
+            if now >= next_look and set(wanted) - answered:
+                every = announced_modules()
+                announced = {n: m for n, m in every.items() if not m.legacy and n not in given}
+                originals = {n: (m.node, m.uri) for n, m in every.items() if m.legacy and n in wanted and n not in given}
+                originals.update(self._legacy_nodes([n for n in wanted if n not in announced and n not in originals
+                                                     and n not in given]))
+                found_given, _missing = self._given_nodes(given)
+                originals.update(found_given)
+                blackboards = self._blackboard_listeners()
+                for name in wanted:
+                    if name in announced:
+                        self._set_route(announced[name])
+                next_look = now + ANNOUNCEMENTS_EVERY
+            problems: Dict[str, List[str]] = {}
             for name in wanted:
-                if name not in live:
-                    if name in legacy:
-                        nodes.append(legacy[name])
-                    else:
-                        problems.append("module %r is not running (no bmtree module announced it and no node "
-                                        "named /%s listens on %s)" % (name, name, TOPIC_CALL))
-                    continue
-                nodes.append(live[name].node)
-                if definitions and name in definitions:
-                    diff = diff_definitions(definitions[name], live[name].definition)
-                    if diff:
-                        problems.append("module %r runs with another definition: %s" % (name, "; ".join(diff)))
+                if name in announced:
+                    found = self._announced_problems(announced[name], definitions, name in answered, pinged,
+                                                     first_ping, now)
+                elif name in originals:
+                    found = self._legacy_problems(name, *originals[name])
+                elif name in given:
+                    found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
+                             % (given[name], name, TOPIC_CALL)]
+                else:
+                    found = ["module %r is not running (no bmtree module announced it and no node named /%s "
+                             "listens on %s; name its node with --legacy %s=/node)" % (name, name, TOPIC_CALL, name)]
+                if found:
+                    problems[name] = found
+            if blackboard and (self._pubs["request"].get_num_connections() < 1 or self._subs[2].get_num_connections() < 1):
+                problems[""] = ["the Blackboard node is not running or not connected"]
+            # a Blackboard node learns the pending calls from /master/output (to store original
+            # modules' results under their call): it must hear the first call too
+            for bb in blackboards:
+                if not self._shared("call").impl.has_connection(bb):
+                    problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s" % (bb, TOPIC_CALL)]
             if not problems:
-                problems = self._unconnected(master, nodes, blackboard)
-            if not problems:
+                self.node_modules = {m.node: n for n, m in announced.items() if n in wanted}
+                self.node_modules.update({node: n for n, (node, _uri) in originals.items()})
+                self._announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
                 return
             if time.monotonic() >= end:
-                raise OSError("; ".join(problems))
-            time.sleep(0.1)
+                problems.update(self._dead([announced[n] for n in problems if n in announced]))
+                hint = address_problem()
+                raise EnvironmentProblem("; ".join([p for name in sorted(problems) for p in problems[name]]
+                                                   + ([hint] if hint else [])))
+            with self._cond:
+                self._cond.wait(0.02)
+
+    def _set_route(self, live: LiveModule) -> None:
+        """Publishers for the module's own topics (once), or none for a module that has none."""
+        route = self._routes.get(live.name)
+        if route is not None and route.resolved_name != live.call_topic:
+            del self._routes[live.name]
+            route.unregister()
+            route = None
+        if route is None and live.call_topic is not None:
+            self._routes[live.name] = self._sender(live.call_topic)
+
+    def _announced_problems(self, live: LiveModule, definitions: Optional[Mapping[str, ModuleDefinition]],
+                            answered: bool, pinged: Dict[str, float], first_ping: Dict[str, float],
+                            now: float) -> List[str]:
+        """Why ``live`` cannot be called yet (nothing once it answered a ping).
+
+        A module announced without its own topics (a bmtree module older than pings
+        answers one ``rejected``) is also taken once connected both ways and
+        :data:`PING_PATIENCE` seconds without an answer, as an original module is.
+        """
+        name = live.name
+        if definitions and name in definitions:
+            diff = diff_definitions(definitions[name], live.definition)
+            if diff:
+                return ["module %r runs with another definition: %s" % (name, "; ".join(diff))]
+        call_pub = self._route(name)
+        problems: List[str] = []
+        if answered:
+            return problems
+        if not call_pub.impl.has_connection(live.node) or not self._subs[0].impl.has_connection(live.uri):
+            return problems + ["module %r (node %s) is not connected to %s and %s yet" % (
+                name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
+        if name not in self._routes and now - first_ping.setdefault(name, now) >= PING_PATIENCE:
+            return problems
+        if now - pinged.get(name, -1e9) >= PING_EVERY:
+            ping = FunctionCall(name, PING_FUNCTION, [], names=[], call_id=new_id())
+            with self._cond:
+                self._pings[ping.call_id or ""] = name
+            call_pub.publish(self._String(ping.encode()))
+            pinged[name] = now
+        return problems + ["module %r (node %s) has not answered a ping on %s" % (name, live.node,
+                                                                                 call_pub.resolved_name)]
 
     @staticmethod
-    def _legacy_nodes(master: Any, names: List[str]) -> Dict[str, str]:
+    def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
+        """Which announced modules are not running at all (a node killed hard leaves its
+        announcement behind), all asked at once."""
+        if not modules:
+            return {}
+        with ThreadPoolExecutor(max_workers=min(32, len(modules))) as pool:
+            alive = list(pool.map(lambda m: node_alive(m.uri, 1.0), modules))
+        return {m.name: ["module %r is not running (node %s announced it but does not answer)" % (m.name, m.node)]
+                for m, up in zip(modules, alive) if not up}
+
+    def _legacy_problems(self, name: str, node: str, uri: str) -> List[str]:
+        if self._shared("call").impl.has_connection(node) and self._subs[0].impl.has_connection(uri):
+            return []
+        return ["original module %r (node %s) is not connected to %s and %s yet" % (name, node, TOPIC_CALL,
+                                                                                   TOPIC_RESULT)]
+
+    @staticmethod
+    def _given_nodes(given: Mapping[str, str]) -> Tuple[Dict[str, Tuple[str, str]], List[str]]:
+        """Nodes named with ``--legacy MODULE=/node`` that run and listen on the call topic
+        (node and URI), and the modules whose node does not."""
+        if not given:
+            return {}, []
+        import rosgraph
+
+        master = rosgraph.Master("/bmtree_ready")
+        _, subs, _ = master.getSystemState()
+        listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
+        found, missing = {}, []
+        for module, node in given.items():
+            try:
+                if node in listeners:
+                    found[module] = (node, master.lookupNode(node))
+                    continue
+            except rosgraph.masterapi.MasterError:
+                pass
+            missing.append(module)
+        return found, missing
+
+    @staticmethod
+    def _blackboard_listeners() -> List[str]:
+        """Running Blackboard nodes that listen to the calls (a killed node stays registered)."""
+        import rosgraph
+
+        master = rosgraph.Master("/bmtree_ready")
+        _, subs, _ = master.getSystemState()
+        subs_of = {t: set(n) for t, n in subs}
+        out = []
+        for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
+            try:
+                if node_alive(master.lookupNode(node), 0.5):
+                    out.append(node)
+            except rosgraph.masterapi.MasterError:
+                continue
+        return out
+
+    @staticmethod
+    def _announce_legacy(found: Mapping[str, str], definitions: Mapping[str, ModuleDefinition]) -> None:
+        import rospy
+
+        for module, node in found.items():
+            if module in definitions:
+                rospy.set_param("%s/%s" % (PARAM_ROOT, module), legacy_announcement(node, definitions[module]))
+
+    @staticmethod
+    def _legacy_nodes(names: List[str]) -> Dict[str, Tuple[str, str]]:
         """Original modules do not announce themselves; they are found by node name.
 
         A node called ``/<module>`` (in any namespace) that subscribes to
         ``/master/output`` is taken as that module, the convention of the original
-        template modules.
+        template modules. Gives the node and its URI.
         """
         if not names:
             return {}
+        import rosgraph
+
+        master = rosgraph.Master("/bmtree_ready")
         _, subs, _ = master.getSystemState()
         listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
         found = {}
         for name in names:
             for node in listeners:
                 if node.rsplit("/", 1)[-1] == name:
-                    found[name] = node
+                    try:
+                        found[name] = (node, master.lookupNode(node))
+                    except rosgraph.masterapi.MasterError:
+                        continue
         return found
 
-    def _unconnected(self, master: Any, nodes: List[str], blackboard: bool) -> List[str]:
-        """Nodes whose topics are not yet connected to ours (a first message would be lost)."""
-        pubs, subs, _ = master.getSystemState()
-        subs_of = {t: set(n) for t, n in subs}
-        pubs_of = {t: set(n) for t, n in pubs}
-        out = []
-        need_call = len([n for n in nodes if n in subs_of.get(TOPIC_CALL, set())])
-        if need_call < len(nodes) or self._pubs["call"].get_num_connections() < need_call:
-            out.append("waiting for modules to connect to %s" % TOPIC_CALL)
-        result_pubs = [n for n in nodes if n in pubs_of.get(TOPIC_RESULT, set())]
-        if len(result_pubs) < len(nodes) or self._subs[0].get_num_connections() < len(result_pubs):
-            out.append("waiting for %s connections" % TOPIC_RESULT)
-        if blackboard and (self._pubs["request"].get_num_connections() < 1 or self._subs[2].get_num_connections() < 1):
-            out.append("the Blackboard node is not running or not connected")
-        return out
+    def stream_sink(self, namespace: str = "/bmtree/run") -> Any:
+        """A run-stream sink that publishes each channel on ``namespace/<channel>`` (README, "Run stream")."""
+        self.open()
+        return RosStreamSink(namespace, self._String)
 
     def close(self) -> None:
+        self.watchdog.stop()
         for s in self._subs:
             s.unregister()
-        for p in self._pubs.values():
+        for p in list(self._pubs.values()) + list(self._routes.values()):
             p.unregister()
-        self._subs, self._pubs = [], {}
+        self._subs, self._pubs, self._routes = [], {}, {}
+
+
+class RosStreamSink(Sink):
+    """Publishes run-stream records, one topic per channel. ``tree`` and ``end`` (once per run)
+    are latched, so a viewer that connects late still gets the tree and the result, and written
+    at once; the frequent channels are queued, so a slow viewer never slows the tick, and
+    drained (bounded) at the end of the run."""
+
+    _ONCE = ("tree", "end")
+
+    def __init__(self, namespace: str, string_cls: Any):
+        import rospy
+
+        self._String = string_cls
+        self._pubs = {}
+        for c in CHANNELS:
+            topic = "%s/%s" % (namespace.rstrip("/"), c)
+            self._pubs[c] = (sync_publisher(topic, string_cls, latch=True) if c in self._ONCE else
+                             rospy.Publisher(topic, string_cls, queue_size=1000))
+
+    def write(self, channel: str, text: str) -> None:
+        self._pubs[channel].publish(self._String(text))
+
+    def close(self, timeout: float = 1.0) -> None:
+        end = time.monotonic() + timeout
+        for c, pub in self._pubs.items():
+            if c in self._ONCE:
+                continue
+            for conn in list(getattr(pub.impl, "connections", [])):
+                while getattr(conn, "_queue", None) and time.monotonic() < end:
+                    time.sleep(0.005)
+
+    def settle(self, timeout: float = 3.0) -> bool:
+        """Wait (bounded) until every viewer already subscribed is connected, so that it misses
+        nothing of the run; True if all are."""
+        import rosgraph
+
+        master = rosgraph.Master("/bmtree_stream")
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                subs = {t: len(n) for t, n in master.getSystemState()[1]}
+            except Exception:
+                return False
+            if all(p.get_num_connections() >= subs.get(p.resolved_name, 0) for p in self._pubs.values()):
+                return True
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.02)

@@ -1,21 +1,25 @@
-"""The tick loop: event-driven, one thread, with a display and a final report.
+"""The tick loop: py_trees' ``BehaviourTree``, ticked when something happens.
 
 The tree is ticked once at start, then whenever a message arrives (a result, an
 event, an answer) or a leaf asked to be woken (timeouts, waits), and at least every
 ``period`` seconds. A chain of calls therefore runs at the speed of the messages.
+What is watched while it runs is py_trees visitors (the status history for tests, the
+coverage of the test kit, the status changes that observers such as the display get).
 """
 from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, TextIO
+from typing import Any, Dict, List, Optional, Sequence, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
 
 from coordinator.context import WAKE, CallRecord, RunContext
+from coordinator.reasons import FailureExplainer
+from coordinator.runevents import Change, RunObserver, StatusWatcher, notify
 
-__all__ = ["RunResult", "TreeRunner", "Display"]
+__all__ = ["Display", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
 
 
 @dataclass
@@ -33,89 +37,150 @@ class RunResult:
         return self.status == Status.SUCCESS
 
 
-def _failure_reason(root: py_trees.behaviour.Behaviour) -> str:
-    """The feedback of the deepest failed behaviour, the likeliest cause."""
-    reason = ""
-    for b in root.iterate():
-        if b.status == Status.FAILURE and b.feedback_message:
-            reason = "%s: %s" % (b.name, b.feedback_message)
-    return reason
+class StatusHistory(py_trees.visitors.VisitorBase):
+    """The statuses each ticked behaviour went through, in order (``run.statuses(name)``)."""
+
+    def __init__(self) -> None:
+        super().__init__(full=False)
+        self.history: Dict[Any, List[Status]] = {}
+
+    def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
+        h = self.history.get(behaviour)
+        if h is None:
+            self.history[behaviour] = [behaviour.status]
+        elif h[-1] != behaviour.status:
+            h.append(behaviour.status)
 
 
-class Display:
+class Visited(py_trees.visitors.VisitorBase):
+    """The behaviours a tick visited, with their status when visited (for the observers' changes)."""
+
+    def __init__(self) -> None:
+        super().__init__(full=False)
+        self.visited: List[Tuple[Any, Status]] = []
+
+    def initialise(self) -> None:
+        self.visited = []
+
+    def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
+        self.visited.append((behaviour, behaviour.status))
+
+
+class Display(RunObserver):
     """Shows the tree with statuses: redrawn in place on a terminal, as changed lines otherwise."""
 
     def __init__(self, stream: TextIO = sys.stdout, tty: Optional[bool] = None, min_interval: float = 0.1):
         self.stream = stream
         self.tty = stream.isatty() if tty is None else tty
         self.min_interval = min_interval
-        self._last: Dict[Any, Status] = {}
-        self._drawn = 0.0
+        self.root: Optional[py_trees.behaviour.Behaviour] = None
+        self._drawn: Optional[float] = None
         self._lines = 0
+        self._start = 0.0
 
-    def __call__(self, root: py_trees.behaviour.Behaviour, now: float, final: bool = False) -> None:
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        self.root = root
+        self._start = ctx.clock.now()
+
+    def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
+        self.root = root
+        now -= self._start          # shown as seconds since the start
         if self.tty:
-            if not final and now - self._drawn < self.min_interval:
-                return
-            self._drawn = now
-            text = py_trees.display.unicode_tree(root, show_status=True)
-            if self._lines:
-                self.stream.write("\x1b[%dA\x1b[J" % self._lines)
-            self.stream.write(text + "\n")
-            self._lines = text.count("\n") + 1
-        else:
-            for b in root.iterate():
-                before = self._last.get(b.id)
-                if before != b.status:
-                    if b.status != Status.INVALID:
-                        extra = " (%s)" % b.feedback_message if b.status == Status.FAILURE and b.feedback_message else ""
-                        self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, b.status.value, b.name, extra))
-                    elif before == Status.RUNNING:
-                        self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", b.name))
-                    self._last[b.id] = b.status
+            if self._drawn is None or now - self._drawn >= self.min_interval:
+                self._draw(now)
+            return
+        for b, before, status in changes:
+            if status != Status.INVALID:
+                extra = " (%s)" % b.feedback_message if status == Status.FAILURE and b.feedback_message else ""
+                self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, status.value, b.name, extra))
+            elif before == Status.RUNNING:
+                self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", b.name))
+        self.stream.flush()
+
+    def on_end(self, result: Any) -> None:
+        if self.tty and self.root is not None:
+            self._draw(result.duration)
+
+    def _draw(self, now: float) -> None:
+        self._drawn = now
+        text = py_trees.display.unicode_tree(self.root, show_status=True)
+        if self._lines:
+            self.stream.write("\x1b[%dA\x1b[J" % self._lines)
+        self.stream.write(text + "\n")
+        self._lines = text.count("\n") + 1
         self.stream.flush()
 
 
 class TreeRunner:
+    """Ticks ``root`` on a py_trees ``BehaviourTree`` until it ends.
+
+    Args:
+        visitors: more py_trees visitors for every tick (the test kit's coverage).
+        observers: RunObservers (``coordinator.runevents``); they are also given to ``ctx``.
+        display: an observer shown the tree as it runs (kept apart for callers that name it).
+        tree: the loaded TreeFile, passed to ``on_start``.
+    """
+
     def __init__(self, root: py_trees.behaviour.Behaviour, ctx: RunContext, period: float = 0.25,
-                 display: Optional[Callable[..., None]] = None, record_history: bool = False):
+                 display: Optional[RunObserver] = None, record_history: bool = False,
+                 visitors: Sequence[py_trees.visitors.VisitorBase] = (),
+                 observers: Sequence[RunObserver] = (), tree: Any = None, gate: Any = None):
         self.root = root
+        self.gate = gate  # may_tick() -> bool: the steering of run --control (coordinator.control)
         self.ctx = ctx
         self.period = period
-        self.display = display
-        self.record_history = record_history
-        self.history: Dict[Any, List[Status]] = {}
-        self.ticks = 0
+        self.tree_file = tree
+        self.tree = py_trees.trees.BehaviourTree(root)
+        self.explainer = FailureExplainer()  # always: the run's reason names the root cause
+        self.observers: List[RunObserver] = list(observers) + ([display] if display is not None else [])
+        self.observers.append(self.explainer)
+        for o in self.observers:
+            if o not in ctx.observers:
+                ctx.observers.append(o)
+        self._history = StatusHistory() if record_history else None
+        self._visited = Visited() if ctx.observers else None
+        self._watcher = StatusWatcher()
+        for v in [self._history, self._visited, *visitors]:
+            if v is not None:
+                self.tree.add_visitor(v)
 
-    def _tick(self) -> None:
-        """One tick; with ``record_history``, note the status of every node it visited."""
-        if not self.record_history:
-            self.root.tick_once()
-            return
-        for b in self.root.tick():
-            h = self.history.get(b)
-            if h is None:
-                self.history[b] = [b.status]
-            elif h[-1] != b.status:
-                h.append(b.status)
+    @property
+    def history(self) -> Dict[Any, List[Status]]:
+        return self._history.history if self._history is not None else {}
+
+    @property
+    def ticks(self) -> int:
+        return self.tree.count
+
+    def tick(self) -> None:
+        """One tick, its status changes told to the observers (a step of :meth:`run`; benchmarks)."""
+        self.tree.tick()
+        if self._visited is not None:
+            self._tell(self._visited.visited)
+
+    def _tell(self, visited: List[Tuple[Any, Status]]) -> None:
+        """Observers get the status changes (after a tick, or after a stop outside a tick: ``[]``)."""
+        if self._visited is not None and self.ctx.observers:
+            notify(self.ctx.observers, "on_tick", self.root, self._watcher.changes(visited), self.ctx.clock.now())
 
     def run(self, max_duration: Optional[float] = None) -> RunResult:
         ctx = self.ctx
-        self.ctx.transport.connect(ctx.inbox.put)
-        self.root.setup_with_descendants()
+        ctx.transport.connect(ctx.inbox.put)
+        self.tree.setup()
         start = ctx.clock.now()
+        if ctx.observers:
+            notify(ctx.observers, "on_start", self.tree_file, self.root, ctx)
         reason = ""
         try:
             while True:
-                self._tick()
-                self.ticks += 1
-                if self.display is not None:
-                    self.display(self.root, ctx.clock.now() - start)
+                if self.gate is None or self.gate.may_tick():
+                    self.tick()
                 if self.root.status in (Status.SUCCESS, Status.FAILURE):
                     break
                 if max_duration is not None and ctx.clock.now() - start >= max_duration:
                     self.root.stop(Status.INVALID)
-                    reason = "stopped after %gs" % max_duration
+                    self._tell([])
+                    reason = "stopped after %g s" % max_duration
                     break
                 item = ctx.clock.wait(ctx.inbox, self.period)
                 while item is not None:
@@ -127,10 +192,19 @@ class TreeRunner:
                         item = None
         except BaseException:
             self.root.stop(Status.INVALID)
+            self._tell([])
+            if ctx.observers:
+                notify(ctx.observers, "on_end", RunResult(
+                    status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
+                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason="interrupted", history=self.history))
             raise
-        if self.display is not None:
-            self.display(self.root, ctx.clock.now() - start, final=True)
-        if self.root.status == Status.FAILURE:
-            reason = _failure_reason(self.root)
-        return RunResult(status=self.root.status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                         blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history)
+        status = self.root.status
+        if reason:  # stopped by max_duration: the task did not get done
+            status = Status.FAILURE
+        elif status == Status.FAILURE:
+            reason = self.explainer.reason(self.root)
+        result = RunResult(status=status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
+                           blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history)
+        if ctx.observers:
+            notify(ctx.observers, "on_end", result)
+        return result

@@ -32,7 +32,7 @@ class Transport(abc.ABC):
         """Ask the Blackboard node."""
 
     def wait_ready(self, modules: Iterable[str], timeout: float) -> None:  # noqa: B027 - optional, no-op default
-        """Block until the named modules can be called (raise EnvironmentError if not)."""
+        """Block until the named modules can be called (raise EnvironmentProblem if not)."""
 
     def close(self) -> None:  # noqa: B027 - optional, no-op default
         """Stop receiving and release resources."""

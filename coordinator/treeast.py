@@ -1,73 +1,91 @@
 """The tree language's syntax tree: what the parser produces and the builder consumes."""
 from __future__ import annotations
 
+import contextlib
+import gc
 from dataclasses import dataclass, field
-from typing import Any, Dict, FrozenSet, List, Set, Tuple
+from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 
-from coordinator.errors import Pos
+from coordinator.errors import Pos, TreeError
 
-__all__ = ["REQUIRED", "Node", "Ref", "TreeFile", "refs_in", "used_modules", "walk"]
-
-
-@dataclass(frozen=True)
-class Ref:
-    """``$key.field[0]`` in a YAML value: read from the tree blackboard when the node starts."""
-
-    key: str
-    path: Tuple[Any, ...] = ()
-
-    def __str__(self) -> str:
-        return "$" + self.key + "".join("[%d]" % p if isinstance(p, int) else "." + p for p in self.path)
+__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "used_modules", "walk"]
 
 
-@dataclass
-class Node:
-    kind: str
-    name: str
-    pos: Pos
-    children: List[Node] = field(default_factory=list)
-    opts: Dict[str, Any] = field(default_factory=dict)
+class TreeNode:
+    """One node as written: its kind's typed ``spec`` (see ``coordinator.nodes``) and its children.
+
+    ``nodekind`` is the registry's object for ``kind``: every generic walk (data flow, build,
+    used modules) asks it, so no walk knows the kinds. (A plain class with slots: a tree has
+    thousands of these.)
+    """
+
+    __slots__ = ("kind", "name", "pos", "children", "spec", "nodekind", "value_pos")
+
+    def __init__(self, kind: str, name: str, pos: Pos, children: Optional[List[TreeNode]] = None,
+                 spec: Any = None, nodekind: Any = None, value_pos: Optional[Pos] = None):
+        self.kind = kind
+        self.name = name
+        self.pos = pos
+        self.children: List[TreeNode] = [] if children is None else children
+        self.spec = spec
+        self.nodekind = nodekind
+        self.value_pos = value_pos   # where the kind's value is written
+
+    def __repr__(self) -> str:
+        return "TreeNode(%s %r at %s)" % (self.kind, self.name, self.pos)
 
 
-@dataclass
+@dataclass(eq=False)
 class TreeFile:
     path: str
     name: str
     description: str
     inputs: Dict[str, Any]            # name -> default (REQUIRED if none)
-    root: Node
+    root: TreeNode
     required_inputs: FrozenSet[str] = frozenset()
+    warnings: List[TreeError] = field(default_factory=list)   # found by the checks; the tree still runs
 
 
 REQUIRED = object()  # an input without a default
 
 
-def refs_in(value: Any) -> List[Ref]:
-    if isinstance(value, Ref):
-        return [value]
-    if isinstance(value, dict):
-        return [r for v in value.values() for r in refs_in(v)]
-    if isinstance(value, list):
-        return [r for v in value for r in refs_in(v)]
-    return []
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """Loading and building allocate tens of thousands of small objects that live as long as the tree.
+
+    The cycle collector's young-generation passes over them cost a quarter of the load time and
+    find nothing; so it waits, and at the end the new objects join the oldest generation directly
+    (``gc.freeze`` then ``gc.unfreeze``: two list splices) where they are looked at only by the
+    rare full collections.
+    """
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if gc.get_freeze_count() == 0:   # nobody else froze objects: we may move everything back to gen 2
+            gc.freeze()
+            gc.unfreeze()
+        if was:
+            gc.enable()
 
 
-def walk(node: Node) -> Any:
-    """Every node of a tree, includes expanded, depth first."""
-    yield node
-    for c in node.children:
-        yield from walk(c)
-    sub = node.opts.get("tree")
-    if sub is not None:
-        yield from walk(sub.root)
+def walk(node: TreeNode) -> Iterator[TreeNode]:
+    """Every node of a tree, includes expanded, depth first (a stack: no generator per level)."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        yield n
+        below = n.nodekind.expand(n)
+        if below:
+            stack.extend(reversed(below))
 
 
 def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:
-    """The modules a tree calls or waits on, and whether it recalls from the Blackboard node."""
+    """The modules a tree calls or waits on, and whether it asks the Blackboard node."""
     mods: Set[str] = set()
     recall = False
     for n in walk(tree.root):
-        if n.kind in ("call", "wait_event") and isinstance(n.opts.get("target"), str):
-            mods.add(n.opts["target"].split(".")[0])
-        recall = recall or n.kind == "recall"
+        mods.update(n.nodekind.modules(n))
+        recall = recall or n.nodekind.uses_blackboard_node
     return mods, recall

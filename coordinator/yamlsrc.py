@@ -1,7 +1,7 @@
 """YAML with positions: safe loading that remembers where every key and value came from."""
 from __future__ import annotations
 
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Tuple
 
 import yaml
 
@@ -9,83 +9,230 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 
 __all__ = ["LMap", "LList", "load_yaml", "pos_of"]
 
-_STR = "tag:yaml.org,2002:str"
-
 
 class LMap(dict):
     """A mapping that knows the position of itself, of each key and of each value."""
 
+    __slots__ = ("pos", "key_pos", "val_pos")
     pos: Pos
     key_pos: Dict[Any, Pos]
     val_pos: Dict[Any, Pos]
 
 
 class LList(list):
+    __slots__ = ("pos", "item_pos")
     pos: Pos
     item_pos: List[Pos]
 
 
-def _pos(file: str, node: yaml.Node) -> Pos:
-    """Where a node starts; for a quoted scalar, where its text starts (inside the quote)."""
-    quoted = isinstance(node, yaml.ScalarNode) and node.style in ("'", '"')
-    return Pos(file, node.start_mark.line + 1, node.start_mark.column + 1 + (1 if quoted else 0))
-
-
-# libyaml's parser when PyYAML was built with it (Debian's is): same nodes and marks, ~10x faster.
+# libyaml's parser when PyYAML was built with it (Debian's is): the same events, ~10x faster.
 _Builder = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
-
 MAX_NODES = 200000
+MAX_DEPTH = 400
+_STR = "tag:yaml.org,2002:str"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+_MERGE = object()        # the '<<' key
+_NO_KEY = object()
+_new_pos = tuple.__new__
+_QUOTES = ("'", '"')
+_PLAIN_TAGS = ("tag:yaml.org,2002:map", "tag:yaml.org,2002:seq")
 
 
-class _Budget:
-    """Counts converted nodes: aliases can make a small file expand without bound."""
-
-    def __init__(self, file: str):
-        self.left = MAX_NODES
-        self.file = file
-
-    def spend(self, node: yaml.Node) -> None:
-        self.left -= 1
-        if self.left < 0:
-            raise TreeErrors([TreeError(_pos(self.file, node), "the document expands to more than %d YAML nodes "
-                                                                "(recursive or repeated aliases?)" % MAX_NODES)])
+def _pos(file: str, mark: Any, quoted: bool = False) -> Pos:
+    """Where an event starts; for a quoted scalar, where its text starts (inside the quote)."""
+    return _new_pos(Pos, (file, mark.line + 1, mark.column + 1 + quoted))
 
 
-def _convert(node: yaml.Node, file: str, ctor: yaml.constructor.SafeConstructor, budget: _Budget) -> Any:
-    budget.spend(node)
-    if isinstance(node, yaml.MappingNode):
-        out = LMap()
-        out.pos, out.key_pos, out.val_pos = _pos(file, node), {}, {}
-        ctor.flatten_mapping(node)
-        for k_node, v_node in node.value:
-            key = _convert(k_node, file, ctor, budget)
-            if isinstance(key, (dict, list)):
-                raise TreeErrors([TreeError(_pos(file, k_node), "a mapping key must be a scalar")])
-            if key in out:
-                raise TreeErrors([TreeError(_pos(file, k_node), "duplicate key %r" % (key,))])
-            out[key] = _convert(v_node, file, ctor, budget)
-            out.key_pos[key] = _pos(file, k_node)
-            out.val_pos[key] = _pos(file, v_node)
-        return out
-    if isinstance(node, yaml.SequenceNode):
-        lst = LList(_convert(n, file, ctor, budget) for n in node.value)
-        lst.pos = _pos(file, node)
-        lst.item_pos = [_pos(file, n) for n in node.value]
-        return lst
-    if node.tag == _STR:  # the common case, without the constructor's machinery
-        return node.value
-    return ctor.construct_object(node, deep=True)
+def file_of(loader: Any) -> str:
+    return getattr(loader, "bmtree_file", "<yaml>")
+
+
+def _fail(file: str, mark: Any, message: str) -> TreeErrors:
+    return TreeErrors([TreeError(_pos(file, mark), message)])
+
+
+_PLAIN: Dict[str, str] = {}   # plain scalar text -> its resolved tag (keys and common words repeat a lot)
+
+
+def _scalar(loader: Any, event: Any) -> Any:
+    """The value of a scalar event, resolved and constructed as PyYAML's safe loader would."""
+    value, tag = event.value, event.tag
+    if tag is None:
+        if not event.implicit[0]:
+            return value
+        tag = _PLAIN.get(value)
+        if tag is None:
+            tag = loader.resolve(yaml.ScalarNode, value, event.implicit)
+            if len(_PLAIN) < 4096:
+                _PLAIN[value] = tag
+        if tag == _STR:
+            return value
+        if tag == _MERGE_TAG:
+            return _MERGE
+    elif tag == "!" or tag == _STR:
+        return value
+    node = yaml.ScalarNode(tag, value, event.start_mark, event.end_mark, event.style)
+    try:
+        return loader.construct_object(node, deep=True)
+    except yaml.YAMLError:
+        raise
+    except (ValueError, TypeError, AttributeError, OverflowError) as exc:  # PyYAML's own bugs, e.g. '!!timestamp x'
+        raise TreeErrors([TreeError(_pos(file_of(loader), event.start_mark), "cannot read %.80r as %s (%s)" % (
+            value, tag, type(exc).__name__))])
+
+
+def _merge(out: LMap, merges: List[Tuple[Any, Pos]]) -> LMap:
+    """A finished mapping with its ``<<`` merges applied (a merged key never overrides: a clash is an error)."""
+    for merged, at in merges:
+        sources = merged if isinstance(merged, list) else [merged]
+        for src in sources:
+            if not isinstance(src, LMap):
+                raise TreeErrors([TreeError(at, "'<<' merges a mapping or a list of mappings")])
+            for k, v in src.items():
+                if k in out:
+                    raise TreeErrors([TreeError(out.key_pos[k], "duplicate key %r" % (k,))])
+                out[k] = v
+                out.key_pos[k], out.val_pos[k] = src.key_pos[k], src.val_pos[k]
+    return out
+
+
+def _build(loader: Any, file: str) -> Any:
+    """One document from the parser's events, with positions; aliases share the anchored value.
+
+    The hot loop of loading a tree: the open container's state lives in locals, and the
+    enclosing containers' states on a stack.
+    """
+    get, check = loader.get_event, loader.check_event
+    # locals for the hot loop
+    ScalarEvent, MappingStart, SequenceStart, MappingEnd, SequenceEnd, Alias = (  # noqa: N806
+        yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent, yaml.MappingEndEvent,
+        yaml.SequenceEndEvent, yaml.AliasEvent)
+    new_pos, plain, str_tag, no_key, quotes, PosT = (  # noqa: N806
+        _new_pos, _PLAIN, _STR, _NO_KEY, _QUOTES, Pos)
+    first_chars = loader.yaml_implicit_resolvers   # plain text starting otherwise is a string
+    get()  # StreamStart
+    if check(yaml.StreamEndEvent):
+        return None
+    get()  # DocumentStart
+    anchors: Dict[str, Tuple[Any, int]] = {}
+    stack: List[Any] = []
+    # the open container: itself, its item positions (a sequence) or key/value positions (a mapping),
+    # the pending key of a mapping, its '<<' merges, its anchor and its node count at the start
+    container: Any = None
+    item_pos: Any = None
+    key_pos: Any = None
+    val_pos: Any = None
+    key: Any = no_key
+    key_at: Any = None
+    merges: Any = None
+    anchor: Any = None
+    start = 0
+    count = 0
+    depth = 0
+    while True:
+        event = get()
+        cls = event.__class__
+        if cls is ScalarEvent:
+            value = event.value
+            tag = event.tag
+            if tag is None:
+                if event.implicit[0]:
+                    known = plain.get(value)
+                    if known is None:
+                        if value[:1] in first_chars:   # some implicit type may match: resolve (and remember)
+                            value = _scalar(loader, event)
+                    elif known != str_tag:
+                        value = _scalar(loader, event)
+            elif tag != "!" and tag != str_tag:
+                value = _scalar(loader, event)
+            count += 1
+            mark = event.start_mark
+            at = new_pos(PosT, (file, mark.line + 1, mark.column + (2 if event.style in quotes else 1)))
+            if event.anchor is not None:
+                anchors[event.anchor] = (value, 1)
+                if count > MAX_NODES:
+                    raise _fail(file, mark, "the document expands to more than %d YAML nodes "
+                                            "(recursive or repeated aliases?)" % MAX_NODES)
+        elif cls is MappingStart or cls is SequenceStart:
+            count += 1
+            depth += 1
+            mark = event.start_mark
+            if count > MAX_NODES:
+                raise _fail(file, mark, "the document expands to more than %d YAML nodes "
+                                        "(recursive or repeated aliases?)" % MAX_NODES)
+            if depth > MAX_DEPTH:
+                raise _fail(file, mark, "the document is nested too deeply (more than %d levels)" % MAX_DEPTH)
+            if event.tag is not None and event.tag not in _PLAIN_TAGS and not event.implicit:
+                raise _fail(file, mark, "YAML tag %r is not allowed here (only plain mappings, sequences and "
+                                        "scalars)" % event.tag)
+            at = new_pos(PosT, (file, mark.line + 1, mark.column + 1))
+            stack.append((container, item_pos, key_pos, val_pos, key, key_at, merges, anchor, start))
+            if cls is MappingStart:
+                container = LMap()
+                container.pos = at
+                container.key_pos = key_pos = {}
+                container.val_pos = val_pos = {}
+                item_pos = None
+                key = no_key
+                merges = None
+            else:
+                container = LList()
+                container.pos = at
+                container.item_pos = item_pos = []
+            anchor, start = event.anchor, count
+            continue
+        elif cls is MappingEnd or cls is SequenceEnd:
+            value = container if merges is None else _merge(container, merges)
+            at = value.pos
+            depth -= 1
+            if anchor is not None:
+                anchors[anchor] = (value, count - start + 1)
+            container, item_pos, key_pos, val_pos, key, key_at, merges, anchor, start = stack.pop()
+        elif cls is Alias:
+            if event.anchor not in anchors:
+                raise _fail(file, event.start_mark, "found undefined alias %r" % event.anchor)
+            value, size = anchors[event.anchor]
+            count += size
+            at = _pos(file, event.start_mark)
+            if count > MAX_NODES:
+                raise _fail(file, event.start_mark, "the document expands to more than %d YAML nodes "
+                                                    "(recursive or repeated aliases?)" % MAX_NODES)
+        else:
+            raise _fail(file, event.start_mark, "unexpected YAML event %s" % cls.__name__)
+        if container is None:
+            break
+        if item_pos is not None:
+            container.append(value)
+            item_pos.append(at)
+        elif key is no_key:
+            if value.__class__ is not str and isinstance(value, (dict, list)):
+                raise TreeErrors([TreeError(at, "a mapping key must be a scalar")])
+            key, key_at = value, at
+        else:
+            if key is _MERGE:
+                if merges is None:
+                    merges = []
+                merges.append((value, key_at))
+            elif key in container:
+                raise TreeErrors([TreeError(key_at, "duplicate key %r" % (key,))])
+            else:
+                container[key] = value
+                key_pos[key] = key_at
+                val_pos[key] = at
+            key = no_key
+    get()  # DocumentEnd
+    if not check(yaml.StreamEndEvent):
+        raise _fail(file, get().start_mark, "expected a single document in the stream, found another one")
+    return value
 
 
 def load_yaml(text: str, file: str) -> Any:
     """Parse one YAML document (safe loader only); syntax errors become TreeErrors."""
     loader = _Builder(text)
+    loader.bmtree_file = file  # for errors raised while constructing scalars
     try:
-        node = loader.get_single_node()
-        if node is None:
-            return None
-        return _convert(node, file, loader, _Budget(file))
+        return _build(loader, file)
     except RecursionError:
         raise TreeErrors([TreeError(Pos(file, 1, 1), "the document is nested too deeply")])
     except yaml.MarkedYAMLError as exc:

@@ -1,8 +1,10 @@
 """Which modules run now: each module node announces itself on the parameter server.
 
-A module writes ``/bmtree/modules/<name>`` = ``{"node": ..., "definition": <JSON>}``
-when it starts and removes it when it stops cleanly. A module killed hard leaves
-its parameter behind, so a listing also pings the node's XML-RPC API: a module
+A module writes ``/bmtree/modules/<name>`` = ``{"node": ..., "definition": <JSON>,
+"uri": <its XML-RPC URI>, "call_topic": ..., "cancel_topic": ...}`` when it starts
+and removes it when it stops cleanly (``uri`` and the topics are absent in the
+announcements of older bmtree modules). A module killed hard leaves its parameter
+behind, so a listing also pings the node's XML-RPC API, every node at once: a module
 whose node does not answer is not listed.
 """
 from __future__ import annotations
@@ -10,14 +12,20 @@ from __future__ import annotations
 import json
 import socket
 import xmlrpc.client
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Dict, Optional
+from typing import Any, Dict, Mapping, Optional
 
 import rosgraph
 
+from comm.addressing import valid_topic
+from comm.errors import ProtocolError
+from comm.limits import check_depth
+from comm.rpc import proxy
 from modules.definition import DefinitionError, ModuleDefinition, parse_definition
 
-__all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "announcement", "node_alive"]
+__all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "announced_modules", "announcement", "legacy_announcement",
+           "node_alive"]
 
 PARAM_ROOT = "/bmtree/modules"
 
@@ -28,34 +36,63 @@ class LiveModule:
     node: str
     uri: str
     definition: ModuleDefinition
+    call_topic: Optional[str] = None  # None: the module takes calls only on /master/output
+    cancel_topic: Optional[str] = None
+    legacy: bool = False  # an original module, announced on its behalf by ``bmtree run``
 
 
-def announcement(node: str, definition: ModuleDefinition) -> Dict[str, str]:
-    return {"node": node, "definition": json.dumps(definition.to_dict())}
+def announcement(node: str, definition: ModuleDefinition, instance: str = "",
+                 topics: Optional[Mapping[str, str]] = None, uri: Optional[str] = None) -> Dict[str, str]:
+    """The parameter a module node sets; ``instance`` tells two processes of one node name apart;
+    ``topics``: its ``call_topic`` and ``cancel_topic``; ``uri``: its node's XML-RPC URI."""
+    out = {"node": node, "definition": json.dumps(definition.to_dict())}
+    if instance:
+        out["instance"] = instance
+    out.update(topics or {})
+    if uri:
+        out["uri"] = uri
+    return out
 
 
-class _TimeoutTransport(xmlrpc.client.Transport):
-    def __init__(self, timeout: float):
-        super().__init__()
-        self._timeout = timeout
-
-    def make_connection(self, host):  # type: ignore[no-untyped-def]
-        conn = super().make_connection(host)
-        conn.timeout = self._timeout
-        return conn
+def legacy_announcement(node: str, definition: ModuleDefinition) -> Dict[str, Any]:
+    """What ``bmtree run`` writes for an original module (which does not announce itself)."""
+    return dict(announcement(node, definition), legacy=True)
 
 
 def node_alive(uri: str, timeout: float = 1.0) -> bool:
     """True if the node at ``uri`` answers ``getPid``."""
     try:
-        code, _, _ = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout)).getPid("/bmtree")
+        code, _, _ = proxy(uri, timeout).getPid("/bmtree")
         return code == 1
     except (OSError, socket.timeout, xmlrpc.client.Error):
         return False
 
 
-def live_modules(master_uri: Optional[str] = None, timeout: float = 1.0) -> Dict[str, LiveModule]:
-    """Modules running now on the master (raises OSError-like errors if there is no master)."""
+_PARSED: Dict[str, ModuleDefinition] = {}  # announcement text -> definition, so that waiting re-reads cheaply
+
+
+def _definition(text: Any, node: str) -> ModuleDefinition:
+    if not isinstance(text, str):
+        raise ValueError("the announcement's definition is not text")
+    found = _PARSED.get(text)
+    if found is None:
+        check_depth(text)
+        found = parse_definition(json.loads(text), "live:%s" % node)
+        if len(_PARSED) >= 512:
+            _PARSED.clear()
+        _PARSED[text] = found
+    return found
+
+
+def _topic(entry: Dict[str, Any], key: str) -> Optional[str]:
+    value = entry.get(key)
+    return value if valid_topic(value) else None
+
+
+def announced_modules(master_uri: Optional[str] = None) -> Dict[str, LiveModule]:
+    """Every module announced on the master, alive or not: one master query (plus one per
+    announcement of an older bmtree, which lacks ``uri``). Raises OSError-like errors if
+    there is no master."""
     master = rosgraph.Master("/bmtree_discovery", master_uri=master_uri)
     try:
         params = master.getParam(PARAM_ROOT)
@@ -68,14 +105,27 @@ def live_modules(master_uri: Optional[str] = None, timeout: float = 1.0) -> Dict
         if not isinstance(entry, dict) or not isinstance(entry.get("node"), str):
             continue
         try:
-            uri = master.lookupNode(entry["node"])
-        except rosgraph.masterapi.MasterError:
+            definition = _definition(entry.get("definition"), entry["node"])
+        except (ValueError, TypeError, RecursionError, ProtocolError, DefinitionError):
             continue
-        if not node_alive(uri, timeout):
-            continue
-        try:
-            definition = parse_definition(json.loads(entry.get("definition", "")), "live:%s" % entry["node"])
-        except (ValueError, DefinitionError):
-            continue
-        found[name] = LiveModule(name=name, node=entry["node"], uri=uri, definition=definition)
+        uri = entry.get("uri")
+        if not isinstance(uri, str) or not uri.startswith("http"):
+            try:
+                uri = master.lookupNode(entry["node"])
+            except rosgraph.masterapi.MasterError:
+                continue
+        found[name] = LiveModule(name=name, node=entry["node"], uri=uri, definition=definition,
+                                 call_topic=_topic(entry, "call_topic"), cancel_topic=_topic(entry, "cancel_topic"),
+                                 legacy=entry.get("legacy") is True)
     return found
+
+
+def live_modules(master_uri: Optional[str] = None, timeout: float = 1.0) -> Dict[str, LiveModule]:
+    """Modules running now on the master: the announced ones whose node answers, all asked
+    at once (raises OSError-like errors if there is no master)."""
+    found = announced_modules(master_uri)
+    if not found:
+        return found
+    with ThreadPoolExecutor(max_workers=min(32, len(found))) as pool:
+        alive = dict(zip(found, pool.map(lambda m: node_alive(m.uri, timeout), found.values())))
+    return {name: m for name, m in found.items() if alive[name]}

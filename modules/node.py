@@ -5,7 +5,7 @@ Run one from the command line::
     bmtree-module --definition my_module.json --class my_package.my_module:MyModule
 
 or ``python -m modules.node ...``. ROS remappings and private parameters work as
-usual; ``_basic_mod:=other_name`` renames the module as the original modules did, and
+usual (``_definition:=``, ``_class:=`` and roslaunch ``<param>`` stand for the options); ``_basic_mod:=other_name`` renames the module as the original modules did, and
 ``_max_bytes:=N`` changes the payload size limit (default 1 MiB).
 """
 from __future__ import annotations
@@ -15,18 +15,116 @@ import importlib
 import importlib.util
 import logging
 import os
+import socket
 import sys
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
-from comm.messages import DEFAULT_MAX_BYTES
+from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, surely_not_for
+from comm.errors import ProtocolError
+from comm.masterwatch import watch_master
+from comm.messages import DEFAULT_MAX_BYTES, FunctionResult, load_payload, new_id
+from comm.nodeopts import parse_node_args
+from comm.roslog import log_to_rosout
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
-from modules.discovery import PARAM_ROOT, announcement
+from modules.discovery import PARAM_ROOT, announcement, node_alive
 from modules.runtime import BasicModule, BindingError, ModuleServer
 
-__all__ = ["ModuleNode", "load_class", "make_parser", "main", "run_module"]
+__all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_parser", "main", "run_module"]
 
 log = logging.getLogger("bmtree.module")
+
+
+class CallInbox:
+    """How any bmtree module node takes calls and cancels, before running them.
+
+    It subscribes to the shared topics (``/master/output``, ``/master/cancel``: the
+    original protocol, for coordinators that do not address calls) and to the module's
+    own (``/bmtree/call/<module>``, ``/bmtree/cancel/<module>``), and hands ``on_call``
+    and ``on_cancel`` the payload text of what is meant for this module: a call for
+    another module is skipped without parsing (:func:`comm.addressing.surely_not_for`),
+    a ``call_id`` that came already (on the other topic) is skipped, a cancel marked
+    ``"cancel": true`` on a call topic goes to ``on_cancel``, and a preflight ping is
+    answered here through ``publish_result``. :meth:`topics` gives the keys
+    the announcement adds. The Python module node and the C++ bridge both use it.
+    """
+
+    def __init__(self, module: str, on_call: Callable[[str], None], on_cancel: Callable[[str], None],
+                 publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096):
+        self.module = module
+        self.on_call = on_call
+        self.on_cancel = on_cancel
+        self.publish_result = publish_result
+        self.max_bytes = max_bytes
+        self.skipped = 0  # calls for other modules, refused without parsing
+        self.duplicates = 0
+        self._seen = RecentIds(remember)
+        self._subs: List[Any] = []
+
+    def handle_call(self, text: Any) -> None:
+        """One payload from either call topic; never raises."""
+        try:
+            if surely_not_for(text, self.module):
+                self.skipped += 1
+                return
+            try:
+                head = load_payload(text, self.max_bytes)
+            except ProtocolError:
+                self.on_call(text)  # malformed: the runtime reports it
+                return
+            if head.get("basic_mod") != self.module:
+                return
+            if head.get("cancel") is True:  # a cancel sent on the call topic, after its call
+                self.on_cancel(text)
+                return
+            call_id = head.get("call_id") if isinstance(head.get("call_id"), str) else None
+            if head.get("function") == PING_FUNCTION:
+                if call_id is not None:
+                    self.publish_result(FunctionResult(call_id=call_id, basic_mod=self.module,
+                                                       function=PING_FUNCTION).encode())
+                return
+            if not self._seen.first(call_id):
+                self.duplicates += 1
+                log.debug("call %s of %s came twice; ran once", call_id, self.module)
+                return
+            self.on_call(text)
+        except Exception:
+            log.exception("unexpected error while taking a call")
+
+    def handle_cancel(self, text: Any) -> None:
+        """One payload from either cancel topic; never raises."""
+        try:
+            if surely_not_for(text, self.module):
+                return
+            self.on_cancel(text)
+        except Exception:
+            log.exception("unexpected error while taking a cancel")
+
+    def subscribe(self) -> None:
+        """Subscribe to the four topics (after ``rospy.init_node``)."""
+        import rospy
+        from std_msgs.msg import String
+
+        def sub(topic: str, handler: Callable[[Any], None], size: int) -> Any:
+            return rospy.Subscriber(topic, String, lambda m: handler(m.data), queue_size=size, tcp_nodelay=True)
+
+        # rospy drops the oldest queued message past queue_size: a burst of calls for other
+        # modules (or garbage) must not push out a good call, so the queues are deep
+        self._subs = [sub(TOPIC_CALL, self.handle_call, 10000), sub(call_topic(self.module), self.handle_call, 10000),
+                      sub(TOPIC_CANCEL, self.handle_cancel, 10000),
+                      sub(cancel_topic(self.module), self.handle_cancel, 10000)]
+
+    def topics(self) -> Dict[str, str]:
+        """The announcement's ``call_topic`` and ``cancel_topic`` (as resolved, remappings applied)."""
+        import rospy
+
+        return {"call_topic": rospy.resolve_name(call_topic(self.module)),
+                "cancel_topic": rospy.resolve_name(cancel_topic(self.module))}
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.unregister()
+        self._subs = []
 
 
 class ModuleNode:
@@ -37,45 +135,89 @@ class ModuleNode:
         self.impl = impl
         self.max_bytes = max_bytes
         self.server: Optional[ModuleServer] = None
-        self._subs: List[Any] = []
+        self.inbox: Optional[CallInbox] = None
+        self.event_publisher: Any = None
         self._param = ""
+        self.instance = "%s:%d:%s" % (socket.gethostname(), os.getpid(), new_id()[:8])
+        self.kicked_out = ""  # why the master stopped this node (another node took its name)
+
+    def _taken_by(self) -> str:
+        """The other live node that already serves this module, if any."""
+        import rosgraph
+        import rospy
+
+        try:
+            entry = rospy.get_param(self._param, None)
+            if not isinstance(entry, dict) or entry.get("node") in (None, rospy.get_name()):
+                return ""
+            uri = rosgraph.Master(rospy.get_name()).lookupNode(entry["node"])
+        except Exception:  # not announced, or its node is not registered
+            return ""
+        return entry["node"] if node_alive(uri, 1.0) else ""
+
+    def _on_shutdown(self, reason: str) -> None:
+        import rospy
+
+        if "new node registered with same name" in reason:
+            self.kicked_out = reason
+            sys.stderr.write("error: another node registered with this node's name %s, so the master stopped "
+                             "this one; module %r is left to the new node\n" % (rospy.get_name(),
+                                                                                 self.definition.name))
 
     def start(self) -> None:
         import rospy
         from std_msgs.msg import String
 
         name = rospy.get_param("~basic_mod", self.definition.name)
-        self.max_bytes = int(rospy.get_param("~max_bytes", self.max_bytes))
+        try:
+            self.max_bytes = int(rospy.get_param("~max_bytes", self.max_bytes))
+        except (TypeError, ValueError):
+            raise BindingError("parameter ~max_bytes must be an integer, got %r" % (rospy.get_param("~max_bytes"),))
         if name != self.definition.name:
-            self.definition = self.definition.renamed(name)
+            try:
+                self.definition = self.definition.renamed(name)
+            except (DefinitionError, TypeError) as exc:
+                raise BindingError("parameter ~basic_mod must be a module name, got %r (%s)" % (name, exc))
+        self._param = "%s/%s" % (PARAM_ROOT, self.definition.name)
+        other = self._taken_by()
+        if other:
+            raise DuplicateModule("module %r is already served by the running node %s: two nodes answering one "
+                                  "module would run every call twice (stop it, or rename this one with "
+                                  "_basic_mod:=NAME)" % (self.definition.name, other))
+        rospy.core.add_preshutdown_hook(self._on_shutdown)
         res_pub = sync_publisher(TOPIC_RESULT, String)  # from the call's worker thread
         ev_pub = rospy.Publisher(TOPIC_EVENT, String, queue_size=1000)
+        self.event_publisher = ev_pub  # for setup(): who listens to this module's events
         self.server = ModuleServer(self.definition, self.impl,
                                    publish_result=lambda text: res_pub.publish(String(text)),
                                    publish_event=lambda text: ev_pub.publish(String(text)),
                                    max_bytes=self.max_bytes)
-        self._subs = [
-            rospy.Subscriber(TOPIC_CALL, String, lambda m: self.server.handle_call(m.data), queue_size=1000,
-                             tcp_nodelay=True),
-            rospy.Subscriber(TOPIC_CANCEL, String, lambda m: self.server.handle_cancel(m.data), queue_size=100,
-                             tcp_nodelay=True),
-        ]
+        self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
+                               lambda text: res_pub.publish(String(text)), self.max_bytes)
+        self.inbox.subscribe()
         self.impl.setup(self)
-        self._param = "%s/%s" % (PARAM_ROOT, self.definition.name)
-        rospy.set_param(self._param, announcement(rospy.get_name(), self.definition))
+        ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
+                           rospy.get_node_uri())
+        rospy.set_param(self._param, ann)
+        watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
         rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))
 
     def stop(self) -> None:
         import rospy
 
-        for s in self._subs:
-            s.unregister()
+        if self.inbox is not None:
+            self.inbox.close()
         try:
-            if self._param and rospy.get_param(self._param, {}).get("node") == rospy.get_name():
+            entry = rospy.get_param(self._param, {}) if self._param and not self.kicked_out else {}
+            if isinstance(entry, dict) and entry.get("instance") == self.instance:
                 rospy.delete_param(self._param)
         except Exception:  # the master may be gone already
             pass
         self.impl.shutdown()
+
+
+class DuplicateModule(Exception):
+    """Another live node already serves this module."""
 
 
 def load_class(spec: str) -> Callable[[], BasicModule]:
@@ -99,36 +241,51 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
     return cls
 
 
+def _where(exc: BaseException, spec: str) -> str:
+    """``file:line`` of the deepest frame of the author's code in a traceback (else the class spec)."""
+    import traceback
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith(here)
+              and "importlib" not in f.filename]
+    return "%s:%s" % (frames[-1].filename, frames[-1].lineno) if frames else spec
+
+
 def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optional[str] = None) -> int:
     """Init a ROS node, serve until SIGINT/SIGTERM or ROS shutdown, clean up. Exit code."""
     import rospy
 
     rospy.init_node(node_name or "bm_%s" % definition.name, anonymous=False)
+    log_to_rosout()
     node = ModuleNode(definition, impl)
     try:
         node.start()
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
+    except DuplicateModule as exc:
+        sys.stderr.write("error: %s\n" % exc)
+        return 3
     try:
         rospy.spin()
     finally:
         node.stop()
-    return 0
+    return 3 if node.kicked_out else 0
 
 
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bmtree-module", description="Run a Python basic module as a ROS node.")
-    p.add_argument("--definition", required=True, help="the module's definition JSON")
-    p.add_argument("--class", dest="cls", required=True, help="MODULE:CLASS or FILE.py:CLASS implementing it")
+    p.add_argument("--definition", help="the module's definition JSON (or the private parameter ~definition)")
+    p.add_argument("--class", dest="cls", help="MODULE:CLASS or FILE.py:CLASS implementing it (or ~class)")
     p.add_argument("--node-name", help="ROS node name (default bm_<module>)")
     return p
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    import rospy
-
-    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    parser = make_parser()
+    args = parse_node_args(parser, (argv if argv is not None else sys.argv)[1:], None)
+    if not args.definition or not args.cls:
+        parser.error("--definition and --class are required (or the private parameters ~definition, ~class)")
     try:
         definition = load_definition(args.definition)
         factory = load_class(args.cls)
@@ -136,8 +293,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     except DefinitionError as exc:
         sys.stderr.write("%s\n" % exc)
         return 2
+    except SyntaxError as exc:  # one line, where the author looks: file:line
+        sys.stderr.write("%s:%s:%s: syntax error: %s\n" % (exc.filename, exc.lineno, exc.offset or 0, exc.msg))
+        return 2
     except (ValueError, ImportError, OSError) as exc:
         sys.stderr.write("error: %s\n" % exc)
+        return 2
+    except Exception as exc:  # the class file raised while loading or in __init__
+        sys.stderr.write("error: %s: %s\n" % (_where(exc, args.cls), "%s: %s" % (type(exc).__name__, exc)))
         return 2
     try:
         ModuleServer(definition, impl, lambda t: None, lambda t: None)

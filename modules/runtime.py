@@ -1,59 +1,52 @@
 """The basic-module runtime: binds an author's class to its definition and serves calls.
 
 This part does not talk to ROS: it turns call/cancel payloads into results and
-events through two publish callbacks, so the ROS node (:mod:`modules.node`), the
-tests and the mocked modules all share it.
+events through two publish callbacks, and takes how to run work and keep time
+(:mod:`modules.execution`), so the ROS node (:mod:`modules.node`, worker threads and
+wall time) and the test kit's in-process transport (the run's simulated clock) are the
+same runtime: busy, refusals, cancels and ``Concurrent`` answer alike in both.
 """
 from __future__ import annotations
 
 import logging
-import queue
+import re
 import threading
-import time
-from typing import Any, Callable, Dict, Iterable, List, Optional, Set, Union
+from typing import Any, Callable, Dict, List, Optional, Set, Union
 
 from comm.errors import ProtocolError
-from comm.messages import DEFAULT_MAX_BYTES, CancelRequest, Event, FunctionCall, FunctionResult, load_payload
+from comm.messages import (
+    DEFAULT_MAX_BYTES,
+    CallStatus,
+    CancelRequest,
+    Event,
+    FunctionCall,
+    FunctionResult,
+    load_payload,
+)
+from modules.binding import signature_problems
 from modules.definition import FunctionDefinition, ModuleDefinition
+from modules.execution import Executor, Scheduler, TimerThread, WorkerThreads
+from modules.outcome import Outcome, OutcomeKind
 
 __all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "ModuleServer", "BindingError"]
 
 log = logging.getLogger("bmtree.module")
 
+_KEY_TEXT = {k: re.compile(r'"%s"\s*:\s*"([^"\\]{1,200})"' % k) for k in ("basic_mod", "function", "call_id")}
 
-class _Workers:
-    """Reusable threads for calls: a call never waits for a thread, and no thread is started
-    per call while one is idle."""
 
-    def __init__(self, name: str, idle_seconds: float = 30.0):
-        self._jobs: queue.Queue = queue.Queue()
-        self._idle = 0
-        self._lock = threading.Lock()
-        self._name = name
-        self._idle_seconds = idle_seconds
-
-    def submit(self, fn: Callable[..., None], *args: Any) -> None:
-        with self._lock:
-            start = self._idle == 0
-            if not start:
-                self._idle -= 1
-        self._jobs.put((fn, args))
-        if start:
-            threading.Thread(target=self._loop, name=self._name, daemon=True).start()
-
-    def _loop(self) -> None:
-        while True:
-            try:
-                fn, args = self._jobs.get(timeout=self._idle_seconds)
-            except queue.Empty:
-                with self._lock:
-                    if self._idle > 0 and self._jobs.empty():
-                        self._idle -= 1
-                        return
-                continue
-            fn(*args)
-            with self._lock:
-                self._idle += 1
+def _salvage(text: Any) -> Dict[str, str]:
+    """The plain string keys of a payload too big, deep or broken to parse, to answer it."""
+    if isinstance(text, (bytes, bytearray)):
+        text = bytes(text[:1 << 20]).decode("utf-8", "replace")
+    if not isinstance(text, str):
+        return {}
+    out = {}
+    for key, pattern in _KEY_TEXT.items():
+        m = pattern.search(text)
+        if m:
+            out[key] = m.group(1)
+    return out
 
 
 class Failure(Exception):
@@ -76,7 +69,6 @@ class CallContext:
         self.call_id = call_id
         self.function = function
         self.cancelled = threading.Event()
-        self.answered = False
         self._callbacks: List[Callable[[], None]] = []
         self._lock = threading.Lock()
 
@@ -101,8 +93,15 @@ class CallContext:
                 log.exception("cancel callback of %s failed", self.function)
 
     def sleep(self, seconds: float) -> bool:
-        """Sleep unless cancelled first; True if the full time passed."""
-        return not self.cancelled.wait(max(0.0, seconds))
+        """Sleep unless cancelled first; True if the full time passed (an infinite time waits for the
+        cancel, NaN does not wait). This blocks a worker thread in wall time: to wait on the
+        module's clock (simulated in tests), return an Outcome with a ``delay`` instead."""
+        if seconds != seconds or seconds <= 0:
+            return not self.cancelled.is_set()
+        if seconds > threading.TIMEOUT_MAX:
+            self.cancelled.wait()
+            return False
+        return not self.cancelled.wait(seconds)
 
 
 class BasicModule:
@@ -110,7 +109,8 @@ class BasicModule:
 
     A method receives its inputs as keyword arguments (ROS messages, by name) and
     returns a dict of outputs (ROS messages or YAML-like values such as ``True`` for
-    ``std_msgs/Bool``). Raise or return :class:`Failure` to answer ``failed``.
+    ``std_msgs/Bool``), or an :class:`~modules.outcome.Outcome` (``succeed(delay=2.0, ...)``).
+    Raise or return :class:`Failure` to answer ``failed``.
     Long functions should watch ``self.context.cancelled`` or use
     ``self.context.sleep``.
 
@@ -142,8 +142,10 @@ class BasicModule:
         assert self._server is not None, "module not bound to a server"
         self._server.emit(event, params)
 
-    def before_call(self, function: str, inputs: Dict[str, Any]) -> None:
-        """Hook run in the call's thread before the function (fault injection, logging)."""
+    def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
+        """Hook run in the call's turn before the function: return an Outcome to answer with it
+        instead of running the method (fault injection), None to run the method."""
+        return None
 
     def setup(self, node: Any) -> None:
         """Hook run once by the ROS node after it connected (extra topics, parameters)."""
@@ -160,8 +162,30 @@ def _public_methods(obj: Any) -> Set[str]:
             and callable(getattr(type(obj), n, None))}
 
 
+class _Call:
+    """One accepted call and where it stands: its code running, answered, holding the module."""
+
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered")
+
+    def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
+        self.ctx = ctx
+        self.fn = fn
+        self.inputs = inputs
+        self.exclusive = exclusive
+        self.running = True       # the author's code runs, or is queued to
+        self.answered = False
+
+
+CANCELLED_TEXT = "cancelled by the coordinator"
+
+
 class ModuleServer:
-    """Serves one module: decode, check, dispatch off-thread, check outputs, answer.
+    """Serves one module: decode, check, dispatch, check outputs, answer.
+
+    A call holds the module (a later non-concurrent call is ``rejected: busy with call …``)
+    until it is answered and its code has returned. A method answers with its outputs, an
+    exception, or an :class:`Outcome` that the server carries out on its clock (delays and
+    hangs hold no thread).
 
     Args:
         definition: the module's definition (its name filters the calls served).
@@ -170,21 +194,26 @@ class ModuleServer:
         publish_event: sends an encoded Event.
         cancel_grace: seconds a cancelled function may take to return before the
             ``cancelled`` answer is sent anyway.
+        executor: where the author's code runs (default: worker threads).
+        scheduler: the module's clock (default: a wall-clock timer thread; in tests the
+            run's simulated clock, with a :class:`~modules.execution.ClockExecutor`).
     """
 
     def __init__(self, definition: ModuleDefinition, impl: BasicModule,
                  publish_result: Callable[[str], None], publish_event: Callable[[str], None],
-                 max_bytes: int = DEFAULT_MAX_BYTES, cancel_grace: float = 1.0):
+                 max_bytes: int = DEFAULT_MAX_BYTES, cancel_grace: float = 1.0,
+                 executor: Optional[Executor] = None, scheduler: Optional[Scheduler] = None):
         self.definition = definition
         self.impl = impl
         self._publish_result = publish_result
         self._publish_event = publish_event
         self.max_bytes = max_bytes
         self.cancel_grace = cancel_grace
+        self.scheduler: Scheduler = scheduler if scheduler is not None else TimerThread("%s-timer" % definition.name)
+        self.executor: Executor = executor if executor is not None else WorkerThreads("%s-call" % definition.name)
         self._lock = threading.Lock()
-        self._running: Dict[str, CallContext] = {}
-        self._exclusive: Optional[CallContext] = None
-        self._workers = _Workers("%s-call" % definition.name)
+        self._calls: Dict[str, _Call] = {}
+        self._exclusive: Optional[_Call] = None
         self._bind()
         impl._server = self
 
@@ -198,6 +227,7 @@ class ModuleServer:
         for m in sorted(methods - functions):
             problems.append("method %r of class %s is not a function of module %r (definition %s)" % (
                 m, type(self.impl).__name__, self.definition.name, self.definition.source or "?"))
+        problems.extend(signature_problems(self.definition, self.impl))
         if problems:
             raise BindingError("; ".join(problems))
 
@@ -210,14 +240,18 @@ class ModuleServer:
         """Handle one ``/master/output`` payload; never raises."""
         try:
             self._handle_call(text)
-        except Exception:
-            log.exception("unexpected error while handling a call")
+        except Exception as exc:
+            log.error("could not handle a call (%s: %s)", type(exc).__name__, exc)
 
     def _handle_call(self, text: Any) -> None:
         try:
             head = load_payload(text, self.max_bytes)
         except ProtocolError as exc:
-            log.warning("ignored a malformed call: %s", exc)
+            keys = _salvage(text)
+            if keys.get("basic_mod") == self.definition.name and "call_id" in keys:
+                self._reject(keys["call_id"], keys.get("function"), "malformed call: %s" % exc)
+            else:
+                log.warning("ignored a malformed call: %s", exc)
             return
         if head.get("basic_mod") != self.definition.name:
             return
@@ -232,28 +266,31 @@ class ModuleServer:
             self._reject(call_id, fname, str(exc))
             return
         try:
-            call = FunctionCall.from_obj(head)
-            inputs = fn.inputs_of(call)
+            inputs = fn.inputs_of(FunctionCall.from_obj(head))
         except ProtocolError as exc:
             self._reject(call_id, fname, "bad inputs: %s" % exc)
             return
-        ctx = CallContext(call_id, fname)
+        call = _Call(CallContext(call_id, fname), fn, inputs, not self._is_concurrent(fn))
         with self._lock:
-            if not self._is_concurrent(fn):
-                if self._exclusive is not None:
-                    busy = self._exclusive
-                    ctx = None
-                else:
-                    self._exclusive = ctx
-            if ctx is not None and call_id is not None:
-                self._running[call_id] = ctx
-        if ctx is None:
-            self._reject(call_id, fname, "busy with call %s (%s)" % (busy.call_id, busy.function))
+            busy = self._exclusive if call.exclusive else None
+            if busy is None:
+                if call.exclusive:
+                    self._exclusive = call
+                if call_id is not None:
+                    self._calls[call_id] = call
+        if busy is not None:
+            self._reject(call_id, fname, "busy with call %s (%s)" % (busy.ctx.call_id, busy.ctx.function))
             return
-        self._workers.submit(self._run, fn, ctx, inputs)
+        self.executor.submit(self._run, call, None)
 
     def handle_cancel(self, text: Any) -> None:
         """Handle one ``/master/cancel`` payload; never raises."""
+        try:
+            self._handle_cancel(text)
+        except Exception as exc:
+            log.error("could not handle a cancel (%s: %s)", type(exc).__name__, exc)
+
+    def _handle_cancel(self, text: Any) -> None:
         try:
             req = CancelRequest.decode(text, self.max_bytes)
         except ProtocolError as exc:
@@ -262,70 +299,121 @@ class ModuleServer:
         if req.basic_mod != self.definition.name:
             return
         with self._lock:
-            ctx = self._running.get(req.call_id)
-        if ctx is None:
+            call = self._calls.get(req.call_id)
+        if call is None:
             return
-        ctx.cancel()
-        timer = threading.Timer(self.cancel_grace, self._answer_cancelled, args=(ctx,))
-        timer.daemon = True
-        timer.start()
+        call.ctx.cancel()
+        with self._lock:
+            running = call.running
+        if running:  # its code may still stop the hardware: wait for it, but not forever
+            self.scheduler.call_later(self.cancel_grace, lambda: self._finish(call, self._cancelled(call)))
+        else:        # waiting on an outcome's delay, or hanging: nothing to stop
+            self._finish(call, self._cancelled(call))
 
     # -- running ---------------------------------------------------------------------
-    def _run(self, fn: FunctionDefinition, ctx: CallContext, inputs: Dict[str, Any]) -> None:
-        self.impl._local.ctx = ctx
+    def _run(self, call: _Call, work: Optional[Callable[..., Any]]) -> None:
+        """Run the author's code for ``call`` (the function if ``work`` is None, else an
+        outcome's respond function) and act on what it gave."""
+        ctx = call.ctx
+        outcome: Optional[Outcome] = None
         result: Optional[FunctionResult] = None
-        try:
-            self.impl.before_call(fn.name, inputs)
-            out = getattr(self.impl, fn.name)(**inputs)
-            if isinstance(out, Failure):
-                raise out
-            if out is None:
-                out = {}
-            if not isinstance(out, dict):
-                raise ProtocolError("%s returned %s, expected a dict of outputs" % (fn.qualified, type(out).__name__))
-            if not ctx.cancelled.is_set():
-                try:
-                    result = fn.build_result(out, ctx.call_id)
-                except ProtocolError as exc:
-                    result = self._result(ctx, "failed", "invalid outputs: %s" % exc)
-        except Failure as exc:
-            result = self._result(ctx, "failed", str(exc) or "failed")
-        except Rejected as exc:
-            result = self._result(ctx, "rejected", str(exc) or "rejected")
-        except Exception as exc:
-            log.exception("%s raised", fn.qualified)
-            result = self._result(ctx, "failed", "%s: %s" % (type(exc).__name__, exc))
-        finally:
-            self.impl._local.ctx = None
+        if not ctx.cancelled.is_set():  # a call cancelled before it started never runs
+            self.impl._local.ctx = ctx
+            try:
+                if work is None:
+                    out = self.impl.before_call(call.fn.name, call.inputs)
+                    if out is None:
+                        out = getattr(self.impl, call.fn.name)(**call.inputs)
+                else:
+                    out = work(**call.inputs)
+                if isinstance(out, Outcome):
+                    outcome = out
+                else:
+                    result = self._outputs(call, out)
+            except Failure as exc:
+                result = self._result(call, CallStatus.FAILED, str(exc) or "failed")
+            except Rejected as exc:
+                result = self._result(call, CallStatus.REJECTED, str(exc) or "rejected")
+            except Exception as exc:
+                log.exception("%s raised", call.fn.qualified)
+                result = self._result(call, CallStatus.FAILED, "%s: %s" % (type(exc).__name__, exc))
+            finally:
+                self.impl._local.ctx = None
         with self._lock:
-            if self._exclusive is ctx:
-                self._exclusive = None
-            if ctx.call_id is not None:
-                self._running.pop(ctx.call_id, None)
+            call.running = False
         if ctx.cancelled.is_set():
-            self._answer_cancelled(ctx)
-        elif result is not None:
-            self._send(ctx, result)
+            self._finish(call, self._cancelled(call))
+        elif outcome is not None:
+            self._follow(call, outcome)
+        else:
+            assert result is not None
+            self._finish(call, result)
 
-    def _answer_cancelled(self, ctx: CallContext) -> None:
-        self._send(ctx, self._result(ctx, "cancelled", "cancelled by the coordinator"))
+    def _outputs(self, call: _Call, out: Any) -> FunctionResult:
+        if isinstance(out, Failure):
+            raise out
+        if out is None:
+            out = {}
+        if not isinstance(out, dict):
+            raise ProtocolError("%s returned %s, expected a dict of outputs" % (call.fn.qualified, type(out).__name__))
+        try:
+            return call.fn.build_result(out, call.ctx.call_id)
+        except ProtocolError as exc:
+            return self._result(call, CallStatus.FAILED, "invalid outputs: %s" % exc)
 
-    def _send(self, ctx: CallContext, result: FunctionResult) -> None:
+    def _follow(self, call: _Call, outcome: Outcome) -> None:
+        """Carry out ``outcome`` on the module's clock."""
+        if outcome.delay > 0:
+            self.scheduler.call_later(outcome.delay, lambda: self.executor.submit(self._effect, call, outcome))
+        else:
+            self._effect(call, outcome)
+
+    def _effect(self, call: _Call, outcome: Outcome) -> None:
+        kind = outcome.kind
         with self._lock:
-            if ctx.answered:
+            if call.answered:  # cancelled meanwhile
                 return
-            ctx.answered = True
-        self._publish_result(result.encode())
+            if kind == OutcomeKind.RESPOND:
+                call.running = True
+        if kind == OutcomeKind.RESPOND:
+            self._run(call, outcome.fn or getattr(self.impl, call.fn.name))
+        elif kind == OutcomeKind.SUCCEED:
+            try:
+                self._finish(call, call.fn.build_result(outcome.outputs, call.ctx.call_id))
+            except ProtocolError as exc:
+                self._finish(call, self._result(call, CallStatus.FAILED, "invalid outputs: %s" % exc))
+        elif kind == OutcomeKind.FAIL:
+            self._finish(call, self._result(call, CallStatus.FAILED, outcome.reason or "failed"))
+        elif kind == OutcomeKind.REJECT:
+            self._finish(call, self._result(call, CallStatus.REJECTED, outcome.reason or "rejected"))
+        # HANG: no answer until a cancel
 
-    def _result(self, ctx: CallContext, status: str, error: str) -> FunctionResult:
-        return FunctionResult(call_id=ctx.call_id, basic_mod=self.definition.name, function=ctx.function,
+    def _finish(self, call: _Call, result: FunctionResult) -> None:
+        """Answer once; free the module when the call is answered and its code has returned."""
+        with self._lock:
+            first = not call.answered
+            call.answered = True
+            if not call.running:
+                if call.ctx.call_id is not None and self._calls.get(call.ctx.call_id) is call:
+                    del self._calls[call.ctx.call_id]
+                if self._exclusive is call:
+                    self._exclusive = None
+        if first:
+            self._publish_result(result.encode())
+
+    def _cancelled(self, call: _Call) -> FunctionResult:
+        return self._result(call, CallStatus.CANCELLED, CANCELLED_TEXT)
+
+    def _result(self, call: _Call, status: CallStatus, error: str) -> FunctionResult:
+        return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.definition.name, function=call.ctx.function,
                               status=status, error=error)
 
     def _reject(self, call_id: Optional[str], function: Any, error: str) -> None:
+        error = error if len(error) <= 2000 else error[:2000] + "..."
         log.warning("rejected call %s of %s.%s: %s", call_id, self.definition.name, function, error)
         fname = function if isinstance(function, str) else None
         self._publish_result(FunctionResult(call_id=call_id, basic_mod=self.definition.name, function=fname,
-                                            status="rejected", error=error).encode())
+                                            status=CallStatus.REJECTED, error=error).encode())
 
     # -- events ----------------------------------------------------------------------
     def emit(self, event: str, params: Dict[str, Any]) -> None:
@@ -334,16 +422,3 @@ class ModuleServer:
             raise ProtocolError("module %r has no event %r" % (self.definition.name, event))
         msgs = ev.build_values(params)
         self._publish_event(Event(self.definition.name, event, [p.name for p in ev.params], msgs).encode())
-
-    def running(self) -> Iterable[str]:
-        with self._lock:
-            return list(self._running)
-
-    def wait_idle(self, timeout: float = 5.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            with self._lock:
-                if not self._running and self._exclusive is None:
-                    return True
-            time.sleep(0.01)
-        return False

@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 ROS_DEBS="python3-rospy python3-rosmaster python3-roslaunch python3-rostopic python3-std-msgs \
-python3-geometry-msgs python3-sensor-msgs python3-std-srvs python3-genpy"
+python3-geometry-msgs python3-sensor-msgs python3-std-srvs python3-genpy rosout"
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 
@@ -14,7 +14,30 @@ if ! /usr/bin/python3 -c 'import rospy, genpy, std_msgs.msg, geometry_msgs.msg, 
    || ! command -v rosmaster >/dev/null; then
   need+=($ROS_DEBS)
 fi
+# make bench's peer baseline: an actionlib goal (move_base_msgs/MoveBase) round trip
+BENCH_DEBS="python3-actionlib python3-actionlib-msgs python3-move-base-msgs"
+if ! /usr/bin/python3 -c 'import actionlib, actionlib_msgs.msg, move_base_msgs.msg' 2>/dev/null \
+   && apt-cache show python3-actionlib >/dev/null 2>&1; then
+  need+=($BENCH_DEBS)
+fi
 command -v dot >/dev/null || need+=(graphviz)
+# the catkin package and its tests: catkin_make, rosrun, and ss/ip for the network tests
+command -v catkin_make >/dev/null || need+=(catkin)
+command -v rosrun >/dev/null || need+=(rosbash)
+[ -x /usr/lib/rosout/rosout ] || [ -n "${ROS_DISTRO:-}" ] || need+=(rosout)   # roslaunch starts it
+{ command -v ss >/dev/null && command -v ip >/dev/null; } || need+=(iproute2)
+# C++ basic modules (modules/cpp): a compiler, cmake, roscpp and the message headers, nlohmann json
+command -v g++ >/dev/null || need+=(g++)
+command -v cmake >/dev/null || need+=(cmake)
+have_any() { for f in "$@"; do [ -e "$f" ] && return 0; done; return 1; }
+if ! have_any /usr/lib/*/cmake/roscpp/roscppConfig.cmake /opt/ros/*/share/roscpp/cmake/roscppConfig.cmake \
+   || ! have_any /usr/include/geometry_msgs/Point.h /opt/ros/*/include/geometry_msgs/Point.h; then
+  need+=(libroscpp-dev libstd-msgs-dev libgeometry-msgs-dev catkin)
+fi
+[ -f /usr/include/nlohmann/json.hpp ] || need+=(nlohmann-json3-dev)
+command -v tmux >/dev/null || need+=(tmux)                       # the terminal view's tests
+command -v chromium >/dev/null || need+=(chromium)               # the web view's browser tests
+command -v chromedriver >/dev/null || need+=(chromium-driver)
 /usr/bin/python3 -c 'import ensurepip, venv' 2>/dev/null || need+=(python3-venv)
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing Debian packages: ${need[*]}"

@@ -3,17 +3,19 @@ from __future__ import annotations
 
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
 from coordinator.testing.mocks import (
-                                       FunctionMock,
-                                       InProcessTransport,
-                                       MockError,
-                                       Mocks,
-                                       Outcome,
-                                       fail,
-                                       hang,
-                                       reject,
-                                       respond,
-                                       succeed,
+    FunctionMock,
+    InProcessTransport,
+    MockError,
+    MockModule,
+    Mocks,
+    Outcome,
+    OutcomeKind,
+    fail,
+    hang,
+    reject,
+    respond,
+    succeed,
 )
 
-__all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "Mocks", "Outcome", "TreeRun",
-           "TreeTest", "fail", "hang", "reject", "respond", "succeed"]
+__all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "MockModule", "Mocks", "Outcome",
+           "OutcomeKind", "TreeRun", "TreeTest", "fail", "hang", "reject", "respond", "succeed"]

@@ -9,17 +9,20 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Set
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Set
 
+import py_trees
 from py_trees.common import Status
 
 from coordinator.builder import build_tree
 from coordinator.clock import SimClock
 from coordinator.context import CallRecord, RunContext, plain
-from coordinator.language import Node, TreeFile, load_tree, walk
+from coordinator.language import load_tree
 from coordinator.runner import RunResult, TreeRunner
 from coordinator.testing.mocks import InProcessTransport, Mocks
-from modules.definition import ModuleDefinition, default_module_paths, load_definitions
+from coordinator.treeast import TreeFile, TreeNode, walk
+from modules.definition import ModuleDefinition
+from modules.search import default_definitions
 
 __all__ = ["TreeTest", "TreeRun", "Coverage"]
 
@@ -73,11 +76,11 @@ class Coverage:
     """Which nodes of which trees were ever ticked, and the outcomes each reached."""
 
     def __init__(self) -> None:
-        self.trees: Dict[str, List[Node]] = {}
+        self.trees: Dict[str, List[TreeNode]] = {}
         self.reached: Dict[Any, Set[str]] = defaultdict(set)
 
     def add_tree(self, tree: TreeFile) -> None:
-        seen: Dict[str, List[Node]] = {}
+        seen: Dict[str, List[TreeNode]] = {}
         for node in walk(tree.root):
             seen.setdefault(node.pos.file, [])
             if node not in seen[node.pos.file]:
@@ -88,11 +91,9 @@ class Coverage:
                 if all(n.pos != k.pos for k in known):
                     known.append(n)
 
-    def record(self, history: Mapping[Any, Iterable[Status]]) -> None:
-        for b, statuses in history.items():
-            node = getattr(b, "bmtree_node", None)
-            if node is not None:
-                self.reached[node.pos].update(s.value for s in statuses if s != Status.INVALID)
+    def visitor(self) -> py_trees.visitors.VisitorBase:
+        """A py_trees visitor that records into this coverage on every tick of a run."""
+        return _CoverageVisitor(self.reached)
 
     def report(self) -> str:
         lines = ["bmtree tree coverage"]
@@ -113,19 +114,30 @@ class Coverage:
         return "\n".join(lines)
 
 
+class _CoverageVisitor(py_trees.visitors.VisitorBase):
+    def __init__(self, reached: Dict[Any, Set[str]]):
+        super().__init__(full=False)
+        self.reached = reached
+
+    def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
+        node = getattr(behaviour, "bmtree_node", None)
+        if node is not None and behaviour.status != Status.INVALID:
+            self.reached[node.pos].add(behaviour.status.value)
+
+
 class TreeTest:
     """One tree, its mocked modules (``mocks``), a simulated clock; ``run()`` to completion.
 
     Args:
         path: the tree file.
-        definitions: module definitions (default: the project's and ``$BMTREE_MODULE_PATH``).
+        definitions: module definitions (default: :func:`modules.search.default_definitions`).
         inputs: values for the tree's declared inputs.
         coverage: a :class:`Coverage` to record into (the pytest plugin passes one).
     """
 
     def __init__(self, path: str, definitions: Optional[Mapping[str, ModuleDefinition]] = None,
                  inputs: Optional[Dict[str, Any]] = None, coverage: Optional[Coverage] = None):
-        self.definitions = dict(definitions) if definitions is not None else load_definitions(default_module_paths())
+        self.definitions = dict(definitions) if definitions is not None else default_definitions()
         self.inputs = dict(inputs or {})
         self.tree = load_tree(path, self.definitions, given=set(self.inputs))
         self.mocks = Mocks(self.definitions)
@@ -133,13 +145,18 @@ class TreeTest:
         if coverage is not None:
             coverage.add_tree(self.tree)
 
-    def run(self, max_duration: float = 3600.0, default_timeout: float = 30.0) -> TreeRun:
-        """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds)."""
+    def run(self, max_duration: float = 3600.0, default_timeout: float = 30.0,
+            observers: Sequence[Any] = ()) -> TreeRun:
+        """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds); ``observers`` are
+        :class:`~coordinator.runevents.RunObserver` (e.g. a RunStream writing a run log)."""
         clock = SimClock()
         transport = InProcessTransport(self.mocks, clock)
         ctx = RunContext(transport, clock, self.definitions, default_timeout=default_timeout)
         root = build_tree(self.tree, ctx, self.inputs)
-        result = TreeRunner(root, ctx, record_history=True).run(max_duration)
-        if self.coverage is not None:
-            self.coverage.record(result.history)
+        visitors = [self.coverage.visitor()] if self.coverage is not None else []
+        del self.mocks.errors[:]
+        result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=observers,
+                            tree=self.tree).run(max_duration)
+        if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
+            raise self.mocks.errors[0]
         return TreeRun(result, transport)

@@ -9,49 +9,38 @@ The script is the YAML form of the in-process kit's scripts::
         - succeed: {room: kitchen}
           delay: 0.5                 # seconds, real time here
     events:
-      - {at: 1.0, event: arrived, params: {place: kitchen}}   # seconds after the node started
+      - {at: 1.0, event: arrived, params: {place: kitchen}}   # seconds after a subscriber (the
+                                                              # coordinator) connected to /event/output
 
 Run one with ``python -m coordinator.testing.mocknode SCRIPT [--modules PATH]``, or from a
 test with :func:`start_mock_node`, which writes the script of ``mocks`` for you. The node is
-the real module runtime (input checks, busy, cancel, discovery); only the behaviour is scripted.
+the real module runtime (input checks, busy, cancel, discovery) serving the same scripted
+module as the in-process transport (:class:`~coordinator.testing.mocks.MockModule`), on worker
+threads and wall time instead of the simulated clock.
 """
 from __future__ import annotations
 
 import argparse
 import os
 import sys
-import threading
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 import yaml
 
-from coordinator.testing.mocks import FunctionMock, MockError, Mocks, outcome_from_dict, outcome_to_dict
+from coordinator.testing.mocks import (
+    MockError,
+    MockModule,
+    Mocks,
+    mock_module,
+    outcome_from_dict,
+    outcome_to_dict,
+)
 from modules.definition import DefinitionError, ModuleDefinition, default_module_paths, load_definitions
-from modules.runtime import BasicModule, Failure, Rejected
 
 __all__ = ["scripted_module", "script_of", "start_mock_node", "main"]
 
 
-def _method(mock: FunctionMock) -> Callable[..., Dict[str, Any]]:
-    def method(self: BasicModule, **inputs: Any) -> Dict[str, Any]:
-        mock.calls.append(inputs)
-        outcome = mock.next_outcome()
-        ctx = self.context
-        if outcome.kind == "hang":
-            ctx.cancelled.wait()
-            return {}
-        if outcome.delay and not ctx.sleep(outcome.delay):
-            return {}
-        if outcome.kind == "fail":
-            raise Failure(outcome.reason)
-        if outcome.kind == "reject":
-            raise Rejected(outcome.reason)
-        return dict(outcome.outputs)
-    method.__name__ = mock.fn.name
-    return method
-
-
-def scripted_module(definition: ModuleDefinition, script: Dict[str, Any]) -> BasicModule:
+def scripted_module(definition: ModuleDefinition, script: Dict[str, Any]) -> MockModule:
     """A module object whose functions follow ``script`` (see the module docstring)."""
     mocks = Mocks({definition.name: definition})
     unknown = set(script.get("functions") or {}) - set(definition.functions)
@@ -60,32 +49,24 @@ def scripted_module(definition: ModuleDefinition, script: Dict[str, Any]) -> Bas
     for fname, outcomes in (script.get("functions") or {}).items():
         outcomes = outcomes if isinstance(outcomes, list) else [outcomes]
         mocks["%s.%s" % (definition.name, fname)].script(*[outcome_from_dict(o) for o in outcomes])
-    methods = {name: _method(mocks["%s.%s" % (definition.name, name)]) for name in definition.functions}
-    events = list(script.get("events") or [])
-    for ev in events:
-        if ev.get("event") not in definition.events:
-            raise MockError("module %r has no event %r" % (definition.name, ev.get("event")))
-        definition.events[ev["event"]].build_values(ev.get("params") or {})
-
-    def setup(self: BasicModule, node: Any) -> None:
-        for ev in events:
-            t = threading.Timer(float(ev.get("at", 0.0)), self.emit, args=(ev["event"],),
-                                kwargs=dict(ev.get("params") or {}))
-            t.daemon = True
-            t.start()
-
-    cls = type("Mock_%s" % definition.name, (BasicModule,), dict(methods, setup=setup, concurrent=True))
-    return cls()
+    for ev in script.get("events") or []:
+        if not isinstance(ev, dict):
+            raise MockError("an event is a mapping {at, event, params}, got %r" % (ev,))
+        mocks.event(float(ev.get("at", 0.0)), "%s.%s" % (definition.name, ev.get("event")), **dict(ev.get("params") or {}))
+    return mock_module(mocks, definition.name)
 
 
 def script_of(mocks: Mocks, module: str, events: Optional[List[Dict[str, Any]]] = None) -> Dict[str, Any]:
-    """The YAML-able script of every function of ``module`` scripted in ``mocks``."""
+    """The YAML-able script of every function of ``module`` scripted in ``mocks``, with its
+    events of ``mocks`` and ``events``."""
     functions = {}
     for fname in mocks.definitions[module].functions:
         mock = mocks["%s.%s" % (module, fname)]
         if mock.outcomes:
             functions[fname] = [outcome_to_dict(o) for o in mock.outcomes]
-    return {"module": module, "functions": functions, "events": list(events or [])}
+    scheduled = [{"at": at, "event": name, "params": params}
+                 for at, mod, name, params in mocks.scheduled_events if mod == module]
+    return {"module": module, "functions": functions, "events": scheduled + list(events or [])}
 
 
 def start_mock_node(ros_graph: Any, mocks: Mocks, module: str, events: Optional[List[Dict[str, Any]]] = None,
@@ -125,7 +106,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         defs = load_definitions(args.modules or default_module_paths())
         definition = defs[script["module"]]
         impl = scripted_module(definition, script)
-    except (OSError, KeyError, DefinitionError, MockError, yaml.YAMLError) as exc:
+    except (OSError, KeyError, TypeError, ValueError, AttributeError, DefinitionError, MockError,
+            yaml.YAMLError) as exc:
         sys.stderr.write("error: %s: %s\n" % (args.script, exc))
         return 2
     return run_module(definition, impl, "bm_%s" % definition.name)

@@ -1,14 +1,18 @@
-"""Mocked modules built from definitions, and the in-process transport that runs them.
+"""Mocked modules built from definitions, served by the real module runtime on the run's clock.
 
-A mock refuses what the real module would refuse (unknown function, missing or
-ill-typed input: the same checks as the module runtime) and a scripted output that
-breaks the definition (at scripting time). Delays, hangs and events run on the
-run's clock, so with a :class:`SimClock` everything is instant and deterministic.
+A mock is a scripted module (:class:`MockModule`): each function follows its script of
+outcomes (:mod:`modules.outcome`). The in-process transport serves it with the same
+:class:`~modules.runtime.ModuleServer` a robot's module node uses, on the run's simulated
+clock, so it refuses what the real module refuses with the same texts: an unknown function,
+missing or ill-typed inputs, a second non-concurrent call while one runs (``busy with call
+…``); it answers cancels the same way. A scripted output that breaks the definition is refused
+when scripted. Delays, hangs and events cost no time under a :class:`SimClock`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Mapping, Optional
+import threading
+import time
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from blackboard.service import BlackboardService
 from blackboard.store import Store
@@ -25,86 +29,47 @@ from coordinator.clock import Clock
 from coordinator.context import plain
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
+from modules.execution import ClockExecutor
+from modules.outcome import (
+    Outcome,
+    OutcomeError,
+    OutcomeKind,
+    fail,
+    hang,
+    reject,
+    respond,
+    succeed,
+)
+from modules.outcome import outcome_from_dict as _outcome_from_dict
+from modules.outcome import outcome_to_dict as _outcome_to_dict
+from modules.runtime import BasicModule, ModuleServer
 
-__all__ = ["MockError", "Outcome", "FunctionMock", "Mocks", "InProcessTransport", "OUTCOME_KINDS",
-           "succeed", "fail", "hang", "reject", "respond", "outcome_from_dict", "outcome_to_dict"]
+__all__ = ["MockError", "FunctionMock", "Mocks", "MockModule", "mock_module", "InProcessTransport",
+           # the outcome type (modules.outcome), re-exported for test authors
+           "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "reject", "respond",
+           "outcome_from_dict", "outcome_to_dict"]
+
+OUTCOME_KINDS = tuple(k.value for k in OutcomeKind if k != OutcomeKind.RESPOND)  # the written ones
 
 
 class MockError(AssertionError):
     """A script that the real module could never follow (fails the test)."""
 
 
-@dataclass
-class Outcome:
-    kind: str                                   # succeed | fail | hang | reject | respond
-    outputs: Dict[str, Any] = field(default_factory=dict)
-    reason: str = ""
-    delay: float = 0.0
-    fn: Optional[Callable[..., Any]] = None
-
-
-def succeed(delay: float = 0.0, **outputs: Any) -> Outcome:
-    """Answer ``succeeded`` with these outputs (unnamed outputs get their zero value)."""
-    return Outcome("succeed", outputs=outputs, delay=delay)
-
-
-def fail(reason: str = "failed (mock)", delay: float = 0.0) -> Outcome:
-    return Outcome("fail", reason=reason, delay=delay)
-
-
-def reject(reason: str = "rejected (mock)", delay: float = 0.0) -> Outcome:
-    return Outcome("reject", reason=reason, delay=delay)
-
-
-def hang() -> Outcome:
-    """Never answer (until cancelled)."""
-    return Outcome("hang")
-
-
-def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
-    """Compute outputs from the inputs: ``fn(**inputs_as_plain_values) -> dict`` or an Outcome."""
-    return Outcome("respond", fn=fn, delay=delay)
-
-
-OUTCOME_KINDS = ("succeed", "fail", "reject", "hang")
-
-
 def outcome_from_dict(raw: Any) -> Outcome:
-    """``{succeed: {outputs}}``, ``{fail: reason}``, ``{reject: reason}`` or ``{hang: true}``,
-    with an optional ``delay`` (seconds): the scripts of scenario files and mock nodes."""
-    if not isinstance(raw, dict):
-        raise MockError("an outcome is a mapping such as {succeed: {...}} or {fail: reason}, got %r" % (raw,))
-    kinds = [k for k in raw if k in OUTCOME_KINDS]
-    extra = [k for k in raw if k not in OUTCOME_KINDS and k != "delay"]
-    if len(kinds) != 1 or extra:
-        raise MockError("an outcome has one of %s (and optionally delay), got %s" % (
-            ", ".join(OUTCOME_KINDS), ", ".join(map(str, raw))))
-    kind = kinds[0]
+    """The written form of an outcome (:func:`modules.outcome.outcome_from_dict`); MockError if wrong."""
     try:
-        delay = float(raw.get("delay", 0.0))
-    except (TypeError, ValueError):
-        raise MockError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
-    if kind == "succeed":
-        outputs = raw["succeed"] or {}
-        if not isinstance(outputs, dict):
-            raise MockError("succeed takes a mapping of outputs, got %r" % (outputs,))
-        return succeed(delay, **dict(outputs))
-    if kind == "fail":
-        return fail(str(raw["fail"]), delay)
-    if kind == "reject":
-        return reject(str(raw["reject"]), delay)
-    return hang()
+        return _outcome_from_dict(raw)
+    except OutcomeError as exc:
+        raise MockError(str(exc))
 
 
 def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
-    if outcome.kind == "respond":
+    """The written form of ``outcome``; MockError for a respond (Python cannot go to a mock node)."""
+    try:
+        return _outcome_to_dict(outcome)
+    except OutcomeError:
         raise MockError("a respond(...) outcome runs Python and cannot be sent to a mock node process")
-    value: Any = {"succeed": dict(outcome.outputs), "fail": outcome.reason, "reject": outcome.reason,
-                  "hang": True}[outcome.kind]
-    out: Dict[str, Any] = {outcome.kind: value}
-    if outcome.delay:
-        out["delay"] = outcome.delay
-    return out
 
 
 def _zero(fn: FunctionDefinition) -> Dict[str, Any]:
@@ -121,9 +86,11 @@ class FunctionMock:
         self.fn = fn
         self.outcomes: List[Outcome] = []
         self.calls: List[Dict[str, Any]] = []
+        self._default: Optional[Outcome] = None
 
     def _check(self, outcome: Outcome) -> Outcome:
-        if outcome.kind == "succeed":
+        """Complete a succeed's outputs with zero values and check them against the definition."""
+        if outcome.kind == OutcomeKind.SUCCEED:
             outputs = dict(_zero(self.fn), **outcome.outputs)
             try:
                 self.fn.build_result(outputs)
@@ -158,10 +125,33 @@ class FunctionMock:
         return self.script(*([fail(reason)] * n + [succeed(**outputs)]))
 
     def next_outcome(self) -> Outcome:
-        if not self.outcomes:
-            return self._check(succeed())
+        if not self.outcomes:  # unscripted: succeed with zero outputs (checked once)
+            if self._default is None:
+                self._default = self._check(succeed())
+            return self._default
         index = min(len(self.calls) - 1, len(self.outcomes) - 1)
         return self.outcomes[index]
+
+    def answer(self, inputs: Dict[str, Any], errors: List[MockError]) -> Outcome:
+        """Record a call (its inputs as plain data) and give its outcome; a respond's function
+        gets the plain inputs, and its outputs are completed and checked like a succeed's (a
+        MockError, also noted in ``errors``, and the runtime answers ``failed``)."""
+        plain_inputs = {k: plain(v) for k, v in inputs.items()}
+        self.calls.append(plain_inputs)
+        outcome = self.next_outcome()
+        if outcome.kind != OutcomeKind.RESPOND or outcome.fn is None:
+            return outcome
+        user_fn = outcome.fn
+
+        def compute(**_messages: Any) -> Outcome:
+            out = user_fn(**plain_inputs)
+            try:
+                return self._check(out if isinstance(out, Outcome) else succeed(**(out or {})))
+            except MockError as exc:
+                errors.append(exc)
+                raise
+
+        return respond(compute, outcome.delay)
 
 
 class Mocks:
@@ -170,7 +160,8 @@ class Mocks:
     def __init__(self, definitions: Mapping[str, ModuleDefinition]):
         self.definitions = dict(definitions)
         self._fns: Dict[str, FunctionMock] = {}
-        self.scheduled_events: List[tuple] = []
+        self.scheduled_events: List[Tuple[float, str, str, Dict[str, Any]]] = []
+        self.errors: List[MockError] = []
 
     def __getitem__(self, target: str) -> FunctionMock:
         if target not in self._fns:
@@ -185,89 +176,111 @@ class Mocks:
         return self._fns[target]
 
     def event(self, at: float, target: str, **params: Any) -> None:
-        """Emit ``module.event`` with ``params`` at simulated time ``at`` (seconds from start)."""
+        """Emit ``module.event`` with ``params`` at ``at`` seconds after the start (of the run, or of a mock node)."""
         mod, _, name = target.partition(".")
         ev = self.definitions.get(mod) and self.definitions[mod].events.get(name)
         if not ev:
             raise MockError("no event %r in the definitions" % target)
         try:
-            msgs = ev.build_values(params)
+            ev.build_values(params)
         except ProtocolError as exc:
             raise MockError(str(exc))
-        self.scheduled_events.append((at, Event(mod, name, [p.name for p in ev.params], msgs)))
+        self.scheduled_events.append((float(at), mod, name, dict(params)))
+
+
+class MockModule(BasicModule):
+    """A module whose functions follow the scripts of ``mocks``: the real runtime serves it, in
+    process (:class:`InProcessTransport`) or as a node (:mod:`coordinator.testing.mocknode`).
+    Its functions are concurrent exactly where the definition says so. Make one with
+    :func:`mock_module` (one method per function of the definition)."""
+
+    def __init__(self, mocks: Mocks, module: str):
+        super().__init__()
+        self._mocks = mocks
+        self._module = module
+
+    def _start_events(self) -> None:
+        """Schedule this module's events of ``mocks`` on the module's clock, from now."""
+        assert self._server is not None, "module not bound to a server"
+        for at, mod, name, params in self._mocks.scheduled_events:
+            if mod == self._module:
+                self._server.scheduler.call_later(at, lambda name=name, params=params: self.emit(name, **params))
+
+    def setup(self, node: Any) -> None:
+        """As a node: the events' times count from when a subscriber (the coordinator under test)
+        connected to the events, so that none is emitted before anyone listens."""
+        publisher = getattr(node, "event_publisher", None)
+        if publisher is None or not any(mod == self._module for _, mod, _, _ in self._mocks.scheduled_events):
+            self._start_events()
+            return
+
+        def start_when_heard() -> None:
+            import rospy
+
+            while publisher.get_num_connections() < 1 and not rospy.is_shutdown():
+                time.sleep(0.02)
+            self._start_events()
+
+        threading.Thread(target=start_when_heard, name="%s-events" % self._module, daemon=True).start()
+
+
+def mock_module(mocks: Mocks, module: str) -> MockModule:
+    """A :class:`MockModule` with one method per function of ``module``'s definition."""
+    methods = {name: _scripted("%s.%s" % (module, name), name) for name in mocks.definitions[module].functions}
+    return type("Mock_%s" % module, (MockModule,), methods)(mocks, module)
+
+
+def _scripted(target: str, name: str) -> Callable[..., Outcome]:
+    def method(self: MockModule, **inputs: Any) -> Outcome:
+        return self._mocks[target].answer(inputs, self._mocks.errors)
+    method.__name__ = name
+    return method
 
 
 class InProcessTransport(Transport):
-    """Runs mocked modules and an in-memory Blackboard in the coordinator's process."""
+    """The module runtime serving every mocked module, and an in-memory Blackboard, in the
+    coordinator's process on the run's clock."""
 
     def __init__(self, mocks: Mocks, clock: Clock):
         self.mocks = mocks
         self.clock = clock
         self._deliver: Callable[[Any], None] = lambda item: None
-        self._live: Dict[str, FunctionCall] = {}
         self.blackboard = BlackboardService(Store(":memory:"), self._on_answer, threaded=False)
         self.sent: List[Any] = []
+        executor = ClockExecutor(clock)
+        self.servers: Dict[str, ModuleServer] = {
+            name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
+                               executor=executor, scheduler=clock)
+            for name, definition in mocks.definitions.items()}
 
     def connect(self, deliver: Callable[[Any], None]) -> None:
         self._deliver = deliver
-        start = self.clock.now()
-        for at, ev in self.mocks.scheduled_events:
-            self.clock.call_later(max(0.0, start + at - self.clock.now()), lambda ev=ev: self._emit(ev))
+        for server in self.servers.values():
+            impl = server.impl
+            assert isinstance(impl, MockModule)
+            impl._start_events()
 
-    def _emit(self, ev: Event) -> None:
-        self._deliver(Event.decode(ev.encode()))
+    def _on_event(self, text: str) -> None:
+        self._deliver(Event.decode(text))
 
     def _on_answer(self, text: str) -> None:
         self._deliver(BlackboardAnswer.decode(text))
 
-    def _answer(self, result: FunctionResult) -> None:
-        text = result.encode()
+    def _on_result(self, text: str) -> None:
         self.blackboard.on_result(text, stamp=self.clock.now())
         self._deliver(FunctionResult.decode(text))
 
     def send_call(self, call: FunctionCall) -> None:
         self.sent.append(call)
-        call = FunctionCall.decode(call.encode())          # what a real module would receive
-        mod = self.mocks.definitions.get(call.basic_mod)
-        if mod is None:
-            return                                          # nobody is listening, as on a real robot
-        base = dict(call_id=call.call_id, basic_mod=call.basic_mod, function=call.function)
-        try:
-            fn = mod.function(call.function)
-            inputs = fn.inputs_of(call)
-        except ProtocolError as exc:
-            self._answer(FunctionResult(status="rejected", error=str(exc), **base))
-            return
-        mock = self.mocks["%s.%s" % (call.basic_mod, call.function)]
-        plain_inputs = {k: plain(v) for k, v in inputs.items()}
-        mock.calls.append(plain_inputs)
-        outcome = mock.next_outcome()
-        if outcome.kind == "hang":
-            self._live[call.call_id or ""] = call
-            return
-        if outcome.kind == "respond":
-            assert outcome.fn is not None
-            out = outcome.fn(**plain_inputs)
-            outcome = out if isinstance(out, Outcome) else mock._check(succeed(outcome.delay, **(out or {})))
-        if outcome.kind == "succeed":
-            result = fn.build_result(outcome.outputs, call.call_id)
-        elif outcome.kind == "reject":
-            result = FunctionResult(status="rejected", error=outcome.reason, **base)
-        else:
-            result = FunctionResult(status="failed", error=outcome.reason, **base)
-        self._live[call.call_id or ""] = call
-        self.clock.call_later(outcome.delay, lambda: self._finish(call, result))
-
-    def _finish(self, call: FunctionCall, result: FunctionResult) -> None:
-        if self._live.pop(call.call_id or "", None) is not None:
-            self._answer(result)
+        server = self.servers.get(call.basic_mod)
+        if server is not None:                               # else nobody listens, as on a robot
+            server.handle_call(call.encode())
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         self.sent.append(cancel)
-        call = self._live.pop(cancel.call_id, None)
-        if call is not None:
-            self._answer(FunctionResult(status="cancelled", error="cancelled by the coordinator",
-                                        call_id=call.call_id, basic_mod=call.basic_mod, function=call.function))
+        server = self.servers.get(cancel.basic_mod)
+        if server is not None:
+            server.handle_cancel(cancel.encode())
 
     def send_request(self, request: BlackboardRequest) -> None:
         self.sent.append(request)

@@ -68,18 +68,13 @@ def ros_master() -> Iterator[str]:
     home = tempfile.mkdtemp(prefix="bmtree-test-ros-")
     graph = RosGraph(home)
     uri = graph.start_master()
-    saved = {k: os.environ.get(k) for k in ("ROS_MASTER_URI", "ROS_HOME", "ROS_LOG_DIR")}
-    os.environ.update(ROS_MASTER_URI=uri, ROS_HOME=home, ROS_LOG_DIR=os.path.join(home, "log"))
+    restore = graph.adopt(home=True)  # the probe and in-process coordinators advertise loopback
     try:
         yield uri
     finally:
         graph.close()
         shutil.rmtree(home, ignore_errors=True)
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+        restore()
 
 
 @pytest.fixture

@@ -5,6 +5,7 @@ test session against the session's master; nodes under test run as processes.
 """
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
@@ -69,12 +70,43 @@ class RosProbe:
         if pub is None:
             pub = self._pubs[topic] = rospy.Publisher(topic, String, queue_size=10000, latch=latch)
         end = time.monotonic() + timeout
-        while pub.get_num_connections() < subscribers:
+        while pub.get_num_connections() < subscribers or self._live_connections(pub) < subscribers:
             if time.monotonic() > end:
                 raise AssertionError("only %d of %d subscribers connected to %s" % (
-                    pub.get_num_connections(), subscribers, topic))
+                    self._live_connections(pub), subscribers, topic))
             time.sleep(0.02)
         return pub
+
+    @staticmethod
+    def _live_connections(pub: Any) -> int:
+        """Connections to running nodes that subscribe the topic now: a node that stopped (or was
+        killed, and is still registered) leaves its connection in the publisher until a write
+        to it fails, and must not be counted."""
+        import rosgraph
+        import rospy
+
+        from modules.discovery import node_alive
+
+        for c in list(pub.impl.connections):  # a subscriber that went away: its socket is at EOF
+            sock = getattr(c, "socket", None)
+            try:
+                closed = sock is not None and sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+            except (BlockingIOError, InterruptedError):
+                closed = False
+            except OSError:
+                closed = True
+            if closed:
+                c.close()
+        master = rosgraph.Master(rospy.get_name())
+        _, subs, _ = master.getSystemState()
+        nodes = [n for n in next((n for t, n in subs if t == pub.resolved_name), []) if pub.impl.has_connection(n)]
+        live = 0
+        for node in nodes:
+            try:
+                live += node_alive(master.lookupNode(node), 0.5)
+            except rosgraph.masterapi.Error:
+                pass
+        return live
 
     def publish(self, topic: str, text: str, subscribers: int = 1) -> None:
         from std_msgs.msg import String

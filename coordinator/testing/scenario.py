@@ -23,6 +23,7 @@
 """
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -33,9 +34,10 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
-from modules.definition import ModuleDefinition, default_module_paths, load_definitions
+from modules.definition import ModuleDefinition
+from modules.search import default_definitions
 
-__all__ = ["run_scenarios", "run_scenario_file"]
+__all__ = ["run_scenarios", "run_scenario_file", "calls_diff"]
 
 _SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect", "max_duration")
 _EXPECT_KEYS = ("status", "calls", "blackboard")
@@ -55,19 +57,64 @@ def _check_keys(m: LMap, allowed: Any, what: str) -> None:
         raise TreeErrors(errs)
 
 
+def _number(m: LMap, key: str, default: float, at: Pos) -> float:
+    """``m[key]`` as a non-negative number of seconds, else a positioned error."""
+    value = m.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+        raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))])
+    return float(value)
+
+
+def _want(want: Any) -> Any:
+    return (want, {}) if isinstance(want, str) else next(iter(want.items()))
+
+
+def _same(want: Any, got: Any) -> bool:
+    target, inputs = _want(want)
+    return got.target == target and all(got.inputs.get(k) == v for k, v in (inputs or {}).items())
+
+
+def _show(target: str, inputs: Any) -> str:
+    return "%s %s" % (target, json.dumps(inputs, sort_keys=True, ensure_ascii=False, default=str)) if inputs else target
+
+
+def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
+    """Expected vs actual calls as a diff: ``  =`` same, ``  -`` expected only, ``  +`` made only."""
+    n, m = len(expected), len(actual)
+    lcs = [[0] * (m + 1) for _ in range(n + 1)]
+    for i in range(n - 1, -1, -1):
+        for j in range(m - 1, -1, -1):
+            lcs[i][j] = lcs[i + 1][j + 1] + 1 if _same(expected[i], actual[j]) else max(lcs[i + 1][j], lcs[i][j + 1])
+    out, i, j = [], 0, 0
+    while i < n or j < m:
+        if i < n and j < m and _same(expected[i], actual[j]):
+            out.append("  = %s" % _show(*_want(expected[i])))
+            i, j = i + 1, j + 1
+        elif j < m and (i == n or lcs[i][j + 1] >= lcs[i + 1][j]):
+            out.append("  + %s" % _show(actual[j].target, actual[j].inputs))
+            j += 1
+        else:
+            out.append("  - %s" % _show(*_want(expected[i])))
+            i += 1
+    return out
+
+
 def _expect_calls(run: TreeRun, expected: List[Any]) -> List[str]:
     problems = []
     actual = run.calls()
     if len(actual) != len(expected):
         problems.append("expected %d calls, got %d: %s" % (len(expected), len(actual), ", ".join(run.targets)))
     for i, (want, got) in enumerate(zip(expected, actual)):
-        target, inputs = (want, {}) if isinstance(want, str) else next(iter(want.items()))
+        target, inputs = _want(want)
         if got.target != target:
             problems.append("call %d: expected %s, got %s" % (i + 1, target, got.target))
             continue
         for k, v in (inputs or {}).items():
             if got.inputs.get(k) != v:
                 problems.append("call %d (%s): input %s is %r, expected %r" % (i + 1, target, k, got.inputs.get(k), v))
+    if problems:
+        problems.append("calls changed (- expected only, + made only, = both):")
+        problems.extend(calls_diff(expected, actual))
     return problems
 
 
@@ -82,7 +129,7 @@ def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinitio
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     _check_keys(data, ("tree", "scenarios"), "top-level")
     tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(data["tree"]))
-    defs = definitions if definitions is not None else load_definitions(default_module_paths())
+    defs = definitions if definitions is not None else default_definitions()
     results = []
     for i, sc in enumerate(data["scenarios"]):
         at = data["scenarios"].item_pos[i]
@@ -99,15 +146,23 @@ def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinitio
                 else:
                     outcomes_list, positions = list(outcomes), outcomes.item_pos
                 test.mocks[target].script(*[_outcome(o, p) for o, p in zip(outcomes_list, positions)])
-            for ev in sc.get("events") or []:
-                test.mocks.event(float(ev.get("at", 0.0)), str(ev["event"]), **dict(ev.get("params") or {}))
+            events = sc.get("events") or []
+            for j, ev in enumerate(events):
+                ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
+                if not isinstance(ev, LMap) or "event" not in ev:
+                    raise TreeErrors([TreeError(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")])
+                _check_keys(ev, ("at", "event", "params"), "event")
+                params = ev.get("params") or {}
+                if not isinstance(params, dict):
+                    raise TreeErrors([TreeError(pos_of(ev, "params", ev_at), "params is a mapping of name: value")])
+                test.mocks.event(_number(ev, "at", 0.0, ev_at), str(ev["event"]), **dict(params))
         except MockError as exc:
             raise TreeErrors([TreeError(pos_of(sc, "mocks", at), str(exc))])
         expect = sc.get("expect") or {}
         if isinstance(expect, LMap):
             _check_keys(expect, _EXPECT_KEYS, "expect")
         t0 = time.perf_counter()
-        run = test.run(max_duration=float(sc.get("max_duration", 3600.0)))
+        run = test.run(max_duration=_number(sc, "max_duration", 3600.0, at))
         ms = (time.perf_counter() - t0) * 1000
         problems = []
         want_status = str(expect.get("status", "success")).upper()
@@ -131,7 +186,7 @@ def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinitio
 def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None) -> int:
     """``bmtree test``: exit 0 if every scenario passed, 1 if one failed, 2 for an invalid file."""
     out = out or sys.stdout
-    defs = load_definitions(modules or default_module_paths())
+    defs = default_definitions(modules or ())
     results: List[bool] = []
     invalid = False
     for path in paths:

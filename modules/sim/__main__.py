@@ -1,10 +1,14 @@
-"""Run one simulated module as a ROS node: ``python -m modules.sim navigation --world W``."""
+"""Run one simulated module as a ROS node: ``python -m modules.sim navigation --world W``.
+
+Under roslaunch the private parameters ``~module`` and ``~world`` stand for the arguments.
+"""
 from __future__ import annotations
 
 import argparse
 import sys
 from typing import List, Optional
 
+from comm.nodeopts import parse_node_args
 from modules.definition import load_definition
 from modules.node import run_module
 from modules.sim import DEFAULT_WORLD, SIM_CLASSES, World, WorldError, definition_path
@@ -12,15 +16,16 @@ from modules.sim import DEFAULT_WORLD, SIM_CLASSES, World, WorldError, definitio
 
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m modules.sim", description="Run a simulated basic module.")
-    p.add_argument("module", choices=sorted(SIM_CLASSES))
+    p.add_argument("module", nargs="?", choices=sorted(SIM_CLASSES))
     p.add_argument("--world", default=DEFAULT_WORLD, help="world YAML (default: the shipped house)")
     return p
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    import rospy
-
-    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    parser = make_parser()
+    args = parse_node_args(parser, (argv if argv is not None else sys.argv)[1:], None)
+    if not args.module:
+        parser.error("which module? one of %s (or the private parameter ~module)" % ", ".join(sorted(SIM_CLASSES)))
     try:
         world = World.load(args.world)
     except (OSError, WorldError) as exc:

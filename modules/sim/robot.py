@@ -1,8 +1,9 @@
 """The simulated modules: navigation, vision and speech over a :class:`World`.
 
-Each runs as its own node. They share the robot's whereabouts the way real modules
-would share a localisation topic: navigation publishes the current room on a latched
-``/sim/robot_room`` topic and the others subscribe to it.
+Each runs as its own node. Navigation writes the robot's room to the ROS parameter
+``/sim/robot_room`` before it answers, and the others read it when a call needs it: the
+master orders the two, so a call made after navigation answered always sees the new room
+(a topic would not: ROS orders messages per connection, not across topics).
 """
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ from typing import Any, Dict, List, Optional
 
 import yaml
 
+from modules.outcome import Outcome
 from modules.runtime import BasicModule, Failure
 from modules.sim.world import Fault, World
 
-__all__ = ["SimModule", "Navigation", "Vision", "Speech", "SIM_CLASSES", "ROOM_TOPIC", "SAID_TOPIC"]
+__all__ = ["SimModule", "Navigation", "Vision", "Speech", "SIM_CLASSES", "ROOM_PARAM", "SAID_TOPIC"]
 
-ROOM_TOPIC = "/sim/robot_room"
+ROOM_PARAM = "/sim/robot_room"
 SAID_TOPIC = "/sim/speech/said"
 
 
@@ -39,6 +41,7 @@ class SimModule(BasicModule):
         x, y = self.world.rooms[self.world.start]
         self.state = state or RobotState(self.world.start, x, y)
         self.faults: Dict[str, Fault] = {}
+        self._rospy: Any = None  # set in setup(): the room then comes from the parameter server
         prefix = self.module_name + "."
         for key, fault in self.world.faults.items():
             if key.startswith(prefix):
@@ -48,38 +51,27 @@ class SimModule(BasicModule):
         for fn, spec in raw.items():
             self.faults[fn] = Fault.parse("%s.%s" % (self.module_name, fn), spec)
 
-    def before_call(self, function: str, inputs: Dict[str, Any]) -> None:
+    def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
+        """An injected fault's outcome replaces the function's answer (the runtime carries it out)."""
         fault = self.faults.get(function)
         if fault is None or not fault.take():
-            return
-        ctx = self.context
-        if fault.delay:
-            ctx.sleep(fault.delay)
-        if fault.hang:
-            ctx.cancelled.wait()
-            raise Failure("cancelled while hanging (injected fault)")
-        if fault.crash:
-            raise RuntimeError(fault.crash)
-        if fault.fail:
-            raise Failure(fault.fail)
+            return None
+        return fault.outcome
 
     def setup(self, node: Any) -> None:
         import rospy
-        from std_msgs.msg import String
 
         raw = rospy.get_param("~faults", "")
         if raw:
             self._add_faults(yaml.safe_load(raw) if isinstance(raw, str) else raw)
-        if not isinstance(self, Navigation):
-            rospy.Subscriber(ROOM_TOPIC, String, self._on_room, queue_size=10)
-
-    def _on_room(self, msg: Any) -> None:
-        loc = self.world.locate(msg.data)
-        if loc:
-            with self.state.lock:
-                self.state.room, self.state.x, self.state.y = loc
+        self._rospy = rospy
 
     def _here(self) -> str:
+        if self._rospy is not None and not isinstance(self, Navigation):
+            loc = self.world.locate(str(self._rospy.get_param(ROOM_PARAM, "")))
+            if loc:
+                with self.state.lock:
+                    self.state.room, self.state.x, self.state.y = loc
         with self.state.lock:
             return self.state.room
 
@@ -88,20 +80,19 @@ class Navigation(SimModule):
     """Drives between places; time = distance / speed, cancellable midway."""
 
     module_name = "navigation"
-    concurrent = {"where_am_i"}
     step = 0.02
 
-    def __init__(self, world: Optional[World] = None, state: Optional[RobotState] = None):
-        super().__init__(world, state)
-        self._room_pub: Any = None
-
     def setup(self, node: Any) -> None:
-        import rospy
-        from std_msgs.msg import String
-
         super().setup(node)
-        self._room_pub = rospy.Publisher(ROOM_TOPIC, String, queue_size=1, latch=True)
-        self._room_pub.publish(String(self._here()))
+        self._rospy.set_param(ROOM_PARAM, self._here())
+
+    def shutdown(self) -> None:
+        if self._rospy is not None:  # a later graph on this master must not see a stale room
+            try:
+                self._rospy.delete_param(ROOM_PARAM)
+            except (KeyError, OSError):
+                pass
+        super().shutdown()
 
     def _drive(self, x: float, y: float) -> bool:
         ctx = self.context
@@ -131,10 +122,8 @@ class Navigation(SimModule):
             return self._where()
         with self.state.lock:
             self.state.room = room
-        if self._room_pub is not None:
-            from std_msgs.msg import String
-
-            self._room_pub.publish(String(room))
+        if self._rospy is not None:  # before the answer, so the next call sees it
+            self._rospy.set_param(ROOM_PARAM, room)
         self.emit("arrived", place=place.data)
         return dict(self._where(), success=True)
 
@@ -173,7 +162,6 @@ class Speech(SimModule):
     """Says sentences (recorded in ``said`` and on ``/sim/speech/said``); listens to scripted answers."""
 
     module_name = "speech"
-    concurrent = {"say"}
 
     def __init__(self, world: Optional[World] = None, state: Optional[RobotState] = None):
         super().__init__(world, state)

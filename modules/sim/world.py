@@ -8,6 +8,8 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
+from modules.outcome import Outcome, OutcomeError, OutcomeKind, outcome_from_dict
+
 __all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault"]
 
 DEFAULT_WORLD = os.path.join(os.path.dirname(__file__), "world.yaml")
@@ -17,29 +19,50 @@ class WorldError(ValueError):
     """A world file that cannot be used (the message names the key)."""
 
 
+def _crash(text: str) -> Any:
+    def crash(**inputs: Any) -> Any:
+        raise RuntimeError(text)
+    return crash
+
+
 @dataclass
 class Fault:
-    """What to do to a function: fail with a reason, hang, delay; ``times`` calls (None: all)."""
+    """An outcome that replaces a function's own answer, for ``times`` calls (None: all).
 
-    fail: Optional[str] = None
-    crash: Optional[str] = None
-    hang: bool = False
-    delay: float = 0.0
+    Written ``{fail: reason}``, ``{reject: reason}``, ``{hang: true}``, ``{crash: text}`` (the
+    function raises) or ``{delay: s}`` alone (the function answers, ``s`` seconds late); ``delay``
+    also delays the others. It is the testing kit's outcome type, carried out by the runtime.
+    """
+
+    outcome: Outcome
     times: Optional[int] = None
 
     @classmethod
     def parse(cls, key: str, raw: Any) -> Fault:
         if not isinstance(raw, dict):
             raise WorldError("faults.%s must be a mapping" % key)
-        unknown = set(raw) - {"fail", "crash", "hang", "delay", "times"}
+        unknown = set(raw) - set(_FAULT_KEYS)
         if unknown:
-            raise WorldError("faults.%s: unknown keys %s (use fail, crash, hang, delay, times)" % (
-                key, ", ".join(sorted(unknown))))
+            raise WorldError("faults.%s: unknown keys %s (use %s)" % (
+                key, ", ".join(sorted(map(str, unknown))), ", ".join(_FAULT_KEYS)))
         times = raw.get("times")
         if times is not None and (not isinstance(times, int) or times < 0):
             raise WorldError("faults.%s.times must be a non-negative integer" % key)
-        return cls(fail=raw.get("fail"), crash=raw.get("crash"), hang=bool(raw.get("hang", False)),
-                   delay=float(raw.get("delay", 0.0)), times=times)
+        spec = {k: v for k, v in raw.items() if k != "times" and not (k == "hang" and v is False)}
+        try:
+            delay = float(spec.get("delay", 0.0))
+        except (TypeError, ValueError):
+            raise WorldError("faults.%s.delay must be a number of seconds" % key)
+        if "crash" in spec:
+            if len(spec) > (2 if "delay" in spec else 1):
+                raise WorldError("faults.%s: crash goes alone (with delay, times)" % key)
+            return cls(Outcome(OutcomeKind.RESPOND, fn=_crash(str(spec["crash"])), delay=delay), times)
+        if set(spec) <= {"delay"}:
+            return cls(Outcome(OutcomeKind.RESPOND, delay=delay), times)
+        try:
+            return cls(outcome_from_dict(spec), times)
+        except OutcomeError as exc:
+            raise WorldError("faults.%s: %s" % (key, exc))
 
     def take(self) -> bool:
         """True if this fault applies to the next call (and count it)."""
@@ -49,6 +72,9 @@ class Fault:
             return False
         self.times -= 1
         return True
+
+
+_FAULT_KEYS = ("fail", "reject", "crash", "hang", "delay", "times")
 
 
 @dataclass

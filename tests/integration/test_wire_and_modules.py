@@ -14,7 +14,7 @@ from std_msgs.msg import Float64, String
 
 from comm import Event, FunctionCall, commBM
 from modules.definition import load_definitions
-from tests.conftest import SHARED_REFERENCE
+from tests.conftest import REFERENCE
 from tests.integration.conftest import NODES, bmtree_cmd, start_sim_module, wait_announced
 
 
@@ -58,7 +58,6 @@ def test_sim_modules_answer_reject_fail_busy_cancel_and_emit(sim_nodes, sim_defs
     assert r.basic_mod == "navigation" and r.function == "go_to"
     ev = Event.decode(events.wait_for(lambda t: '"arrived"' in t)[0])
     assert ev.values["place"].data == "bedroom"
-    time.sleep(0.3)  # vision and speech learn the room from the latched /sim/robot_room
     r = c.call(sim_defs, "vision.find_person", name="Ana")
     assert r.values["person"].data == "Ana" and r.values["position"].x == pytest.approx(2.3)
     assert Event.decode(events.wait_for(lambda t: '"personSeen"' in t)[0]).values["person"].data == "Ana"
@@ -85,14 +84,21 @@ def test_sim_modules_answer_reject_fail_busy_cancel_and_emit(sim_nodes, sim_defs
     r = c.result("u3")
     assert r.status == "rejected" and "bad inputs" in r.error and "msgs[0]" in r.error
     # busy -> rejected; cancel -> cancelled and the robot stops
+    # connected before it is needed, to all three modules (each listens), not just the first
+    cancels = ros_probe.publisher("/master/cancel", 3)
     go = sim_defs["navigation"].function("go_to").build_call({"place": "kitchen"})
+    x0 = c.call(sim_defs, "navigation.where_am_i").values["position"].x
     c.send(go)
-    time.sleep(0.5)
+    deadline = time.monotonic() + 20
+    while c.call(sim_defs, "navigation.where_am_i").values["position"].x == x0:  # until the robot moves
+        assert time.monotonic() < deadline, "go_to never started driving"
     r = c.call(sim_defs, "navigation.approach", target={"x": 1.0})
     assert r.status == "rejected" and r.error == "busy with call %s (go_to)" % go.call_id
+    from std_msgs.msg import String
+
     from comm import CancelRequest
 
-    ros_probe.publish("/master/cancel", CancelRequest(go.call_id, "navigation", "go_to").encode())
+    cancels.publish(String(CancelRequest(go.call_id, "navigation", "go_to").encode()))
     r = c.result(go.call_id)
     assert r.status == "cancelled"
     where = c.call(sim_defs, "navigation.where_am_i")
@@ -192,7 +198,7 @@ def test_module_node_cli_binds_and_reports_errors(tmp_path, ros_master):
 
 def test_original_python_bm_module_called_by_typed_and_legacy_api(ros_graph, caller_factory, ros_probe):
     ros_graph.start_node([sys.executable, os.path.join(NODES, "legacy_python_bm.py")], "/PYTHON_BM")
-    defs = load_definitions([SHARED_REFERENCE])
+    defs = load_definitions([REFERENCE])
     c = caller_factory(subscribers=1, publishers=1)
     call = defs["PYTHON_BM"].function("graspObject").build_call({"target_pos": {"x": 0.3, "y": 0.1, "z": 0.9},
                                                                  "obj_radius": 0.0})

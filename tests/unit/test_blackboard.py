@@ -102,3 +102,34 @@ def test_store_survives_reopen_and_dump(tmp_path, capsys):
     assert bmtree(["blackboard", "dump", "--db", path, "--name", "vision/find_object/room"]) == 0
     assert "vision.find_object" in capsys.readouterr().out
     assert bmtree(["blackboard", "dump", "--db", str(tmp_path / "none.sqlite")]) == 3
+
+
+def test_original_modules_results_are_stored_under_the_module_whose_node_published_them(tmp_path):
+    from geometry_msgs.msg import Point
+
+    from blackboard.attribution import Attribution
+    from comm import FunctionCall
+
+    arm = {"Functions": [{"Name": "grasp", "Output-params": [{"Name": "success"}, {"Name": "final_pos"}]},
+                         {"Name": "home", "Output-params": [{"Name": "final_pos"}]}]}
+    announced = {"arm": {"node": "/arm_driver", "definition": json.dumps(arm), "legacy": True}}
+    answers = []
+    store = Store(str(tmp_path / "bb.sqlite"))
+    svc = BlackboardService(store, answers.append, attribution=Attribution(lambda: announced))
+    try:
+        for module, function, call_id in (("arm", "home", "k1"), ("arm", "grasp", "k2"), ("speech", "say", "k3")):
+            svc.on_call(FunctionCall(module, function, call_id=call_id).encode())
+        svc.on_result(commBM.writeMsgFromRos([Bool(True), Point(x=1.0)], ["success", "final_pos"]),
+                      publisher="/arm_driver")                  # answers k2 (arm.grasp), not k1 (arm.home)
+        svc.on_result(commBM.writeMsgFromRos([Bool(False)], ["success"]), publisher="/stranger")
+        svc.on_cancel(json.dumps({"call_id": "k1", "basic_mod": "arm", "function": "home"}))
+        svc.on_result(commBM.writeMsgFromRos([Point(x=2.0)], ["final_pos"]), publisher="/arm_driver")
+        ans = ask(svc, answers, var_names=["arm/grasp/success", "arm/grasp/final_pos", "arm/home/final_pos"])
+        assert [n for n in ans.names] == ["arm/grasp/success", "arm/grasp/final_pos", "arm/home/final_pos"]
+        assert ans.sources[0]["call_id"] == "k2" and ans.msgs[1].x == 1.0
+        assert ans.sources[2]["call_id"] is None and ans.msgs[2].x == 2.0   # k1 was cancelled: no call of its own
+        ans = ask(svc, answers, var_names=["success"])
+        assert ans.msgs[0].data is False and ans.sources[0]["basic_mod"] is None   # a node of no module
+    finally:
+        svc.stop()
+        store.close()

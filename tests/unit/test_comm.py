@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import os
 
 import pytest
 from geometry_msgs.msg import Point
@@ -21,10 +20,10 @@ from comm import (
 from comm.rostypes import resolve_type, suggest_type, to_message
 from modules.definition import load_definitions
 from modules.sim import SIM_DIR
-from tests.conftest import SHARED_REFERENCE
+from tests.conftest import REFERENCE
 
 ALL_DEFS = {}
-ALL_DEFS.update(load_definitions([SHARED_REFERENCE]) if os.path.isdir(SHARED_REFERENCE) else {})
+ALL_DEFS.update(load_definitions([REFERENCE]))
 ALL_DEFS.update(load_definitions([SIM_DIR]))
 ALL_TYPES = sorted({p.rostype for d in ALL_DEFS.values() for f in d.functions.values()
                     for p in f.inputs + f.outputs} | {p.rostype for d in ALL_DEFS.values()
@@ -181,7 +180,7 @@ def test_result_status_and_size_limit_are_checked():
     small = FunctionResult(["t"], [String("x" * 200)]).encode()
     with pytest.raises(ProtocolError, match="exceeds the limit of 100 bytes"):
         FunctionResult.decode(small, max_bytes=100)
-    with pytest.raises(ProtocolError, match="must be a positive integer"):
+    with pytest.raises(ProtocolError, match="must be an integer from 1"):
         BlackboardRequest.decode('{"var_names": ["a"], "history": 0}')
     with pytest.raises(ProtocolError, match="not UTF-8"):
         FunctionCall.decode(b"\xff\xfe")

@@ -13,7 +13,7 @@ from comm import FunctionResult, ProtocolError
 from coordinator.cli import main as bmtree
 from modules.definition import DefinitionError, load_definition, load_definitions
 from modules.sim import SIM_DIR
-from tests.conftest import DATA, SHARED_REFERENCE
+from tests.conftest import DATA, REFERENCE
 
 BAD = os.path.join(DATA, "definitions_bad")
 with open(os.path.join(BAD, "expected.json")) as _fh:
@@ -21,7 +21,7 @@ with open(os.path.join(BAD, "expected.json")) as _fh:
 
 
 def test_reference_definitions_load():
-    defs = load_definitions([SHARED_REFERENCE])
+    defs = load_definitions([REFERENCE])
     assert set(defs) == {"DEMO_BM", "PYTHON_BM", "module_pf"}
     assert [f for f in defs["PYTHON_BM"].functions] == ["graspObject", "putObject", "goSafePos"]
     assert set(defs["module_pf"].events) == {"foundPerson", "lostPerson"}
@@ -47,8 +47,8 @@ def test_broken_definition_gives_expected_error(name):
 def test_directory_reports_every_error_and_duplicate_modules(tmp_path):
     for name in ("01_float_type", "05_duplicate_function"):
         shutil.copy(os.path.join(BAD, name + ".json"), tmp_path)
-    shutil.copy(os.path.join(SHARED_REFERENCE, "PYTHON_BM.json"), tmp_path / "a.json")
-    shutil.copy(os.path.join(SHARED_REFERENCE, "PYTHON_BM.json"), tmp_path / "b.json")
+    shutil.copy(os.path.join(REFERENCE, "PYTHON_BM.json"), tmp_path / "a.json")
+    shutil.copy(os.path.join(REFERENCE, "PYTHON_BM.json"), tmp_path / "b.json")
     with pytest.raises(DefinitionError) as info:
         load_definitions([str(tmp_path)])
     text = str(info.value)
@@ -57,7 +57,7 @@ def test_directory_reports_every_error_and_duplicate_modules(tmp_path):
 
 
 def test_bmtree_modules_lists_and_reports(capsys):
-    assert bmtree(["modules", SHARED_REFERENCE]) == 0
+    assert bmtree(["modules", REFERENCE]) == 0
     out = capsys.readouterr().out
     assert "graspObject(target_pos: geometry_msgs/Point, obj_radius: std_msgs/Float64)" in out
     assert "event lostPerson()" in out
@@ -81,7 +81,7 @@ def test_build_call_accepts_yaml_friendly_values(sim_defs):
 
 
 def test_result_validation_against_definition():
-    fn = load_definitions([SHARED_REFERENCE])["PYTHON_BM"].function("putObject")
+    fn = load_definitions([REFERENCE])["PYTHON_BM"].function("putObject")
     fn.check_result(FunctionResult(["success", "final_pos"], [Bool(True), Point()]))
     with pytest.raises(ProtocolError, match="output 'final_pos' is std_msgs/Bool, the definition says"):
         fn.check_result(FunctionResult(["success", "final_pos"], [Bool(True), Bool(False)]))

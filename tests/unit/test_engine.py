@@ -212,7 +212,8 @@ def _ctx_with_tree(tmp_path, sim_defs, body):
 
 
 def test_legacy_result_correlation(tmp_path, sim_defs):
-    """Results without call_id: by module+function, else by output names, else the oldest call."""
+    """Results without call_id: within the module that published them (named, or mapped from the
+    publishing node by the transport), by function when named, else by output names; else dropped."""
     ctx, root, _ = _ctx_with_tree(tmp_path, sim_defs, """
 root:
   parallel:
@@ -227,13 +228,20 @@ root:
     root.tick_once()
     say, where, find = ctx.calls
     ctx.dispatch(FunctionResult(["room", "position"], [String("hall"), Point()]))
-    assert where.result is not None and say.result is None            # by output names
+    assert where.result is not None and say.result is None            # by output names (no publisher known)
     ctx.dispatch(FunctionResult(["success"], [Bool(True)], basic_mod="speech", function="say"))
     assert say.result is not None                                       # by module and function
     ctx.dispatch(FunctionResult(["something"], [String("x")]))
-    assert find.result is not None                                      # the oldest pending call
+    assert find.result is None and len(ctx.dropped) == 1                # no oldest-call fallback
+    vision_outputs = (["success", "position", "room"], [Bool(True), Point(), String("kitchen")])
+    ctx.dispatch(FunctionResult(*vision_outputs, basic_mod="speech", publisher="/bm_speech"))
+    assert find.result is None and len(ctx.dropped) == 2                # never another module's call
+    ctx.dispatch(FunctionResult(*vision_outputs, publisher="/some_other_node"))
+    assert find.result is None and len(ctx.dropped) == 3                # a node of no module of this run
+    ctx.dispatch(FunctionResult(*vision_outputs, basic_mod="vision", publisher="/vision"))
+    assert find.result is not None                                      # its own module's call
     ctx.dispatch(FunctionResult(["success"], [Bool(True)], call_id="not-pending"))
-    assert len(ctx.dropped) == 1                                        # a late answer matches nothing
+    assert len(ctx.dropped) == 4                                        # a late answer matches nothing
 
 
 def test_late_result_of_timed_out_call_is_not_taken(tmp_path, sim_defs):
@@ -306,6 +314,11 @@ def test_live_definition_mismatch_is_described(sim_defs):
     assert "go_to inputs differ: here place:std_msgs/String, running place:geometry_msgs/Point" in diff
     assert "function 'approach' is not served by the running module" in diff
     assert diff_definitions(sim_defs["navigation"], sim_defs["navigation"]) == []
+    live = sim_defs["navigation"].to_dict()
+    where = next(f for f in live["Functions"] if f["Name"] == "where_am_i")
+    where["Concurrent"] = not sim_defs["navigation"].function("where_am_i").concurrent
+    assert any("'where_am_i' is" in d and "concurrent in the running module" in d
+               for d in diff_definitions(sim_defs["navigation"], parse_definition(live)))
 
 
 def test_display_on_a_terminal_and_as_lines(tmp_path):

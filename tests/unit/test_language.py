@@ -94,12 +94,12 @@ def test_every_node_kind_and_option(tmp_path, sim_defs):
     assert kinds == {"sequence", "parallel", "call", "wait_event", "selector", "inverter", "check", "force_failure",
                      "wait", "retry", "repeat", "timeout", "force_success", "recall", "set", "include"}
     root = tree.root
-    assert root.name == "all" and root.opts["memory"] is False
+    assert root.name == "all" and root.spec.memory is False
     par = root.children[1]
-    assert par.opts == {"policy": "one", "synchronise": False}
+    assert (par.spec.policy, par.spec.synchronise) == ("one", False)
     say = par.children[0]
-    assert say.opts["timeout"] == 2.5 and say.opts["check_success"] is False and say.name == "speech.say"
-    assert root.children[0].opts["values"]["greeting"] == "$5 off"  # a leading $$ escapes
+    assert say.spec.timeout == 2.5 and say.spec.check_success is False and say.name == "speech.say"
+    assert root.children[0].spec["greeting"] == "$5 off"  # a leading $$ escapes
     assert tree.inputs["who"] == "Ana" and tree.required_inputs == {"count"}
     assert used_modules(tree) == ({"speech", "navigation", "vision"}, True)
     assert root.children[-2].name == "kitchen search"
@@ -147,7 +147,7 @@ def test_expressions_on_ros_messages_and_errors():
         Expr("p.w").evaluate({"p": Point()}.__getitem__)
     with pytest.raises(ExprError, match="cannot compare"):
         Expr("a < 'x'").evaluate({"a": 1}.__getitem__)
-    for bad, where in (("__import__('os')", 10), ("a ==", 4), ("a b", 2), ("(a", 2)):
+    for bad, where in (("__import__('os')", 0), ("a.__class__(", 11), ("a ==", 4), ("a b", 2), ("(a", 2)):
         with pytest.raises(ExprError) as info:
             Expr(bad)
         assert info.value.offset == where

@@ -5,11 +5,12 @@ import os
 
 import pytest
 
-from coordinator.testing import fail
+from coordinator.testing import fail, succeed
 from tests.conftest import TREES
 
 FIND_APPLE = os.path.join(TREES, "find_apple.yaml")
 INVITE = os.path.join(TREES, "invite_to_dining_room.yaml")
+GREET = os.path.join(TREES, "greet_guest.yaml")
 ROOMS = ["living_room", "kitchen", "dining_room", "bedroom"]
 
 
@@ -72,11 +73,12 @@ def test_find_apple_when_navigation_fails_twice_then_succeeds(bmtree_tree):
     assert run.succeeded, run.reason
     assert [c.status for c in run.calls("navigation.go_to")] == ["failed", "failed", "succeeded"]
     assert [c.error for c in run.calls("navigation.go_to")][:2] == ["path blocked"] * 2
-    assert run.statuses("go to the room (3 attempts)")[-1] == "SUCCESS"
+    assert run.statuses("go to the room (retrying)")[-1] == "SUCCESS"
 
 
 @pytest.mark.parametrize("answer,status,last_said", [
     ("yes, I am coming", "SUCCESS", "Here is the dining room. Enjoy your dinner!"),
+    ("YES!", "SUCCESS", "Here is the dining room. Enjoy your dinner!"),       # the switch is on lower(answer)
     ("no, thank you", "SUCCESS", "All right, maybe later."),
     (None, "FAILURE", "I did not hear an answer. I will come back later."),
 ])
@@ -92,7 +94,7 @@ def test_invite_to_dining_room(bmtree_tree, answer, status, last_said):
     assert run.said()[-1] == last_said
     assert run.calls("navigation.approach")[0].inputs["target"]["x"] == 2.3
     led = [c.inputs["place"] for c in run.calls("navigation.go_to")]
-    assert (led[-1] == "dining_room") == (answer is not None and answer.startswith("yes"))
+    assert (led[-1] == "dining_room") == (answer is not None and answer.lower().startswith("yes"))
 
 
 def test_invite_when_listening_hangs(bmtree_tree):
@@ -102,3 +104,23 @@ def test_invite_when_listening_hangs(bmtree_tree):
     run = t.run()
     assert run.failed and run.calls("speech.listen")[0].status == "timeout"
     assert run.said()[-1] == "I did not hear an answer. I will come back later."
+
+
+def test_greet_guest_looks_while_nobody_is_seen(bmtree_tree):
+    t = bmtree_tree(GREET)
+    t.mocks["vision.find_person"].script(succeed(success=False, person=""),
+                                         succeed(success=False, person=""),
+                                         succeed(success=True, person="Ana"))
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert len(run.calls("vision.find_person")) == 3
+    assert run.said() == ["Welcome, Ana! Dinner is served in the dining room."]
+    assert run.duration == pytest.approx(1.0, abs=0.05)  # two pauses of 0.5 s on simulated time
+
+
+def test_greet_guest_gives_up_after_its_maximum(bmtree_tree):
+    t = bmtree_tree(GREET, inputs={"looks": 3})
+    t.mocks["vision.find_person"].succeed(success=False, person="")
+    run = t.run()
+    assert run.failed and len(run.calls("vision.find_person")) == 3
+    assert "maximum of 3 runs" in run.reason and run.said() == []

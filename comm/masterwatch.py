@@ -1,0 +1,137 @@
+"""Survive a restarted ROS master: notice it and register this node again.
+
+rospy registers a node's topics once, when they are created; a master that is killed and
+started again knows nothing, so new nodes never find the old ones (``bmtree modules --live``
+is empty, ``bmtree run`` finds no module). Connections between running nodes survive a
+master restart (they are plain TCP), so re-registering is enough to be whole again.
+
+:class:`MasterWatch` asks the master for its pid every ``period`` seconds. When the master
+answers again after being unreachable, or with another pid, it registers every publisher,
+subscriber and service of this process again through the master API with the node's own
+XML-RPC URI (what ``rospy.impl.registration.RegManager`` does at start-up), tells the
+node's subscribers the current publishers (its own ``publisherUpdate``), sets the
+parameters the node asked to keep, and calls ``on_restart`` hooks.
+
+What ROS cannot get back: parameters set by others (launch files, ``rosparam``, private
+``_name:=value`` arguments of nodes that do not use this watch), nodes that do not
+re-register (plain rospy/roscpp nodes), and anything the master held only in memory
+(parameter subscriptions). Messages published while a subscriber was not connected are
+not replayed.
+"""
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import xmlrpc.client
+from typing import Any, Callable, Dict, List, Optional
+
+from comm.rpc import proxy
+
+__all__ = ["MasterWatch", "watch_master"]
+
+log = logging.getLogger("bmtree.master")
+
+
+class MasterWatch:
+    """One per process, after ``rospy.init_node``; :func:`watch_master` makes and starts it."""
+
+    def __init__(self, period: float = 0.5, timeout: float = 2.0):
+        self.period = period
+        self.timeout = timeout
+        import rosgraph
+
+        # the node's own master (rosgraph reads __master:= remappings and ROS_MASTER_URI)
+        self.master_uri = rosgraph.get_master_uri()
+        self.params: Dict[str, Callable[[], Any]] = {}
+        self.on_restart: List[Callable[[], None]] = []
+        self.restarts = 0
+        self._pid: Optional[int] = None
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.registered = threading.Event()  # set after each successful re-registration
+
+    def keep_param(self, key: str, value: Callable[[], Any]) -> None:
+        """Set ``key`` again (to ``value()``; skipped when it returns None) after a master restart."""
+        self.params[key] = value
+
+    def start(self) -> None:
+        import rospy
+
+        if self._thread is None:
+            self._pid = self._master_pid()
+            self._thread = threading.Thread(target=self._loop, name="bmtree-masterwatch", daemon=True)
+            self._thread.start()
+            rospy.on_shutdown(self._stop.set)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _master(self) -> Any:
+        return proxy(self.master_uri, self.timeout)
+
+    def _master_pid(self) -> Optional[int]:
+        try:
+            code, _, pid = self._master().getPid("/bmtree_masterwatch")
+            return pid if code == 1 else None
+        except (OSError, socket.timeout, xmlrpc.client.Error):
+            return None
+
+    def _loop(self) -> None:
+        down = False
+        while not self._stop.wait(self.period):
+            pid = self._master_pid()
+            if pid is None:
+                if not down:
+                    log.warning("the ROS master at %s does not answer; waiting for it to come back", self.master_uri)
+                down = True
+                continue
+            if down or pid != self._pid:
+                try:
+                    self.register_again()
+                except Exception as exc:  # the master went away again: retry next period
+                    log.warning("could not register again with the ROS master: %s", exc)
+                    down = True
+                    continue
+                self._pid = pid
+                self.restarts += 1
+            down = False
+
+    def register_again(self) -> None:
+        """Register every topic, service and kept parameter of this node with the master."""
+        import rospy
+        from rospy.impl.registration import get_service_manager, get_topic_manager
+
+        caller_id = rospy.get_caller_id()
+        api = rospy.core.get_node_uri()
+        master = self._master()
+        tm = get_topic_manager()
+        for topic, type_ in tm.get_publications():
+            master.registerPublisher(caller_id, topic, type_, api)
+        node = proxy(api, self.timeout)
+        for topic, type_ in tm.get_subscriptions():
+            code, _, publishers = master.registerSubscriber(caller_id, topic, type_, api)
+            if code == 1:
+                node.publisherUpdate("/master", topic, publishers)
+        for service, uri in get_service_manager().get_services():
+            master.registerService(caller_id, service, uri, api)
+        for key, value in list(self.params.items()):
+            v = value()
+            if v is not None:
+                master.setParam(caller_id, key, v)
+        for hook in list(self.on_restart):
+            hook()
+        rospy.logwarn("registered again with the restarted ROS master at %s", self.master_uri)
+        self.registered.set()
+
+
+_WATCH: Optional[MasterWatch] = None
+
+
+def watch_master(period: float = 0.5) -> MasterWatch:
+    """The process's MasterWatch, started (once per process, after ``rospy.init_node``)."""
+    global _WATCH
+    if _WATCH is None:
+        _WATCH = MasterWatch(period)
+        _WATCH.start()
+    return _WATCH

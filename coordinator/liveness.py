@@ -1,0 +1,191 @@
+"""Liveness: a module (or the Blackboard) that dies mid-call is noticed in about a second.
+
+ROS 1 tells a subscriber nothing when a publisher's process dies, so a call to a killed
+module would wait out its whole timeout. The watchdog asks the node of every module that
+has calls in flight (and the Blackboard while requests are open) for its pid over the
+node's own XML-RPC API, every ``period`` seconds. A node whose port refuses connections,
+that is no longer registered, or that answers with another pid than when the watch on it
+began (it was restarted and forgot the call) is *lost*: its open calls are reported at once as :class:`ModuleLost`
+(requests as :class:`BlackboardLost`). A node that is merely slow to answer (busy, or
+stopped with SIGSTOP) is not lost: the call's own timeout covers it.
+"""
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import xmlrpc.client
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
+
+from comm.rpc import proxy
+
+__all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "DEFAULT_PERIOD"]
+
+log = logging.getLogger("bmtree.coordinator")
+
+DEFAULT_PERIOD = 0.25
+BLACKBOARD = "\0blackboard"  # the watchdog's key for the Blackboard node
+
+
+@dataclass
+class ModuleLost:
+    """The node serving ``module`` died or restarted while ``call_ids`` were in flight."""
+
+    module: str
+    node: str
+    reason: str
+    call_ids: List[str] = field(default_factory=list)
+
+
+@dataclass
+class BlackboardLost:
+    """The Blackboard node died or restarted while ``request_ids`` were open."""
+
+    node: str
+    reason: str
+    request_ids: List[str] = field(default_factory=list)
+
+
+def _pid(uri: str, timeout: float) -> Optional[int]:
+    """The pid a node answers with; None if it does not answer in time (alive but busy).
+
+    Raises:
+        OSError: the node's port refuses connections (its process is gone).
+    """
+    try:
+        code, _, pid = proxy(uri, timeout).getPid("/bmtree_liveness")
+    except (socket.timeout, TimeoutError):
+        return None
+    except xmlrpc.client.Error as exc:
+        raise OSError("the node answered badly: %s" % exc)
+    return pid if code == 1 else None
+
+
+class Watchdog:
+    """Watches the nodes that owe answers; ``deliver`` gets ModuleLost/BlackboardLost items.
+
+    Args:
+        resolve: maps a module name (or :data:`BLACKBOARD`) to its node name, or None.
+        lookup: maps a node name to its XML-RPC URI (raises or returns None if unregistered).
+        period: seconds between checks (the time to notice a death is about one period).
+    """
+
+    def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
+                 lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
+                 ping_timeout: float = 0.5):
+        self.deliver = deliver
+        self.resolve = resolve
+        self.lookup = lookup
+        self.period = period
+        self.ping_timeout = ping_timeout
+        self._lock = threading.Lock()
+        self._calls: Dict[str, str] = {}           # call_id -> module
+        self._requests: Set[str] = set()
+        self._known: Dict[str, Tuple[str, str, int]] = {}  # module -> (node, uri, pid)
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+
+    def start(self) -> None:
+        if self._thread is None and self.period > 0:
+            self._thread = threading.Thread(target=self._loop, name="bmtree-liveness", daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    # bookkeeping, from any thread ----------------------------------------------------
+    def call_sent(self, call_id: str, module: str) -> None:
+        with self._lock:
+            self._calls[call_id] = module
+
+    def call_done(self, call_id: Optional[str]) -> None:
+        if call_id is not None:
+            with self._lock:
+                self._calls.pop(call_id, None)
+
+    def request_sent(self, request_id: str) -> None:
+        with self._lock:
+            self._requests.add(request_id)
+
+    def request_done(self, request_id: Optional[str]) -> None:
+        if request_id is not None:
+            with self._lock:
+                self._requests.discard(request_id)
+
+    # the watching thread ------------------------------------------------------------
+    def _loop(self) -> None:
+        while not self._stop.wait(self.period):
+            try:
+                self.check()
+            except Exception as exc:  # the master may be away; try again next period
+                log.debug("liveness check failed: %s", exc)
+
+    def check(self) -> None:
+        """One round: every module with calls in flight, and the Blackboard if asked."""
+        with self._lock:
+            busy = sorted(set(self._calls.values()))
+            if self._requests:
+                busy.append(BLACKBOARD)
+        # Forget the process of a node that owes nothing: restarted between two calls (a respawn),
+        # it must not be taken for one that forgot a call.
+        for key in set(self._known) - set(busy):
+            del self._known[key]
+        for key in busy:
+            reason = self._lost(key)
+            if reason is None:
+                continue
+            node = self._known.pop(key, ("?", "", 0))[0]
+            with self._lock:
+                if key == BLACKBOARD:
+                    ids = sorted(self._requests)
+                    self._requests.clear()
+                else:
+                    ids = [c for c, m in self._calls.items() if m == key]
+                    for c in ids:
+                        del self._calls[c]
+            if not ids:
+                continue
+            if key == BLACKBOARD:
+                log.warning("Blackboard node %s lost: %s", node, reason)
+                self.deliver(BlackboardLost(node=node, reason=reason, request_ids=ids))
+            else:
+                log.warning("module %s (node %s) lost: %s", key, node, reason)
+                self.deliver(ModuleLost(module=key, node=node, reason=reason, call_ids=ids))
+
+    def _lost(self, key: str) -> Optional[str]:
+        """Why the node of ``key`` is lost, or None while it lives (or cannot be told)."""
+        known = self._known.get(key)
+        if known is None:
+            node = self.resolve(key)
+            if node is None:
+                return None  # not found (yet): the call's timeout stays the bound
+            try:
+                uri = self.lookup(node)
+            except OSError:
+                return None
+            if not uri:
+                return "node %s is not registered with the master" % node
+            try:
+                pid = _pid(uri, self.ping_timeout)
+            except OSError:
+                return "node %s stopped (its process is gone)" % node
+            if pid is not None:
+                self._known[key] = (node, uri, pid)
+            return None
+        node, uri, pid = known
+        try:
+            now = _pid(uri, self.ping_timeout)
+        except OSError:
+            now = -1
+        if now is None or now == pid:
+            return None
+        try:
+            new_uri = self.lookup(node)
+        except OSError:
+            new_uri = None
+        if now == -1 and new_uri and new_uri != uri:
+            return "node %s was restarted (it cannot know the calls sent to its previous process)" % node
+        if now == -1:
+            return "node %s stopped (its process is gone)" % node
+        return "node %s was restarted (pid %d, was %d)" % (node, now, pid)

@@ -1,0 +1,238 @@
+"""What a node kind is: its options as data, and the hooks every generic walk calls.
+
+A kind (one object, in one family file of this package) says how its YAML parses into a
+typed spec, which tree keys it reads and writes, how it becomes a py_trees behaviour, its
+default name, and documents itself (the language reference's tables and the JSON Schema are
+generated from these objects).
+"""
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
+
+import py_trees
+
+from comm.errors import did_you_mean
+from coordinator.errors import Pos, TreeError
+from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
+from coordinator.treeast import TreeNode
+
+if TYPE_CHECKING:  # pragma: no cover
+    from coordinator.context import RunContext
+    from coordinator.language import Parser
+    from coordinator.yamlsrc import LMap
+    from modules.definition import FunctionDefinition
+
+__all__ = ["Flow", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "param_keys", "run_param"]
+
+NO_DEFAULT = object()
+
+BuildChild = Callable[[TreeNode], py_trees.behaviour.Behaviour]
+
+
+@dataclass(frozen=True)
+class ValueType:
+    """A type of option or main value: its check, its error text, its table text and its JSON Schema."""
+
+    name: str
+    doc: str
+    schema: Dict[str, Any]
+    ok: Optional[Callable[[Any], bool]] = None   # None: parsed by the kind itself
+    expect: str = ""
+
+
+def _num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+_NODE = {"$ref": "#/definitions/node"}
+_PARAM = {"type": "string", "pattern": r"^\$[^$]"}
+_KEY = {"type": "string", "pattern": r"^[^\W\d]\w*$"}
+TYPES: Dict[str, ValueType] = {t.name: t for t in (
+    ValueType("bool", "`true` or `false`", {"type": "boolean"}, lambda v: isinstance(v, bool)),
+    ValueType("count", "an integer ≥ 1", {"anyOf": [{"type": "integer", "minimum": 1}, _PARAM]},
+              lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
+    ValueType("seconds", "seconds (> 0)", {"anyOf": [{"type": "number", "exclusiveMinimum": 0}, _PARAM]},
+              lambda v: _num(v) and v > 0, "a positive number of seconds"),
+    ValueType("seconds0", "seconds (≥ 0)", {"anyOf": [{"type": "number", "minimum": 0}, _PARAM]},
+              lambda v: _num(v) and v >= 0, "a number of seconds >= 0"),
+    ValueType("policy", "`all` or `one`", {"enum": ["all", "one"]}),
+    ValueType("children", "list of children", {"type": "array", "minItems": 1, "items": _NODE}),
+    ValueType("node", "a node", _NODE),
+    ValueType("function", "`module.function`", {"type": "string", "pattern": r"^\w+\.\w+$"}),
+    ValueType("event", "`module.event`", {"type": "string", "pattern": r"^\w+\.\w+$"}),
+    ValueType("inputs", "input name → value", {"type": "object"}),
+    ValueType("outputs", "name → tree key", {"type": "object", "additionalProperties": _KEY}),
+    ValueType("recall", "tree key → Blackboard name (`name` or `module/function/name`)",
+              {"type": "object", "minProperties": 1,
+               "additionalProperties": {"type": "string", "pattern": r"^[^/\s]+(/[^/\s]+/[^/\s]+)?$"}}),
+    ValueType("values", "tree key → value", {"type": "object", "minProperties": 1}),
+    ValueType("list", "a list, `$key` or `$( … )`", {"anyOf": [{"type": "array"}, _PARAM]}),
+    ValueType("key", "a tree key", _KEY, lambda v: isinstance(v, str) and v.isidentifier(), "a tree key"),
+    ValueType("cases", "case value → node", {"type": "object", "minProperties": 1, "additionalProperties": _NODE}),
+    ValueType("match", "`equals` or `contains`", {"enum": ["equals", "contains"]}),
+    ValueType("value", "a value: `$key`, `$( … )`, text with `{…}`", {}),
+    ValueType("expr", "an expression", {"type": "string", "minLength": 1}),
+    ValueType("path", "a tree file (relative to this file)", {"type": "string", "minLength": 1}),
+)}
+
+
+PARAM_TYPES = ("count", "seconds", "seconds0")
+"""Types whose values may also be a ``$reference`` or a ``$( … )`` expression, checked when the node starts."""
+
+
+def param_keys(*values: Any) -> List[str]:
+    """The tree keys that parameters (counts, durations) read."""
+    return [r.key for v in values for r in refs_in(v)]
+
+
+def run_param(value: Any, lookup: Callable[[str], Any], type_name: str, label: str) -> Tuple[Any, str]:
+    """A parameter's value now, and '' — or None and why it cannot be used (the node then fails)."""
+    if not isinstance(value, (Ref, Computed)):
+        return value, ""
+    try:
+        v = unwrap(resolve(value, lookup))
+    except (KeyError, RefError) as exc:
+        return None, "%s %r: %s" % (label, value, exc.args[0] if exc.args else exc)
+    if type_name == "count" and isinstance(v, float) and v.is_integer():
+        v = int(v)
+    t = TYPES[type_name]
+    if t.ok is not None and not t.ok(v):
+        return None, "%s %s is %r, not %s" % (label, value, v, t.expect)
+    return v, ""
+
+
+@dataclass(frozen=True)
+class Option:
+    """An option key beside the kind key."""
+
+    name: str
+    type: str
+    doc: str = ""
+    default: Any = NO_DEFAULT
+    required: bool = False
+    shown: str = ""          # the default as the tables say it, when it is not a plain value
+
+    @property
+    def default_text(self) -> str:
+        if self.shown or self.default is NO_DEFAULT:
+            return self.shown
+        if isinstance(self.default, bool):
+            return "`%s`" % str(self.default).lower()
+        return "`%s`" % self.default
+
+
+class Flow:
+    """The data-flow walk (``coordinator.dataflow``): kinds call back into it for their children."""
+
+    def __init__(self, errors: List[TreeError]):
+        self.errors = errors
+
+    def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
+        for k in sorted(set(keys)):
+            if k not in avail:
+                self.errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
+                                                       "node (%s)" % (k, did_you_mean(k, avail)[2:-1]
+                                                                      or "write it earlier or declare it under "
+                                                                         "'inputs:'")))
+
+    def of(self, node: TreeNode, avail: FrozenSet[str]) -> FrozenSet[str]:
+        """Keys surely written when ``node`` succeeds."""
+        return node.nodekind.flow(node, avail, self)
+
+
+class NodeKind(abc.ABC):
+    """One kind of node. Subclasses set the class attributes, ``parse`` and ``build``, and override
+    the other hooks they need."""
+
+    name = ""
+    family = ""                        # 'composite' | 'decorator' | 'leaf'
+    value: Tuple[str, str] = ("", "")  # (type of the main value, what it is, for the tables)
+    label = ""                         # the main value's name in error messages ('duration of wait')
+    options: Tuple[Option, ...] = ()
+    summary = ""                       # what the node does, for the tables
+    uses_blackboard_node = False
+
+    # parsing -----------------------------------------------------------------------------
+    @abc.abstractmethod
+    def parse(self, p: Parser, node: TreeNode, raw: LMap, value: Any, at: Pos) -> Any:
+        """The typed spec of ``node``; problems go to ``p.err`` (parsing goes on)."""
+
+    def option(self, name: str) -> Option:
+        return next(o for o in self.options if o.name == name)
+
+    def default_name(self, node: TreeNode) -> str:
+        return self.name
+
+    # data flow and checks ----------------------------------------------------------------
+    def reads(self, node: TreeNode) -> Iterable[str]:
+        return ()
+
+    def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
+        """Tree keys written on SUCCESS, each with its ROS type when known (for the type checks)."""
+        return {}
+
+    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+        f.need(node, self.reads(node), avail)
+        return frozenset(self.writes(node))
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:  # noqa: B027
+        """Report references whose known type cannot fit where they are used (most kinds pass none)."""
+
+    def warnings(self, node: TreeNode) -> List[TreeError]:
+        return []
+
+    # structure ---------------------------------------------------------------------------
+    def expand(self, node: TreeNode) -> List[TreeNode]:
+        """The nodes under this one (an include's subtree root too)."""
+        return node.children
+
+    def modules(self, node: TreeNode) -> Iterable[str]:
+        return ()
+
+    def functions(self, node: TreeNode) -> Iterable[FunctionDefinition]:
+        """Module functions this node itself calls."""
+        return ()
+
+    # building ----------------------------------------------------------------------------
+    @abc.abstractmethod
+    def build(self, node: TreeNode, ctx: RunContext, child: BuildChild) -> py_trees.behaviour.Behaviour:
+        """The behaviour of a validated node; ``child(n)`` builds a node below it."""
+
+    # documentation -----------------------------------------------------------------------
+    def value_schema(self) -> Dict[str, Any]:
+        return dict(TYPES[self.value[0]].schema)
+
+    def schema(self) -> Dict[str, Any]:
+        """JSON Schema of one node of this kind."""
+        props: Dict[str, Any] = {self.name: self.value_schema(), "name": {"type": "string"}}
+        for o in self.options:
+            s = dict(TYPES[o.type].schema)
+            if o.doc:
+                s["description"] = o.doc
+            props[o.name] = s
+        props[self.name]["description"] = "%s: %s" % (self.value[1], self.summary)
+        required = [self.name] + [o.name for o in self.options if o.required]
+        return {"type": "object", "properties": props, "required": required, "additionalProperties": False}
+
+    def options_text(self) -> str:
+        """The options cell of the reference table."""
+        parts = []
+        for o in self.options:
+            bits = []
+            if o.required:
+                bits.append("required")
+            if o.default_text:
+                bits.append("default %s" % o.default_text)
+            head = "`%s`%s" % (o.name, " (%s)" % ", ".join(bits) if bits else "")
+            parts.append("%s: %s" % (head, o.doc) if o.doc else head)
+        return "; ".join(parts)
+
+
+def check_choice(p: Parser, raw: LMap, key: str, choices: Tuple[str, ...], default: str) -> str:
+    v = raw.get(key, default)
+    if v not in choices:
+        p.err(raw.val_pos[key], "%s must be %s%s" % (key, " or ".join("%r" % c for c in choices),
+                                                      did_you_mean(v, choices)))
+    return v

@@ -1,0 +1,205 @@
+"""``call``: call a module function, its inputs checked and converted once, when the tree loads."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, Iterable, List, Optional
+
+import py_trees
+from py_trees.common import Status
+
+from comm.errors import ProtocolError, did_you_mean
+from comm.messages import FunctionCall, new_id
+from comm.rostypes import resolve_type
+from coordinator.context import CallRecord, RecordStatus
+from coordinator.errors import Pos, TreeError
+from coordinator.nodes.base import NodeKind, Option, param_keys, run_param
+from coordinator.nodes.leafbase import Leaf
+from coordinator.refs import RefError, refs_in, resolve, unwrap
+from coordinator.treeast import TreeNode
+from coordinator.values import value_type_errors
+from modules.definition import FunctionDefinition
+
+__all__ = ["Call", "CallSpec", "KINDS"]
+
+
+@dataclass
+class CallSpec:
+    target: Any
+    function: Optional[FunctionDefinition] = None
+    inputs: Dict[str, Any] = field(default_factory=dict)        # input name -> literal (with Refs)
+    static: Dict[str, Any] = field(default_factory=dict)        # input name -> message, for inputs without Refs
+    outputs: Dict[str, str] = field(default_factory=dict)       # output name -> tree key
+    timeout: Optional[float] = None
+    check_success: bool = True
+    input_pos: Dict[str, Pos] = field(default_factory=dict)
+
+
+class Call(Leaf):
+    """Call ``module.function``; SUCCESS when it succeeds (and ``success`` is not false)."""
+
+    def initialise(self) -> None:
+        self.reason = ""
+        self.feedback_message = ""
+        self.record: Optional[CallRecord] = None
+        spec: CallSpec = self.node.spec
+        self.timeout, self.reason = run_param(spec.timeout, self.ctx.lookup, "seconds", "timeout of call")
+        if self.reason:
+            return
+        self.timeout = self.timeout or self.ctx.default_timeout
+        fn = spec.function
+        assert fn is not None
+        try:
+            msgs = [spec.static[p.name] if p.name in spec.static else p.convert(resolve(spec.inputs[p.name],
+                                                                                        self.ctx.lookup))
+                    for p in fn.inputs]
+        except (KeyError, RefError, ProtocolError) as exc:
+            self.reason = "cannot build the call: %s" % (exc.args[0] if exc.args else exc)
+            return
+        call = FunctionCall(fn.module, fn.name, msgs, [p.name for p in fn.inputs], new_id())
+        self.record = self.ctx.start_call(fn, call, owner=self)
+        self.deadline = self.ctx.clock.now() + self.timeout
+        self.ctx.wake_after(self.timeout)
+        self.feedback_message = "waiting for %s" % fn.qualified
+
+    def update(self) -> Status:
+        rec = self.record
+        if rec is None:
+            return self._fail(self.reason)
+        result = rec.result
+        if result is None:
+            if rec.ended is not None:
+                return self._fail(rec.error or rec.status)
+            if self.ctx.clock.now() >= self.deadline:
+                self.ctx.cancel(rec, RecordStatus.TIMEOUT, "no answer within %gs" % self.timeout)
+                return self._fail("%s: no answer within %gs" % (rec.target, self.timeout))
+            return Status.RUNNING
+        fn = rec.function
+        assert fn is not None
+        if result.status != "succeeded":
+            self.ctx.finish(rec, result.status, result.error)
+            return self._fail("%s %s: %s" % (rec.target, result.status, result.error))
+        try:
+            fn.check_result(result)
+        except ProtocolError as exc:
+            self.ctx.finish(rec, RecordStatus.FAILED, str(exc))
+            return self._fail("%s answered outputs that break its definition: %s" % (rec.target, exc))
+        values = result.values
+        rec.outputs = dict(values)
+        if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:
+            self.ctx.finish(rec, RecordStatus.FAILED, "answered success: false")
+            return self._fail("%s answered success: false" % rec.target)
+        self.ctx.finish(rec, RecordStatus.SUCCEEDED)
+        self.feedback_message = "succeeded in %.3fs" % (rec.duration or 0.0)
+        for out, key in self.node.spec.outputs.items():
+            self.ctx.write(key, values[out])
+        return Status.SUCCESS
+
+    def terminate(self, new_status: Status) -> None:
+        rec = getattr(self, "record", None)
+        if new_status == Status.INVALID and rec is not None and rec.ended is None:
+            self.ctx.cancel(rec, RecordStatus.HALTED, "halted by the tree")
+
+
+class _Unknown(Exception):
+    """A reference whose type is not known statically: nothing to check."""
+
+
+class CallKind(NodeKind):
+    name = "call"
+    family = "leaf"
+    value = ("function", "`module.function`")
+    summary = ("send the call; RUNNING until the answer, SUCCESS when it succeeds (and its `success` output, "
+               "if any, is not false)")
+    options = (Option("inputs", "inputs", "input name → value (YAML literal, `$reference`, `$( … )`, `{…}` text)"),
+               Option("outputs", "outputs", "output name → tree key"),
+               Option("timeout", "seconds", "seconds", shown="`--call-timeout` (30)"),
+               Option("check_success", "bool", "`false`: a `success: false` output is not a failure", default=True))
+
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> CallSpec:
+        spec = CallSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
+                        check_success=p.opt(node, raw, self.option("check_success")))
+        found = p.target(node, value, at, "function")
+        inputs_raw = p.mapping(raw, "inputs", at, "'inputs' must be a mapping of input name: value")
+        spec.inputs = {k: p.literal_at(inputs_raw, k, at) for k in inputs_raw}
+        spec.input_pos = {k: inputs_raw.val_pos[k] for k in inputs_raw}
+        if found is None:
+            return spec
+        mod, fname = found
+        fn = mod.functions.get(fname)
+        if fn is None:
+            p.err(at, "module %r has no function %r%s" % (mod.name, fname, did_you_mean(fname, mod.functions)
+                                                           or " (functions: %s)" % ", ".join(mod.functions)))
+            return spec
+        spec.function = fn
+        params = {q.name: q for q in fn.inputs}
+        for k in inputs_raw:
+            if k not in params:
+                p.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, params)))
+        for q in fn.inputs:
+            if q.name not in inputs_raw:
+                p.err(raw.key_pos.get("inputs", at), "%s needs input %r (%s)" % (value, q.name, q.rostype))
+            elif spec.inputs[q.name] is not None and not refs_in(spec.inputs[q.name]):
+                try:  # converted here, once: the call leaf sends these messages as they are
+                    spec.static[q.name] = q.convert(spec.inputs[q.name])
+                except ProtocolError as exc:
+                    p.err(inputs_raw.val_pos[q.name], "input %r: %s" % (q.name, exc))
+        spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
+        return spec
+
+    def default_name(self, node: TreeNode) -> str:
+        return str(node.spec.target)
+
+    def reads(self, node: TreeNode) -> Iterable[str]:
+        return [r.key for r in refs_in(node.spec.inputs)] + param_keys(node.spec.timeout)
+
+    def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
+        fn = node.spec.function
+        types = {q.name: q.rostype for q in fn.outputs} if fn is not None else {}
+        return {key: types.get(out) for out, key in node.spec.outputs.items()}
+
+    def modules(self, node: TreeNode) -> Iterable[str]:
+        t = node.spec.target
+        return [t.split(".")[0]] if isinstance(t, str) and "." in t else []
+
+    def functions(self, node: TreeNode) -> Iterable[FunctionDefinition]:
+        return [node.spec.function] if node.spec.function is not None else []
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        fn = node.spec.function
+        if fn is None:
+            return
+        for q in fn.inputs:
+            value = node.spec.inputs.get(q.name)
+            at = node.spec.input_pos.get(q.name, node.pos)
+            for off, msg in value_type_errors(value, types):
+                errors.append(TreeError(Pos(at.file, at.line, at.column + off), "input %r: %s" % (q.name, msg)))
+            refs = refs_in(value)
+            if not refs:
+                continue
+            try:
+                sample = resolve(value, lambda key: _sample(types, key))
+            except (_Unknown, RefError):
+                continue
+            try:
+                q.convert(sample)
+            except ProtocolError as exc:
+                held = ", ".join("%s (%s holds %s)" % (r, r.key, next(iter(types[r.key]))) for r in refs)
+                errors.append(TreeError(node.spec.input_pos.get(q.name, node.pos), "input %r (%s) cannot take %s: %s"
+                                        % (q.name, q.rostype, held, exc)))
+
+    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
+        return Call(node, ctx)
+
+
+def _sample(types: Dict[str, set], key: str) -> Any:
+    """A default message of the one type ``key`` is known to hold."""
+    known = types.get(key)
+    if not known or len(known) != 1 or None in known:
+        raise _Unknown(key)
+    cls = resolve_type(next(iter(known)))
+    if cls is None:
+        raise _Unknown(key)
+    return cls()
+
+
+KINDS = (CallKind(),)

@@ -1,0 +1,216 @@
+"""Decorators: ``retry``, ``timeout`` (on the run's clock), ``inverter``, ``force_*`` (py_trees'); loops are in ``loops``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional
+
+import py_trees
+from py_trees.common import Status
+
+from coordinator.errors import TreeError
+from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
+from coordinator.treeast import TreeNode
+from coordinator.values import at_value_errors
+
+__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "Timeout", "TimesSpec", "SecondsSpec"]
+
+
+@dataclass(frozen=True)
+class TimesSpec:
+    times: Optional[int]
+
+
+@dataclass(frozen=True)
+class SecondsSpec:
+    seconds: Optional[float]
+
+
+class Guarded(py_trees.decorators.Decorator):
+    """A decorator that can end without ticking its child: when a parameter is bad when it starts
+    (FAILURE with the reason) or its loop has nothing to run (``finish_early``)."""
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, ctx: Any):
+        super().__init__(name=name, child=child)
+        self.ctx = ctx
+        self.early: Optional[Status] = None
+
+    def finish_early(self, status: Status, reason: str = "") -> None:
+        self.early = status
+        self.feedback_message = reason
+
+    def param(self, value: Any, type_name: str, label: str) -> Any:
+        """A count or duration now (None after ``finish_early(FAILURE, why)`` if it cannot be used)."""
+        v, why = run_param(value, self.ctx.lookup, type_name, label)
+        if why:
+            self.finish_early(Status.FAILURE, why)
+        return v
+
+    def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        if self.status != Status.RUNNING:
+            self.early = None
+            self.feedback_message = ""
+            self.initialise()
+        if self.early is None:
+            yield from self.decorated.tick()
+        new_status = self.early if self.early is not None else self.update()
+        if new_status != Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        yield self
+
+    def rerun(self, message: str) -> Status:
+        """Run the child again from the start, at once (not at the next period)."""
+        self.feedback_message = message
+        self.decorated.stop(Status.INVALID)
+        self.ctx.wake_after(0.0)
+        return Status.RUNNING
+
+
+class Timeout(Guarded):
+    """FAILURE (and the child halted) when the child runs longer than ``duration`` on the run's clock."""
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, duration: Any, ctx: Any):
+        super().__init__(name, child, ctx)
+        self.duration_param = duration
+        self.duration = 0.0
+
+    def initialise(self) -> None:
+        self.duration = self.param(self.duration_param, "seconds", "duration of timeout")
+        if self.duration is None:
+            return
+        self.deadline = self.ctx.clock.now() + self.duration
+        self.ctx.wake_after(self.duration)
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        if status == Status.RUNNING and self.ctx.clock.now() >= self.deadline:
+            self.feedback_message = "timed out after %gs" % self.duration
+            return Status.FAILURE
+        return status
+
+
+class Retry(Guarded):
+    """Re-run a failing child, at most ``times`` attempts in all."""
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: Any, ctx: Any):
+        super().__init__(name, child, ctx)
+        self.times_param = times
+
+    def initialise(self) -> None:
+        self.runs = 0
+        self.times = self.param(self.times_param, "count", "count of retry")
+
+    def update(self) -> Status:
+        if self.decorated.status == Status.FAILURE:
+            self.runs += 1
+            if self.runs < self.times:
+                return self.rerun("run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value))
+            self.feedback_message = "failed in run %d of %d" % (self.runs, self.times)  # not the last rerun's
+        return self.decorated.status
+
+
+CHILD = Option("child", "node", "the decorated node", required=True)
+
+
+class Counted(NodeKind):
+    """A decorator whose main value is a number and whose child is the ``child`` option."""
+
+    family = "decorator"
+    options = (CHILD,)
+    behaviour: Any = None
+
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
+        spec = self.make_spec(p.typed(node, self.label, value, at, self.value[0]))
+        if "child" in raw:
+            p.child(node, raw["child"], raw.val_pos["child"])
+        return spec
+
+    def param(self, node: TreeNode) -> Any:
+        return node.spec.times
+
+    def make_spec(self, v: Any) -> Any:
+        return TimesSpec(v)
+
+    def default_name(self, node: TreeNode) -> str:
+        return "%s x%s" % (self.name, node.spec.times)
+
+    def reads(self, node: TreeNode) -> Iterable[str]:
+        return param_keys(self.param(node))
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        at_value_errors(self.param(node), node.value_pos or node.pos, types, errors)
+
+    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+        f.need(node, self.reads(node), avail)
+        return f.of(node.children[0], avail) if node.children else frozenset()
+
+    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
+        return self.behaviour(node.name, child(node.children[0]), node.spec.times, ctx)
+
+
+class RetryKind(Counted):
+    name = "retry"
+    value = ("count", "attempts in all (≥ 1)")
+    label = "count"
+    summary = "re-run the child while it fails"
+    behaviour = Retry
+
+
+class TimeoutKind(Counted):
+    name = "timeout"
+    value = ("seconds", "seconds (> 0)")
+    label = "duration"
+    summary = "FAILURE, and the child halted (its calls cancelled), after N seconds"
+
+    def make_spec(self, v: Any) -> Any:
+        return SecondsSpec(v)
+
+    def param(self, node: TreeNode) -> Any:
+        return node.spec.seconds
+
+    def default_name(self, node: TreeNode) -> str:
+        return "timeout %ss" % node.spec.seconds
+
+    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
+        return Timeout(node.name, child(node.children[0]), node.spec.seconds, ctx)
+
+
+class _Wrap(NodeKind):
+    """A decorator whose main value is its child; what the child writes is not guaranteed."""
+
+    family = "decorator"
+    value = ("node", "the child node")
+    behaviour: Any = None
+
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
+        p.child(node, value, at)
+        return None
+
+    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+        for c in node.children:
+            f.of(c, avail)
+        return frozenset()
+
+    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
+        return self.behaviour(node.name, child(node.children[0]))
+
+
+class Inverter(_Wrap):
+    name = "inverter"
+    summary = "SUCCESS ↔ FAILURE"
+    behaviour = py_trees.decorators.Inverter
+
+
+class ForceSuccess(_Wrap):
+    name = "force_success"
+    summary = "FAILURE → SUCCESS"
+    behaviour = py_trees.decorators.FailureIsSuccess
+
+
+class ForceFailure(_Wrap):
+    name = "force_failure"
+    summary = "SUCCESS → FAILURE"
+    behaviour = py_trees.decorators.SuccessIsFailure
+
+
+KINDS = (RetryKind(), TimeoutKind(), Inverter(), ForceSuccess(), ForceFailure())

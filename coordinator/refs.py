@@ -1,0 +1,164 @@
+"""``$references`` to tree-blackboard keys: one grammar, one parser, one resolver.
+
+    ref := '$' key ('.' field | '[' index ']')*
+
+Call inputs, ``set`` values and include arguments hold references inside YAML literals
+(``target: {x: $pos.x, y: 0.0}``, see ``coordinator.values``); expressions hold them without the ``$``.
+Both are parsed by :func:`scan_ref` when the tree is loaded and resolved by
+:meth:`Ref.resolve` when the node runs.
+"""
+from __future__ import annotations
+
+import abc
+import re
+from dataclasses import dataclass
+from typing import Any, Callable, List, Tuple
+
+import genpy
+
+from comm.errors import InvalidInput
+
+__all__ = ["Computed", "Ref", "RefError", "field_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap"]
+
+_NAME = re.compile(r"[^\W\d]\w*")
+_INDEX = re.compile(r"-?\d+")
+_SPACE = re.compile(r"\s*")
+
+
+class RefError(InvalidInput, ValueError):
+    """A malformed reference, or one that cannot be followed; ``offset`` is where, in its text."""
+
+    def __init__(self, message: str, offset: int = 0):
+        super().__init__(message)
+        self.offset = offset
+
+
+def unwrap(value: Any) -> Any:
+    """The plain value of a one-field message; other values unchanged."""
+    while isinstance(value, genpy.Message):
+        slots = value.__slots__
+        if len(slots) != 1:
+            break
+        value = getattr(value, slots[0])
+    return value
+
+
+def field_of(value: Any, step: Any, root: str) -> Any:
+    """``value.step`` or ``value[step]`` for a message, a mapping or a list; RefError names ``root``."""
+    try:
+        if isinstance(step, int):
+            return unwrap(value)[step]
+        if isinstance(value, dict):
+            return value[step]
+        if isinstance(value, genpy.Message) and step in value.__slots__:
+            return getattr(value, step)
+    except (IndexError, KeyError, TypeError):
+        pass
+    raise RefError("%s has no %s %r" % (root, "index" if isinstance(step, int) else "field", step))
+
+
+@dataclass(frozen=True)
+class Ref:
+    """``$key.field[0]``: read from the tree blackboard when the node runs."""
+
+    key: str
+    path: Tuple[Any, ...] = ()
+
+    def __str__(self) -> str:
+        return "$" + self.key + "".join("[%d]" % p if isinstance(p, int) else "." + p for p in self.path)
+
+    def resolve(self, lookup: Callable[[str], Any]) -> Any:
+        """The value now; ``lookup`` raises KeyError for an unset key, a missing field is a RefError."""
+        value = lookup(self.key)
+        for step in self.path:
+            value = field_of(value, step, self.key)
+        return value
+
+
+def scan_ref(text: str, start: int = 0, dollar: bool = True, spaces: bool = False) -> Tuple[Ref, int]:
+    """The reference that starts at ``text[start]`` and where it ends.
+
+    Args:
+        dollar: the leading ``$`` is required (YAML values) rather than optional (expressions).
+        spaces: blanks may surround ``.`` and brackets (expressions).
+    """
+    i = start
+    if text.startswith("$", i):
+        i += 1
+    elif dollar:
+        raise RefError("a reference starts with '$'", i)
+    m = _NAME.match(text, i)
+    if m is None:
+        raise RefError("expected a key name", i)
+    key, i = m.group(), m.end()
+    path: List[Any] = []
+    while True:
+        j = _SPACE.match(text, i).end() if spaces else i
+        if text.startswith(".", j):
+            j = _SPACE.match(text, j + 1).end() if spaces else j + 1
+            m = _NAME.match(text, j)
+            if m is None:
+                raise RefError("expected a field name after '.'", j)
+            path.append(m.group())
+            i = m.end()
+        elif text.startswith("[", j):
+            j = _SPACE.match(text, j + 1).end() if spaces else j + 1
+            m = _INDEX.match(text, j)
+            if m is None:
+                raise RefError("expected an integer index", j)
+            k = _SPACE.match(text, m.end()).end() if spaces else m.end()
+            if not text.startswith("]", k):
+                raise RefError("expected ']'", k)
+            path.append(int(m.group()))
+            i = k + 1
+        else:
+            return Ref(key, tuple(path)), i
+
+
+def parse_ref(text: str) -> Any:
+    """A Ref for ``$…`` text, None for other text (``$$`` escapes a dollar); RefError if malformed."""
+    if not text.startswith("$") or text.startswith("$$"):
+        return None
+    try:
+        ref, end = scan_ref(text)
+        if end != len(text):
+            raise RefError("unexpected %r" % text[end:], end)
+    except RefError as exc:
+        raise RefError("%r is not a valid reference (expected $key, $key.field or $key[0]): %s" % (text, exc),
+                       exc.offset)
+    return ref
+
+
+class Computed(abc.ABC):
+    """A value worked out from references when the node runs (``coordinator.values``: templates,
+    ``$( … )`` expressions); ``refs`` are the references it reads."""
+
+    refs: List[Ref] = []
+
+    @abc.abstractmethod
+    def resolve(self, lookup: Callable[[str], Any]) -> Any:
+        """The value now; ``lookup`` raises KeyError for an unset key."""
+
+
+def refs_in(value: Any) -> List[Ref]:
+    """Every Ref inside a literal."""
+    if isinstance(value, Ref):
+        return [value]
+    if isinstance(value, Computed):
+        return list(value.refs)
+    if isinstance(value, dict):
+        return [r for v in value.values() for r in refs_in(v)]
+    if isinstance(value, list):
+        return [r for v in value for r in refs_in(v)]
+    return []
+
+
+def resolve(value: Any, lookup: Callable[[str], Any]) -> Any:
+    """A literal with every Ref (and computed value) replaced by its value now."""
+    if isinstance(value, (Ref, Computed)):
+        return value.resolve(lookup)
+    if isinstance(value, dict):
+        return {k: resolve(v, lookup) for k, v in value.items()}
+    if isinstance(value, list):
+        return [resolve(v, lookup) for v in value]
+    return value

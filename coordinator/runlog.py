@@ -1,0 +1,285 @@
+"""Run logs: the run stream as JSON lines, one file per run, durable at every tick.
+
+Why JSON lines and not SQLite: a run is written once, in order, and read whole; an
+append-only text file costs one ``write`` per tick, and a crash (``kill -9``, power
+loss) can only cut the last line, which the reader drops. The records are the run
+stream's own, byte for byte, so a log and a ``rosbag`` of ``/bmtree/run/*`` say the
+same thing and ``jq``/``grep`` read both. Writing happens in a thread: the ticking
+thread only hands over the tick's lines; the thread writes them and ``fsync``s.
+"""
+from __future__ import annotations
+
+import json
+import os
+import queue
+import re
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+from comm.errors import InvalidInput
+from coordinator.runstream import Sink
+
+__all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
+           "new_log_path", "prune", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
+
+DEFAULT_KEEP = 50
+MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
+MAX_RECORD_BYTES = 64 << 20
+_SUFFIX = ".jsonl"
+_NAME = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.jsonl$")
+_SIM = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.sim$")
+
+
+class RunLogError(InvalidInput, ValueError):
+    """A file that is not a run log (``path:line: message``), or a bad recording option: exit code 2."""
+
+
+def default_runs_dir() -> str:
+    """``$ROS_HOME/bmtree/runs`` (``~/.ros`` when ROS_HOME is not set, as ROS does)."""
+    home = os.environ.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
+    return os.path.join(home, "bmtree", "runs")
+
+
+def new_log_path(directory: str, run_id: str, tree_name: str) -> str:
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", tree_name)[:60] or "tree"
+    return os.path.join(directory, "%s-%s%s" % (run_id, safe, _SUFFIX))
+
+
+def _logs_in(directory: str) -> List[str]:
+    try:
+        names = [n for n in os.listdir(directory) if _NAME.match(n)]
+    except OSError:
+        return []
+    return [os.path.join(directory, n) for n in sorted(names)]
+
+
+def prune(directory: str, keep: int) -> List[str]:
+    """Delete all but the newest ``keep`` run logs of ``directory``, and all but the newest ``keep``
+    ``.sim`` directories (a simulated robot's store and logs); the names sort by start time."""
+    import shutil
+
+    logs = _logs_in(directory)
+    gone = logs[:max(0, len(logs) - keep)]
+    for path in gone:
+        try:
+            os.remove(path)
+        except OSError:
+            pass
+    try:
+        sims = sorted(n for n in os.listdir(directory) if _SIM.match(n))
+    except OSError:
+        sims = []
+    for name in sims[:max(0, len(sims) - keep)]:
+        shutil.rmtree(os.path.join(directory, name), ignore_errors=True)
+        gone.append(os.path.join(directory, name))
+    return gone
+
+
+class RunFiles:
+    """Where one ``bmtree run`` keeps its log and, with ``--sim``, the simulated robot's files."""
+
+    def __init__(self, run_id: str, log_path: Optional[str], sim_dir: str):
+        self.run_id = run_id
+        self.log_path = log_path
+        self.sim_dir = sim_dir
+        self.writer: Optional[RunLogWriter] = None
+
+    def recorder(self, sinks: List[Sink], inputs: Dict[str, Any], max_duration: Optional[float],
+                 world: Optional[str]) -> Any:
+        """The run-stream observer writing to ``sinks`` and, unless ``--no-record``, the log."""
+        from coordinator.runstream import RunStream
+
+        meta: Dict[str, Any] = {"inputs": inputs, "max_duration": max_duration}
+        if world is not None or os.path.isdir(self.sim_dir):
+            meta["sim"] = {"world": os.path.abspath(world) if world else None, "dir": self.sim_dir}
+        all_sinks = list(sinks)
+        if self.log_path is not None:
+            self.writer = RunLogWriter(self.log_path)
+            all_sinks.append(self.writer)
+        return RunStream(all_sinks, meta, self.run_id)
+
+    def report(self, say: Any) -> None:
+        if self.writer is not None:
+            say("run log: %s%s" % (self.log_path, "  (NOT complete: %s)" % self.writer.error
+                                   if self.writer.error else ""))
+        if os.path.isdir(self.sim_dir):
+            say("simulated robot's Blackboard store and module logs: %s" % self.sim_dir)
+
+
+def plan_run_files(tree_path: str, record: Optional[str], no_record: bool, keep: Optional[int]) -> RunFiles:
+    """Name this run's files and apply the retention (newest ``keep`` runs, this one included)."""
+    import time
+    import uuid
+
+    if keep is None:
+        env = os.environ.get("BMTREE_KEEP_RUNS", "")
+        try:
+            keep = int(env) if env else DEFAULT_KEEP
+        except ValueError:
+            raise RunLogError("BMTREE_KEEP_RUNS must be a whole number, got %r" % env)
+    if keep < 1:
+        raise RunLogError("--keep-runs must be at least 1, got %d" % keep)
+    directory = default_runs_dir()
+    run_id = "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
+    name = os.path.splitext(os.path.basename(tree_path))[0]
+    default = new_log_path(directory, run_id, name)
+    prune(directory, keep - 1)
+    log_path = None if no_record else (os.path.abspath(record) if record else default)
+    return RunFiles(run_id, log_path, default[:-len(_SUFFIX)] + ".sim")
+
+
+class RunLogWriter(Sink):
+    """Appends records to ``path``; each tick's lines are written and fsync'd by a writer thread."""
+
+    def __init__(self, path: str, fsync: bool = True):
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        self.path = path
+        self.fsync = fsync
+        self._fh = open(path, "ab")
+        self._batch: List[str] = []
+        self._queue: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._write_loop, name="bmtree-runlog", daemon=True)
+        self._thread.start()
+        self.error: Optional[OSError] = None
+
+    def write(self, channel: str, text: str) -> None:
+        self._batch.append(text)
+
+    def flush(self) -> None:
+        if self._batch:
+            self._queue.put(self._batch)
+            self._batch = []
+
+    def _write_loop(self) -> None:
+        while True:
+            batch = self._queue.get()
+            if batch is None:
+                return
+            lines = [batch]
+            while True:  # take whatever else is waiting: one write and one fsync for all of it
+                try:
+                    more = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if more is None:
+                    self._queue.put(None)
+                    break
+                lines.append(more)
+            data = "".join(t + "\n" for b in lines for t in b).encode("utf-8")
+            try:
+                self._fh.write(data)
+                self._fh.flush()
+                if self.fsync:
+                    os.fsync(self._fh.fileno())
+            except OSError as exc:  # a full disk must not stop the robot
+                self.error = exc
+
+    def close(self) -> None:
+        self.flush()
+        self._queue.put(None)
+        self._thread.join()
+        self._fh.close()
+
+
+@dataclass
+class RunLog:
+    """One run read back: its records in order, and whether the end is missing."""
+
+    path: str
+    records: List[Dict[str, Any]]
+    truncated: bool = False        # the last line was cut (the process died while writing)
+
+    @property
+    def tree(self) -> Dict[str, Any]:
+        return self.records[0]
+
+    @property
+    def end(self) -> Optional[Dict[str, Any]]:
+        last = self.records[-1]
+        return last if last.get("type") == "end" else None
+
+    def of_type(self, kind: str) -> List[Dict[str, Any]]:
+        return [r for r in self.records if r.get("type") == kind]
+
+
+def read_log(path: str) -> RunLog:
+    """Read a run log; a cut last line is dropped. RunLogError for anything else that is wrong."""
+    size = os.path.getsize(path)
+    if size > MAX_LOG_BYTES:
+        raise RunLogError("%s: %d bytes is larger than the %d a run log may have" % (path, size, MAX_LOG_BYTES))
+    records: List[Dict[str, Any]] = []
+    truncated = False
+    with open(path, "rb") as fh:
+        lines = fh.read().split(b"\n")
+    last = len(lines) - 1
+    for i, raw in enumerate(lines):
+        if not raw.strip():
+            continue
+        if len(raw) > MAX_RECORD_BYTES:
+            raise RunLogError("%s:%d: record larger than %d bytes" % (path, i + 1, MAX_RECORD_BYTES))
+        try:
+            rec = json.loads(raw.decode("utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            if i == last:      # no newline after it: the writer was killed in the middle of it
+                truncated = True
+                break
+            raise RunLogError("%s:%d: not a JSON record: %s" % (path, i + 1, exc))
+        if not isinstance(rec, dict) or not isinstance(rec.get("type"), str):
+            raise RunLogError("%s:%d: a record is a JSON object with a 'type'" % (path, i + 1))
+        records.append(rec)
+    if not records or records[0].get("type") != "tree":
+        raise RunLogError("%s:1: not a bmtree run log (it must start with a 'tree' record)" % path)
+    if records[0].get("v") != 1:
+        raise RunLogError("%s:1: run log version %r is not supported (this bmtree reads version 1)" % (
+            path, records[0].get("v")))
+    return RunLog(path, records, truncated)
+
+
+@dataclass
+class RunSummary:
+    path: str
+    name: str
+    started: float
+    duration: Optional[float]
+    status: str
+    reason: str
+    extra: Dict[str, Any] = field(default_factory=dict)
+
+
+def _tail_record(path: str) -> Optional[Dict[str, Any]]:
+    with open(path, "rb") as fh:
+        fh.seek(0, os.SEEK_END)
+        size = fh.tell()
+        fh.seek(max(0, size - 65536))
+        tail = fh.read().split(b"\n")
+    for raw in reversed(tail):
+        try:
+            rec = json.loads(raw.decode("utf-8"))
+        except (ValueError, UnicodeDecodeError):
+            continue
+        if isinstance(rec, dict):
+            return rec
+    return None
+
+
+def list_runs(directory: str) -> List[RunSummary]:
+    """Every run log of ``directory``, oldest first; unreadable files are skipped."""
+    out = []
+    for path in _logs_in(directory):
+        try:
+            with open(path, "rb") as fh:
+                head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
+            tail = _tail_record(path)
+        except (OSError, ValueError, UnicodeDecodeError):
+            continue
+        if not isinstance(head, dict) or head.get("type") != "tree":
+            continue
+        end = tail if tail is not None and tail.get("type") == "end" else None
+        last_t = tail.get("t") if isinstance(tail, dict) else None
+        out.append(RunSummary(
+            path=path, name=str(head.get("name", "?")), started=float(head.get("started") or 0.0),
+            duration=end.get("t") if end else last_t,
+            status=str(end.get("status")) if end else "UNFINISHED",
+            reason=str(end.get("reason") or "") if end else "the log ends without an end record (killed?)"))
+    return out

@@ -1,0 +1,213 @@
+"""The run stream: what happens in a run as versioned JSON records, for topics and logs.
+
+One :class:`RunStream` observer turns the run's callbacks into records (format in
+the README, "Run stream") and hands each record's JSON text to its sinks with the
+record's channel; at the end of every tick the sinks are flushed (the run log makes
+that its durable point). The ROS sink lives in the ROS transport, the log sink in
+:mod:`coordinator.runlog`; this module talks to neither ROS nor files.
+"""
+from __future__ import annotations
+
+import abc
+import json
+import os
+import time
+import uuid
+from typing import Any, Dict, List, Optional, Sequence
+
+import py_trees
+from py_trees.common import Status
+
+from coordinator.context import plain
+from coordinator.runevents import Change, RunObserver
+
+__all__ = ["VERSION", "CHANNELS", "RunStream", "Sink", "node_table", "preorder", "to_json"]
+
+VERSION = 1
+CHANNELS = ("tree", "status", "calls", "events", "blackboard", "end", "control")
+
+
+class Sink(abc.ABC):
+    """Where records go: ``write`` a record's text, ``flush`` at the end of a tick, ``close`` at the end."""
+
+    @abc.abstractmethod
+    def write(self, channel: str, text: str) -> None:
+        """Take one record."""
+
+    def flush(self) -> None:  # noqa: B027 - optional, no-op default
+        """End of a tick."""
+
+    def close(self) -> None:  # noqa: B027 - optional, no-op default
+        """End of the run."""
+
+
+def _default(value: Any) -> Any:
+    v = plain(value)
+    if v is value:
+        if isinstance(value, (bytes, bytearray)):
+            return list(value)
+        if isinstance(value, (set, frozenset, tuple)):
+            return list(value)
+        return str(value)
+    return v
+
+
+def to_json(record: Dict[str, Any]) -> str:
+    """A record as one line of JSON (values that JSON lacks become plain data or text)."""
+    return json.dumps(record, default=_default, separators=(",", ":"), ensure_ascii=False)
+
+
+def _shape(b: Any) -> str:
+    if isinstance(b, py_trees.composites.Sequence):
+        return "sequence"
+    if isinstance(b, py_trees.composites.Selector):
+        return "selector"
+    if isinstance(b, py_trees.composites.Parallel):
+        return "parallel"
+    if isinstance(b, py_trees.decorators.Decorator):
+        return "decorator"
+    return "leaf"
+
+
+def preorder(root: Any) -> List[Any]:
+    """Every behaviour, parents before children (the ids of the run stream are these indexes)."""
+    out = []
+    todo = [root]
+    while todo:
+        b = todo.pop()
+        out.append(b)
+        todo.extend(reversed(b.children))
+    return out
+
+
+def node_table(root: Any) -> List[Dict[str, Any]]:
+    """The tree's nodes depth first: id (the index), parent id, kind, shape, name, where written."""
+    ids = {b: i for i, b in enumerate(preorder(root))}
+    out = []
+    for b, i in ids.items():
+        node = getattr(b, "bmtree_node", None) or getattr(b, "node", None)
+        if not hasattr(node, "kind") or not hasattr(node, "pos"):
+            node = None
+        shape = _shape(b)
+        row: Dict[str, Any] = {"id": i, "parent": ids.get(b.parent), "kind": node.kind if node else shape,
+                               "shape": shape, "name": b.name}
+        if node is not None:
+            row.update(file=node.pos.file, line=node.pos.line, column=node.pos.column)
+            target = getattr(node.spec, "target", None)  # call and wait_event: "module.member"
+            if isinstance(target, str):
+                row["target"] = target
+        if shape in ("sequence", "selector"):
+            row["memory"] = bool(getattr(b, "memory", False))
+        out.append(row)
+    return out
+
+
+class RunStream(RunObserver):
+    """Records of one run, written to ``sinks``.
+
+    Args:
+        sinks: where the JSON texts go (a ROS publisher, a log file).
+        meta: extra facts for the ``tree`` record (``inputs`` given, ``max_duration``, ``sim`` …).
+    """
+
+    def __init__(self, sinks: Sequence[Sink], meta: Optional[Dict[str, Any]] = None, run_id: str = ""):
+        self.sinks = list(sinks)
+        self.meta = dict(meta or {})
+        self.run_id = run_id or "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
+        self._ids: Dict[Any, int] = {}
+        self._start = 0.0
+        self._ticks = 0
+        self._open = False
+        self._clock: Any = None
+
+    def _emit(self, channel: str, record: Dict[str, Any]) -> None:
+        text = to_json(record)
+        for s in self.sinks:
+            s.write(channel, text)
+
+    def _t(self, now: float) -> float:
+        return round(now - self._start, 6)
+
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        self._start = ctx.clock.now()
+        self._open = True
+        nodes = node_table(root)
+        self._ids = {b: i for i, b in enumerate(preorder(root))}
+        self._clock = ctx.clock
+        record: Dict[str, Any] = {
+            "v": VERSION, "type": "tree", "run": self.run_id, "t": 0.0, "started": time.time(),
+            "name": getattr(tree, "name", root.name),
+            "path": os.path.abspath(tree.path) if getattr(tree, "path", None) else None,
+            "pid": os.getpid(), "blackboard": {k: plain(v) for k, v in ctx.blackboard.items()}, "nodes": nodes}
+        record.update(self.meta)
+        self._emit("tree", record)
+        self.flush()
+
+    def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
+        self._ticks += 1
+        if changes:
+            ids = self._ids
+            rows: List[list] = []
+            for b, _old, new in changes:
+                i = ids.get(b)
+                if i is None:
+                    continue
+                if new is Status.FAILURE and b.feedback_message:
+                    rows.append([i, new.value, b.feedback_message])
+                else:
+                    rows.append([i, new.value])
+            # the run clock, not ``now``: runners differ on whether ``now`` counts from the start
+            self._emit("status", {"v": VERSION, "type": "tick", "run": self.run_id, "t": self._t(self._clock.now()),
+                                  "n": self._ticks, "changes": rows})
+        self.flush()
+
+    def on_call_start(self, record: Any) -> None:
+        if self._open:
+            self._emit("calls", {"v": VERSION, "type": "call_start", "run": self.run_id, "t": self._t(record.started),
+                                 "call_id": record.call_id, "target": record.target,
+                                 "node": self._ids.get(record.owner), "inputs": record.inputs,
+                                 "timeout": getattr(record.owner, "timeout", None)})
+
+    def on_call_end(self, record: Any) -> None:
+        if self._open:
+            result = record.result
+            self._emit("calls", {
+                "v": VERSION, "type": "call_end", "run": self.run_id, "t": self._t(record.ended),
+                "call_id": record.call_id, "target": record.target, "node": self._ids.get(record.owner),
+                "status": record.status, "error": record.error,
+                "outputs": {k: plain(v) for k, v in record.outputs.items()},
+                "answer": result.status if result is not None else None,
+                "duration": round(record.duration or 0.0, 6)})
+
+    def on_event(self, event: Any, now: float) -> None:
+        if self._open:
+            try:
+                params = {k: plain(v) for k, v in event.values.items()}
+            except Exception:  # an event that breaks its definition is still worth recording
+                params = {}
+            self._emit("events", {"v": VERSION, "type": "event", "run": self.run_id, "t": self._t(now),
+                                  "module": event.basic_mod, "event": event.event, "params": params})
+
+    def on_blackboard_write(self, key: str, value: Any, now: float) -> None:
+        if self._open:
+            self._emit("blackboard", {"v": VERSION, "type": "write", "run": self.run_id, "t": self._t(now),
+                                      "key": key, "value": plain(value)})
+
+    def on_control(self, record: Any, now: float) -> None:
+        if self._open:
+            self._emit("control", dict(record, v=VERSION, type="control", run=self.run_id, t=self._t(now)))
+
+    def on_end(self, result: Any) -> None:
+        if not self._open:
+            return
+        self._emit("end", {"v": VERSION, "type": "end", "run": self.run_id, "t": self._t(self._clock.now()),
+                           "status": result.status.value, "reason": result.reason, "ticks": result.ticks,
+                           "duration": round(result.duration, 6), "calls": len(result.calls)})
+        self._open = False
+        for s in self.sinks:
+            s.flush()
+            s.close()
+
+    def flush(self) -> None:
+        for s in self.sinks:
+            s.flush()

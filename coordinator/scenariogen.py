@@ -1,0 +1,79 @@
+"""A recorded run as a ``bmtree test`` scenario: the field run becomes a regression test.
+
+Every module answers as it did (per function, in call order: outputs, failure or
+rejection text, and how long it took); a call that never got an answer (timed out,
+halted, still running at the end) hangs; events come at their recorded times. The
+expectations are the recorded result and the calls in order with their inputs, so
+``bmtree test`` reproduces the same path on simulated time, and a changed tree
+shows which calls changed.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, Dict, List
+
+import yaml
+
+from coordinator.runlog import RunLog, RunLogError
+
+__all__ = ["scenario_from_log", "write_scenario"]
+
+
+def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
+    answer = end.get("answer")
+    delay = round(float(end.get("duration") or 0.0), 6)
+    if answer == "succeeded":
+        out: Dict[str, Any] = {"succeed": dict(end.get("outputs") or {})}
+    elif answer == "failed":
+        out = {"fail": str(end.get("error") or "failed")}
+    elif answer == "rejected":
+        out = {"reject": str(end.get("error") or "rejected")}
+    else:  # no answer (timeout, halted) or the answer to a cancel
+        return {"hang": True}
+    if delay:
+        out["delay"] = delay
+    return out
+
+
+def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
+    """The scenario file's content for ``log``, with the tree path relative to ``out_path``."""
+    tree = log.tree
+    end = log.end
+    if end is None:
+        raise RunLogError("%s: the run has no end record (it was killed?); a scenario needs its result" % log.path)
+    path = tree.get("path")
+    if not path or not os.path.isfile(path):
+        raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
+    ends = {r.get("call_id"): r for r in log.of_type("call_end")}
+    mocks: Dict[str, List[Dict[str, Any]]] = {}
+    calls: List[Dict[str, Any]] = []
+    for start in log.of_type("call_start"):
+        target = str(start.get("target"))
+        finished = ends.get(start.get("call_id"))
+        mocks.setdefault(target, []).append(_outcome(finished) if finished else {"hang": True})
+        calls.append({target: dict(start.get("inputs") or {})})
+    events = [{"at": r.get("t"), "event": "%s.%s" % (r.get("module"), r.get("event")),
+               "params": dict(r.get("params") or {})} for r in log.of_type("event")]
+    scenario: Dict[str, Any] = {}
+    scenario["name"] = "as recorded in run %s" % tree.get("run")
+    if tree.get("inputs"):
+        scenario["inputs"] = dict(tree["inputs"])
+    scenario["mocks"] = mocks
+    if events:
+        scenario["events"] = events
+    if tree.get("max_duration") is not None:
+        scenario["max_duration"] = tree["max_duration"]
+    scenario["expect"] = {"status": str(end.get("status", "")).lower(), "calls": calls}
+    rel = os.path.relpath(os.path.abspath(path), os.path.dirname(os.path.abspath(out_path)))
+    return {"tree": rel, "scenarios": [scenario]}
+
+
+def write_scenario(log: RunLog, out_path: str) -> None:
+    data = scenario_from_log(log, out_path)
+    end = log.end or {}
+    header = ("# Written by 'bmtree replay %s --scenario': the modules answer as they did in that run,\n"
+              "# and the run must end the same way (%s%s) with the same calls.\n" % (
+                  os.path.basename(log.path), end.get("status"), ": %s" % end.get("reason") if end.get("reason") else ""))
+    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=110)
+    with open(out_path, "w", encoding="utf-8") as fh:
+        fh.write(header + text)

@@ -1,0 +1,299 @@
+"""``bmtree watch``: attach to the tree running on $ROS_MASTER_URI through its run stream.
+
+The watcher subscribes to ``/bmtree/run/*``: the latched ``tree`` and ``snapshot``
+records catch it up mid-run, the other channels keep it current. On a terminal it
+shows :func:`coordinator.watchview.render` redrawn in place (``rich.live``); otherwise
+one line per change. ``--web`` serves the same state as a page (:mod:`coordinator.webview`).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import threading
+from typing import Any, Callable, List, Optional, Tuple
+
+from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchview import LinePrinter, now_since, render
+
+__all__ = ["RosWatcher", "LiveView", "cmd_watch", "run_view", "STREAM_NS", "WATCH_CHANNELS"]
+
+STREAM_NS = "/bmtree/run"
+WATCH_CHANNELS = ("tree", "snapshot", "status", "calls", "events", "blackboard", "control", "end")
+
+
+class RosWatcher:
+    """Subscribes to the run stream and applies every record to ``state`` (and to ``on_record``)."""
+
+    def __init__(self, state: WatchState, namespace: str = STREAM_NS,
+                 on_record: Optional[Callable[[dict], None]] = None):
+        self.state = state
+        self.namespace = namespace.rstrip("/")
+        self.on_record = on_record
+        self._subs: List[Any] = []
+
+    def start(self) -> None:
+        import rospy
+        from std_msgs.msg import String
+
+        for c in WATCH_CHANNELS:
+            self._subs.append(rospy.Subscriber("%s/%s" % (self.namespace, c), String, self._got, queue_size=1000))
+
+    def _got(self, msg: Any) -> None:
+        try:
+            rec = json.loads(msg.data)
+        except (ValueError, TypeError, AttributeError):
+            return
+        if not isinstance(rec, dict):
+            return
+        with self.state.lock:
+            self.state.apply(rec)
+            if self.on_record is not None:
+                try:
+                    self.on_record(rec)
+                except Exception:  # a printing problem must not stop the subscriber
+                    pass
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.unregister()
+        self._subs = []
+
+
+class LiveView:
+    """Redraws ``state`` in place on a terminal (rich.live, alternate screen) until stopped;
+    ``keys`` maps a key to a callable returning a short answer shown in the footer."""
+
+    def __init__(self, state: WatchState, console: Any = None, footer: str = "", refresh: float = 0.2):
+        from rich.console import Console
+
+        self.state = state
+        self.console = console or Console()
+        self.footer = footer
+        self.refresh = refresh
+        self.message = ""
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+
+    def _frame(self, anchor: List[float]) -> Any:
+        size = self.console.size
+        foot = self.message or self.footer  # an answer replaces the help until the next key
+        return render(self.state, size.width, size.height, foot.strip(), now_since(self.state, anchor))
+
+    def _loop(self) -> None:
+        from rich.live import Live
+
+        anchor: List[float] = []
+        with Live(self._frame(anchor), console=self.console, screen=True, auto_refresh=False,
+                  redirect_stdout=False, redirect_stderr=False) as live:
+            while not self._stop.wait(self.refresh):
+                live.update(self._frame(anchor), refresh=True)
+
+    def start(self) -> LiveView:
+        self._thread = threading.Thread(target=self._loop, name="bmtree-live-view", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, final: bool = True) -> None:
+        """Leave the alternate screen; with ``final`` print the last view once (it stays in the scrollback)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        if final:
+            size = self.console.size
+            self.console.print(render(self.state, size.width, max(24, size.height) - 1, ""))
+
+
+def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[Optional[LiveView], List[Any]]:
+    """For ``bmtree run``: the snapshot publisher (latched ``namespace/snapshot``, so watchers that
+    attach mid-run catch up) and, on a terminal, the live view drawn from the same state."""
+    import rospy
+
+    transport.open()
+    pub = rospy.Publisher("%s/snapshot" % namespace.rstrip("/"), transport._String, queue_size=1, latch=True)
+    sink = SnapshotSink(lambda text: pub.publish(transport._String(text)))
+    view = None
+    if not quiet and sys.stdout.isatty():
+        view = LiveView(sink.state, footer="bmtree run (Ctrl-C stops the run)").start()
+    return view, [sink]
+
+
+KEYS_HELP = "q quit  p pause/resume  s step  : command (break NODE, clear NODE, force NODE SUCCESS, set KEY VALUE)"
+
+
+class Keys:
+    """The watch's keys: p, s, q, and ``:`` for a typed command; answers go to the view's footer."""
+
+    def __init__(self, view: LiveView, client: Any, stop: threading.Event):
+        self.view, self.client, self.stop = view, client, stop
+        self.line: Optional[str] = None
+
+    def _send(self, cmd: dict) -> None:
+        def go() -> None:
+            reply = self.client.send(cmd, 10.0)
+            self.view.message = ("ok: " if reply.get("ok") else "refused: ") + str(reply.get("answer"))
+        threading.Thread(target=go, daemon=True).start()
+
+    def press(self, ch: str) -> None:
+        from coordinator.control import parse_command
+
+        if self.line is not None:
+            if ch in ("\r", "\n"):
+                words, self.line = self.line.split(), None
+                try:
+                    self._send(parse_command(words))
+                except ValueError as exc:
+                    self.view.message = "refused: %s" % exc
+            elif ch == "\x1b":
+                self.line, self.view.message = None, ""
+            elif ch in ("\x7f", "\b"):
+                self.line = self.line[:-1]
+                self.view.message = ":" + self.line
+            elif ch.isprintable():
+                self.line += ch
+                self.view.message = ":" + self.line
+            return
+        if ch in ("q", "Q"):
+            self.stop.set()
+        elif ch == "p":
+            self._send({"command": "resume" if self.view.state.paused else "pause"})
+        elif ch == "s":
+            self._send({"command": "step"})
+        elif ch == ":":
+            self.line = ""
+            self.view.message = ":"
+
+
+def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Optional[threading.Thread]:
+    """Single keys from a terminal's stdin (cbreak mode), given to ``handler``; None without a terminal."""
+    if not sys.stdin.isatty():
+        return None
+    import select
+    import termios
+    import tty
+
+    fd = sys.stdin.fileno()
+    old = termios.tcgetattr(fd)
+
+    def loop() -> None:
+        tty.setcbreak(fd)
+        try:
+            while not stop.is_set():
+                ready, _, _ = select.select([fd], [], [], 0.2)
+                if ready:
+                    ch = os.read(fd, 1).decode("utf-8", "replace")
+                    handler(ch)
+        finally:
+            termios.tcsetattr(fd, termios.TCSADRAIN, old)
+
+    t = threading.Thread(target=loop, name="bmtree-keys", daemon=True)
+    t.start()
+    return t
+
+
+def cmd_watch(args: argparse.Namespace) -> int:
+    """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
+    import rospy
+
+    from coordinator.cli import EXIT_ENV, EXIT_OK, _err, _master_up
+
+    if not _master_up(args.wait):
+        _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+        return EXIT_ENV
+    state = WatchState()
+    tty = sys.stdout.isatty() and not args.plain
+    printer = None if tty or args.web else LinePrinter(sys.stdout)
+    rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
+    watcher = RosWatcher(state, args.namespace, on_record=(lambda r: printer.record(r, state)) if printer else None)
+    watcher.start()
+    server = None
+    view = None
+    client = None
+    stop = threading.Event()
+    try:
+        from coordinator.control import ControlClient
+
+        client = ControlClient()
+        if args.web:
+            from coordinator.webview import serve
+
+            server = serve(state, args.bind, args.port, control=lambda cmd: client.send(cmd, 10.0))
+            print("watching %s/* of the master %s; page at %s" % (
+                args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.url))
+            sys.stdout.flush()
+        elif tty:
+            view = LiveView(state, footer=KEYS_HELP).start()
+            _key_reader(Keys(view, client, stop).press, stop)
+        if not state.wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
+            if view is not None:
+                view.stop(final=False)
+                view = None
+            _err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
+                args.namespace, args.wait))
+            return EXIT_ENV
+        while not stop.is_set():
+            if state.wait(lambda s: s.end is not None, 0.3) and not args.follow and not args.web:
+                break
+        return EXIT_OK
+    except KeyboardInterrupt:
+        return EXIT_OK
+    finally:
+        stop.set()
+        if view is not None:
+            view.stop()
+        if server is not None:
+            server.close()
+        if client is not None:
+            client.close()
+        watcher.close()
+        rospy.signal_shutdown("bmtree watch finished")
+
+
+def add_watch_parser(sub: Any) -> None:
+    w = sub.add_parser("watch", help="show the tree running on $ROS_MASTER_URI, live (terminal or --web)")
+    w.add_argument("--plain", action="store_true", help="one line per change even on a terminal")
+    w.add_argument("--follow", action="store_true", help="keep watching after the run ends (the next run too)")
+    w.add_argument("--namespace", default=STREAM_NS, help="the run stream's topics (default %(default)s)")
+    w.add_argument("--wait", type=float, default=10.0, help="how long to wait for the master and a run (s)")
+    w.add_argument("--web", action="store_true", help="serve a live page instead of the terminal view")
+    w.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")
+    w.add_argument("--port", type=int, default=8765, help="port of the page with --web (0: any free one)")
+    w.set_defaults(func=cmd_watch)
+
+
+def cmd_control(args: argparse.Namespace) -> int:
+    """``bmtree control COMMAND ...``: one command to the run on $ROS_MASTER_URI, its answer printed."""
+    import rospy
+
+    from coordinator.cli import EXIT_ENV, EXIT_INVALID, EXIT_OK, _err, _master_up
+    from coordinator.control import ControlClient, parse_command
+
+    try:
+        cmd = parse_command(args.words)
+    except ValueError as exc:
+        _err("error: %s" % exc)
+        return EXIT_INVALID
+    if not _master_up(args.wait):
+        _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+        return EXIT_ENV
+    rospy.init_node("bmtree_control", anonymous=True, disable_signals=True)
+    client = ControlClient()
+    try:
+        reply = client.send(cmd, args.wait)
+    finally:
+        client.close()
+        rospy.signal_shutdown("bmtree control finished")
+    if reply.get("ok"):
+        print(reply.get("answer"))
+        return EXIT_OK
+    _err("refused: %s" % reply.get("answer"))
+    return EXIT_ENV if str(reply.get("answer", "")).startswith("no run answered") else EXIT_INVALID
+
+
+def add_control_parser(sub: Any) -> None:
+    c = sub.add_parser("control", help="steer the run on $ROS_MASTER_URI (started with 'bmtree run --control')")
+    c.add_argument("words", nargs="+", metavar="COMMAND",
+                   help="pause | resume | step | break NODE | clear NODE | force NODE SUCCESS|FAILURE | set KEY VALUE")
+    c.add_argument("--wait", type=float, default=10.0, help="how long to wait for the run's answer (s)")
+    c.set_defaults(func=cmd_control)

@@ -1,0 +1,217 @@
+"""What a watcher knows about a run, rebuilt from run-stream records (README, "Run stream").
+
+:class:`WatchState` applies the records of one run (live from topics, from a run log,
+or from the run's own stream in-process) and can be caught up at once from a
+``snapshot`` record, which the running process publishes latched and periodically
+(:class:`SnapshotSink`) so that a watcher that attaches mid-run sees the present
+state without the history. Plain data only: the terminal and web views draw it.
+"""
+from __future__ import annotations
+
+import json
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+from coordinator.runstream import VERSION, Sink, to_json
+
+__all__ = ["WatchState", "SnapshotSink", "StateSink", "SNAPSHOT_VERSION"]
+
+SNAPSHOT_VERSION = 1
+KEEP = 200  # finished calls, events and control actions kept (the latest)
+
+
+class WatchState:
+    """One run as seen from outside; every method is thread-safe."""
+
+    def __init__(self) -> None:
+        self.lock = threading.RLock()
+        self.changed = threading.Condition(self.lock)
+        self.version = 0  # bumped on every applied record (the web view polls it)
+        self._reset()
+
+    def _reset(self, run: str = "") -> None:
+        self._early: List[Dict[str, Any]] = getattr(self, "_early", [])
+        self.run = run
+        self.tree: Dict[str, Any] = {}
+        self.nodes: List[Dict[str, Any]] = []
+        self.status: Dict[int, str] = {}
+        self.halted: Dict[int, bool] = {}
+        self.feedback: Dict[int, str] = {}
+        self.pending: Dict[str, Dict[str, Any]] = {}
+        self.calls: List[Dict[str, Any]] = []
+        self.events: List[Dict[str, Any]] = []
+        self.control: List[Dict[str, Any]] = []
+        self.blackboard: Dict[str, Any] = {}
+        self.end: Optional[Dict[str, Any]] = None
+        self.paused = False
+        self.t = 0.0
+        self.tick = 0
+        self.caught_up = False
+
+    # applying ---------------------------------------------------------------------------
+    def apply_text(self, text: str) -> None:
+        """One record's JSON text; a malformed one is ignored (it must never stop a watcher)."""
+        try:
+            rec = json.loads(text)
+        except ValueError:
+            return
+        if isinstance(rec, dict):
+            self.apply(rec)
+
+    def apply(self, rec: Dict[str, Any]) -> None:
+        with self.lock:
+            try:
+                self._apply(rec)
+            except (TypeError, ValueError, KeyError, IndexError, AttributeError):
+                return
+            self.version += 1
+            self.changed.notify_all()
+
+    def _apply(self, rec: Dict[str, Any]) -> None:
+        kind = rec.get("type")
+        run = str(rec.get("run") or "")
+        if kind == "tree":
+            if run != self.run or not self.nodes:
+                self._reset(run)
+            self.tree = {k: v for k, v in rec.items() if k != "nodes"}
+            self.nodes = [n for n in rec.get("nodes") or [] if isinstance(n, dict)]
+            self.blackboard.update(rec.get("blackboard") or {})
+            early, self._early = self._early, []
+            for r in early:  # records that came before the tree (topics are not ordered among them)
+                if str(r.get("run") or "") == run:
+                    self._apply(r)
+            return
+        if not self.nodes:
+            if len(self._early) < 1000:
+                self._early.append(rec)
+            return
+        if run and self.run and run != self.run:
+            return  # a record of another run (an old latched one)
+        if kind == "snapshot":
+            if self.caught_up and int(rec.get("n") or 0) <= self.tick:
+                return
+            self._load(rec)
+            return
+        self.t = max(self.t, float(rec.get("t") or 0.0))
+        if kind == "tick":
+            n = int(rec.get("n") or 0)
+            if n and n <= self.tick:
+                return  # already in the snapshot
+            self.tick = n or self.tick + 1
+            for change in rec.get("changes") or []:
+                i, new = int(change[0]), str(change[1])
+                old = self.status.get(i, "INVALID")
+                self.halted[i] = new == "INVALID" and old == "RUNNING"
+                self.status[i] = new
+                self.feedback[i] = str(change[2]) if len(change) > 2 else ""
+        elif kind == "call_start":
+            self.pending[str(rec.get("call_id"))] = rec
+        elif kind == "call_end":
+            start = self.pending.pop(str(rec.get("call_id")), None)
+            if not any(c.get("call_id") == rec.get("call_id") for c in self.calls[-20:]):
+                self.calls.append(dict(rec, started=(start or {}).get("t", rec.get("t"))))
+                del self.calls[:-KEEP]
+        elif kind == "write":
+            self.blackboard[str(rec.get("key"))] = rec.get("value")
+        elif kind == "event":
+            self.events.append(rec)
+            del self.events[:-KEEP]
+        elif kind == "control":
+            self.control.append(rec)
+            del self.control[:-KEEP]
+            if "paused" in rec:
+                self.paused = bool(rec["paused"])
+        elif kind == "end":
+            self.end = rec
+            self.pending.clear()
+
+    def _load(self, rec: Dict[str, Any]) -> None:
+        self.t = float(rec.get("t") or 0.0)
+        self.tick = int(rec.get("n") or 0)
+        self.status = {int(k): str(v) for k, v in (rec.get("status") or {}).items()}
+        self.halted = {int(k): True for k in rec.get("halted") or []}
+        self.feedback = {int(k): str(v) for k, v in (rec.get("feedback") or {}).items()}
+        self.pending = {str(c.get("call_id")): c for c in rec.get("pending") or []}
+        self.calls = list(rec.get("calls") or [])
+        self.events = list(rec.get("events") or [])
+        self.control = list(rec.get("control") or [])
+        self.blackboard = dict(rec.get("blackboard") or {})
+        self.paused = bool(rec.get("paused"))
+        if rec.get("end"):
+            self.end = rec["end"]
+        self.caught_up = True
+
+    # reading ----------------------------------------------------------------------------
+    def snapshot(self, calls: int = 50, events: int = 50) -> Dict[str, Any]:
+        """The present state as a versioned ``snapshot`` record (what a late watcher loads)."""
+        with self.lock:
+            return {"v": VERSION, "type": "snapshot", "sv": SNAPSHOT_VERSION, "run": self.run, "t": self.t,
+                    "n": self.tick, "status": {str(k): v for k, v in self.status.items() if v != "INVALID"},
+                    "halted": [k for k, v in self.halted.items() if v],
+                    "feedback": {str(k): v for k, v in self.feedback.items() if v},
+                    "pending": list(self.pending.values()), "calls": self.calls[-calls:],
+                    "events": self.events[-events:], "control": self.control[-events:],
+                    "blackboard": dict(self.blackboard), "paused": self.paused, "end": self.end}
+
+    def view(self) -> Dict[str, Any]:
+        """Everything a view draws, as plain data (the web page's JSON)."""
+        with self.lock:
+            snap = self.snapshot(calls=KEEP, events=KEEP)
+            snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started")},
+                        nodes=self.nodes, version=self.version)
+            return snap
+
+    def label(self, i: int) -> str:
+        """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED or '' (not ticked yet / reset)."""
+        s = self.status.get(i, "INVALID")
+        if s == "INVALID":
+            return "HALTED" if self.halted.get(i) else ""
+        return s
+
+    def wait(self, predicate: Callable[[WatchState], bool], timeout: float) -> bool:
+        """Block until ``predicate(self)`` holds (True) or ``timeout`` passes (False)."""
+        end = time.monotonic() + timeout
+        with self.lock:
+            while not predicate(self):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self.changed.wait(min(left, 0.5))
+            return True
+
+
+class StateSink(Sink):
+    """Feeds the run's own records to a :class:`WatchState` (the run's terminal view)."""
+
+    def __init__(self, state: WatchState):
+        self.state = state
+
+    def write(self, channel: str, text: str) -> None:
+        self.state.apply_text(text)
+
+
+class SnapshotSink(StateSink):
+    """Keeps the run's state and publishes it as a ``snapshot`` record through ``publish``
+    (a latched topic) at most every ``interval`` seconds, at the end of a tick, and at the end."""
+
+    def __init__(self, publish: Callable[[str], None], interval: float = 0.5):
+        super().__init__(WatchState())
+        self.publish = publish
+        self.interval = interval
+        self._last = 0.0
+
+    def write(self, channel: str, text: str) -> None:
+        super().write(channel, text)
+        if channel == "control":  # while paused there are no ticks: publish now
+            self._last = 0.0
+            self.flush()
+
+    def flush(self) -> None:
+        now = time.monotonic()
+        if now - self._last >= self.interval:
+            self._last = now
+            self.publish(to_json(self.state.snapshot()))
+
+    def close(self) -> None:
+        self.publish(to_json(self.state.snapshot()))

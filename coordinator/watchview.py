@@ -1,0 +1,214 @@
+"""The terminal view of a run: the tree with statuses, pending calls, tree blackboard,
+events and call log, drawn with ``rich`` to fit the terminal (README, "Watching a run").
+
+The tree folds to fit: finished or idle subtrees collapse to one line, and if it
+still does not fit, a window around the running branch is shown. Every line is cut,
+never wrapped, so redrawing in place leaves no stale lines. Where the output is not
+a terminal, :class:`LinePrinter` writes one line per change instead.
+"""
+from __future__ import annotations
+
+import json
+import time
+from typing import Any, Dict, List, Optional, TextIO, Tuple
+
+from rich.console import Group
+from rich.text import Text
+
+from coordinator.watchstate import WatchState
+
+__all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
+
+STYLE = {"RUNNING": "bold yellow", "SUCCESS": "green", "FAILURE": "bold red", "HALTED": "magenta", "": "dim"}
+MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "": "-"}
+
+
+def _short(value: Any, width: int = 60) -> str:
+    text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
+def _children(nodes: List[Dict[str, Any]]) -> Tuple[Dict[Any, List[int]], Dict[int, Dict[str, Any]]]:
+    kids: Dict[Any, List[int]] = {}
+    by_id = {}
+    for n in nodes:
+        by_id[n["id"]] = n
+        kids.setdefault(n.get("parent"), []).append(n["id"])
+    return kids, by_id
+
+
+def tree_lines(state: WatchState, height: int) -> List[Text]:
+    """The tree as at most ``height`` lines: folded around the running branch if it is too long."""
+    kids, by_id = _children(state.nodes)
+    rows: List[Tuple[int, int, int]] = []  # (id, depth, hidden descendants)
+
+    def walk(i: int, depth: int, fold: bool) -> None:
+        below = kids.get(i, [])
+        if fold and below and state.label(i) != "RUNNING":
+            rows.append((i, depth, _count(i)))
+            return
+        rows.append((i, depth, 0))
+        for c in below:
+            walk(c, depth + 1, fold)
+
+    def _count(i: int) -> int:
+        return sum(1 + _count(c) for c in kids.get(i, []))
+
+    for fold in (False, True):
+        rows = []
+        for r in kids.get(None, []):
+            walk(r, 0, fold)
+        if len(rows) <= height:
+            break
+    start = 0
+    if len(rows) > height:  # a window around the deepest running node
+        running = [k for k, (i, _d, _h) in enumerate(rows) if state.label(i) == "RUNNING"]
+        focus = running[-1] if running else 0
+        start = max(0, min(focus - height // 2, len(rows) - height + 2))
+    out: List[Text] = []
+    if start:
+        out.append(Text("  ↑ %d more" % start, style="dim"))
+    window = rows[start:start + height - len(out) - (1 if start + height < len(rows) else 0)]
+    for i, depth, hidden in window:
+        n = by_id[i]
+        label = state.label(i)
+        line = Text("  " * depth)
+        line.append("%s " % MARK[label], style=STYLE[label])
+        line.append(str(n.get("name", "?")), style="bold" if label == "RUNNING" else "")
+        if n.get("shape") not in (None, "leaf"):
+            line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
+        if label:
+            line.append("  %s" % label, style=STYLE[label])
+        if hidden:
+            line.append("  (+%d folded)" % hidden, style="dim")
+        fb = state.feedback.get(i)
+        if fb and label == "FAILURE":
+            line.append("  " + fb, style="red")
+        out.append(line)
+    rest = len(rows) - start - len(window)
+    if rest > 0:
+        out.append(Text("  ↓ %d more" % rest, style="dim"))
+    return out
+
+
+def _section(title: str) -> Text:
+    return Text(title, style="bold cyan")
+
+
+def render(state: WatchState, width: int, height: int, footer: str = "", now: Optional[float] = None) -> Group:
+    """The whole view, exactly ``height`` lines or fewer, none longer than ``width``."""
+    with state.lock:
+        name = state.tree.get("name") or "(waiting for a run on the run stream)"
+        head = Text()
+        head.append("bmtree watch ", style="bold")
+        head.append("%s  t=%.1fs  tick %d" % (name, state.t, state.tick))
+        if state.paused:
+            head.append("  PAUSED", style="bold magenta")
+        if state.end:
+            head.append("  %s" % state.end.get("status"), style=STYLE.get(str(state.end.get("status")), ""))
+        pending = list(state.pending.values())
+        t_now = state.t if now is None else now
+        plines = []
+        for c in pending:
+            el = max(0.0, t_now - float(c.get("t") or 0.0))
+            to = c.get("timeout")
+            plines.append(Text("  %-24s %6.1fs / %s  %s" % (
+                c.get("target"), el, ("%gs" % to) if to else "-", _short(c.get("inputs"), 40))))
+        bb = [Text("  %s = %s" % (k, _short(v, max(20, width - len(k) - 6)))) for k, v in sorted(state.blackboard.items())]
+        ev = [Text("  %7.2fs %s.%s %s" % (float(e.get("t") or 0.0), e.get("module"), e.get("event"),
+                                           _short(e.get("params"), 40))) for e in state.events]
+        ev += [Text("  %7.2fs control %s %s: %s" % (float(c.get("t") or 0.0), c.get("command"),
+                                                      _short(c.get("args"), 30), c.get("answer")), style="magenta")
+               for c in state.control]
+        ev.sort(key=lambda x: x.plain)
+        calls = []
+        for c in state.calls:
+            st = str(c.get("status"))
+            calls.append(Text("  %7.2fs %-24s %-9s %6.2fs %s" % (
+                float(c.get("started") or 0.0), c.get("target"), st, float(c.get("duration") or 0.0),
+                c.get("error") or ""), style="red" if st not in ("succeeded",) else ""))
+        end = []
+        if state.end:
+            end.append(Text("result: %s in %.2fs (%s ticks)%s" % (
+                state.end.get("status"), float(state.end.get("duration") or 0.0), state.end.get("ticks"),
+                ("  reason: %s" % state.end.get("reason")) if state.end.get("reason") else ""),
+                style=STYLE.get(str(state.end.get("status")), "")))
+        # budget: header, footer, result; the panels get a share, the tree the rest
+        fixed = 1 + (1 if footer else 0) + len(end)
+        room = max(4, height - fixed)
+        panels = [("pending calls", plines, "none"), ("tree blackboard", bb, "empty"),
+                  ("last events", ev, "none"), ("call log", calls, "none")]
+        share = max(1, room // 3 // len(panels)) if height < 30 else max(2, room // 2 // len(panels))
+        body: List[Text] = []
+        for title, lines, empty in panels:
+            body.append(_section("%s%s" % (title, "" if lines else ": " + empty)))
+            take = lines[-share:] if title in ("last events", "call log") else lines[:share]
+            if len(lines) > share:
+                body[-1].append(" (%d of %d)" % (share, len(lines)), style="dim")
+            body.extend(take)
+        tree_room = max(3, room - len(body))
+        tree = tree_lines(state, tree_room)
+        out = [head] + tree + body + end + ([Text(footer, style="dim")] if footer else [])
+    out = out[:height]
+    for line in out:
+        line.no_wrap = True
+        line.overflow = "ellipsis"
+        line.truncate(width, overflow="ellipsis")
+    return Group(*out)
+
+
+class LinePrinter:
+    """One line per change (statuses, calls, events, writes, control, the end), for logs and pipes."""
+
+    def __init__(self, out: TextIO):
+        self.out = out
+        self._caught: Any = None
+
+    def record(self, rec: Dict[str, Any], state: WatchState) -> None:
+        kind = rec.get("type")
+        t = float(rec.get("t") or 0.0)
+        names = {n.get("id"): n.get("name") for n in state.nodes}
+        lines = []
+        if kind == "tree":
+            lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
+        elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
+            self._caught = rec.get("run")  # the periodic snapshots after the first say nothing new
+            running = ["%s RUNNING" % names.get(int(k), k) for k, v in (rec.get("status") or {}).items()
+                       if v == "RUNNING"]
+            pending = ["%s since %.3fs" % (c.get("target"), float(c.get("t") or 0.0)) for c in rec.get("pending") or []]
+            lines.append("[%7.3fs] caught up at tick %s: %s; pending calls: %s; %d calls done" % (
+                t, rec.get("n"), ", ".join(running) or "nothing running", ", ".join(pending) or "none",
+                len(rec.get("calls") or [])))
+        elif kind == "tick":
+            for ch in rec.get("changes") or []:
+                status = ch[1]
+                if status == "INVALID":
+                    if state.halted.get(ch[0]):
+                        lines.append("[%7.3fs] %-9s %s" % (t, "HALTED", names.get(ch[0], ch[0])))
+                    continue
+                extra = " (%s)" % ch[2] if len(ch) > 2 and ch[2] else ""
+                lines.append("[%7.3fs] %-9s %s%s" % (t, status, names.get(ch[0], ch[0]), extra))
+        elif kind == "call_start":
+            lines.append("[%7.3fs] call      %s %s" % (t, rec.get("target"), _short(rec.get("inputs"))))
+        elif kind == "call_end":
+            lines.append("[%7.3fs] %-9s %s %s" % (t, rec.get("status"), rec.get("target"), rec.get("error") or ""))
+        elif kind == "event":
+            lines.append("[%7.3fs] event     %s.%s %s" % (t, rec.get("module"), rec.get("event"), _short(rec.get("params"))))
+        elif kind == "write":
+            lines.append("[%7.3fs] write     %s = %s" % (t, rec.get("key"), _short(rec.get("value"))))
+        elif kind == "control":
+            lines.append("[%7.3fs] control   %s %s: %s" % (t, rec.get("command"), _short(rec.get("args")), rec.get("answer")))
+        elif kind == "end":
+            lines.append("[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else ""))
+        for line in lines:
+            self.out.write(line.rstrip() + "\n")
+        if lines:
+            self.out.flush()
+
+
+def now_since(state: WatchState, anchor: List[float]) -> float:
+    """The run's time now, advanced between records by the wall clock (for elapsed times)."""
+    mono = time.monotonic()
+    if not anchor or anchor[0] != state.t:
+        anchor[:] = [state.t, mono]
+    return anchor[0] + (mono - anchor[1]) if not state.end else state.t

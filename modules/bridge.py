@@ -1,0 +1,428 @@
+"""``bmtree-bridge``: serves a C++ basic module (manual §4.3) as a bmtree module.
+
+One process per C++ module. Towards the coordinator and the Blackboard it is a module
+node like any other (:class:`modules.node.ModuleNode` with the runtime's validation,
+busy rule, cancel answers and announcement); its functions are executed by the C++ node
+over the original protocol: the inputs on the data topics ``/<BM>/<type>``, then
+``/<BM>/BM_input``; the C++ node publishes the outputs on the data topics, then
+``/<BM>/BM_output``. See the README's "C++ modules" for what it adds to the original.
+
+    bmtree-bridge --definition gripper.json            # or python -m modules.bridge
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import socket
+import sys
+import threading
+import time
+from typing import Any, Dict, List, Optional, Tuple
+from urllib.parse import urlsplit
+
+from comm import sync_publisher
+from comm.errors import ProtocolError
+from comm.messages import load_payload
+from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
+from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
+
+__all__ = ["BridgeError", "CppBridge", "data_topic", "data_topics", "make_bridge", "make_parser", "main"]
+
+log = logging.getLogger("bmtree.bridge")
+
+#: Gap between the last input and ``BM_input`` for C++ nodes that are not built with bmtree's
+#: library (they read the last value of each topic as soon as ``BM_input`` arrives, and ROS
+#: orders messages per connection only). Measured on loopback: see the README.
+DEFAULT_INPUT_GAP = 0.01
+_POLL = 0.2  # how often a running call checks that the C++ node is still there (s)
+
+
+class BridgeError(EnvironmentError):
+    """The C++ node is not there or not connected (the message names what is missing)."""
+
+
+def data_topic(module: str, rostype: str) -> str:
+    """``std_msgs/Float64`` in module ``gripper`` -> ``/gripper/float64`` (the original naming)."""
+    return "/%s/%s" % (module, rostype.rsplit("/", 1)[-1].lower())
+
+
+def data_topics(definition: ModuleDefinition) -> Tuple[Dict[str, str], Dict[str, str]]:
+    """(input topics, output topics) of a module, each ``topic -> ROS type``.
+
+    Raises:
+        DefinitionError: two types of the module would share one data topic.
+    """
+    ins: Dict[str, str] = {}
+    outs: Dict[str, str] = {}
+    problems = []
+    every: Dict[str, str] = {}
+    for fn in definition.functions.values():
+        for kind, params, table in (("Input", fn.inputs, ins), ("Output", fn.outputs, outs)):
+            for p in params:
+                topic = data_topic(definition.name, p.rostype)
+                other = every.setdefault(topic, p.rostype)
+                if other != p.rostype:
+                    problems.append("%s: %s.%s-params: %s: types %s and %s would share the data topic %s of the "
+                                    "C++ protocol" % (definition.source, fn.name, kind, p.name, other, p.rostype,
+                                                      topic))
+                table[topic] = p.rostype
+    if problems:
+        raise DefinitionError(sorted(set(problems)))
+    return ins, outs
+
+
+class _Call:
+    """What the bridge collects for the call the C++ node is running."""
+
+    def __init__(self, fn: FunctionDefinition, topics: List[str]):
+        self.fn = fn
+        self.fresh: Dict[str, List[Any]] = {t: [] for t in topics}
+        self.output: Optional[Dict[str, Any]] = None
+        self.output_at = 0.0
+
+
+class CppBridge(BasicModule):
+    """Execution over the C++ protocol; one method per function is added by :func:`make_bridge`.
+
+    Args:
+        call_timeout: seconds a call may wait for ``BM_output`` (0: no limit; a crashed node
+            is still noticed within ``_POLL`` seconds).
+        input_gap: seconds between the last input and ``BM_input``; None = none for nodes
+            built with bmtree's C++ library, :data:`DEFAULT_INPUT_GAP` for others.
+        output_wait: seconds to wait, after ``BM_output``, for output values still in flight.
+        connect_timeout: seconds to wait at start-up for the C++ node's connections.
+    """
+
+    def __init__(self, call_timeout: float = 30.0, input_gap: Optional[float] = None, output_wait: float = 1.0,
+                 connect_timeout: float = 30.0, max_bytes: int = 1 << 20):
+        super().__init__()
+        self.call_timeout = call_timeout
+        self.input_gap = input_gap
+        self.output_wait = output_wait
+        self.connect_timeout = connect_timeout
+        self.max_bytes = max_bytes
+        self.cpp_node = ""
+        self.cpp_uri = ""
+        self.library = False
+        self._cond = threading.Condition()
+        self._call: Optional[_Call] = None
+        self._ready = False
+        self._pubs: Dict[str, Any] = {}
+        self._subs: List[Any] = []
+        self._in_pub: Any = None
+        self._out_sub: Any = None
+        self._String: Any = None
+        self._self_name = ""
+
+    # -- set-up ----------------------------------------------------------------------
+    def setup(self, node: Any) -> None:
+        """Create the C++ protocol's topics and wait (bounded) until the C++ node is connected."""
+        import rospy
+        from std_msgs.msg import String
+
+        from comm.rostypes import resolve_type
+
+        self._String = String
+        self._self_name = rospy.get_name()
+        name = self.definition.name
+        ins, outs = data_topics(self.definition)
+        for topic, rostype in ins.items():
+            self._pubs[topic] = sync_publisher(topic, resolve_type(rostype))
+        for topic, rostype in outs.items():
+            self._subs.append(rospy.Subscriber(topic, resolve_type(rostype), self._on_data, callback_args=topic,
+                                               queue_size=1000, tcp_nodelay=True))
+        self._in_pub = sync_publisher("/%s/BM_input" % name, String)
+        self._out_sub = rospy.Subscriber("/%s/BM_output" % name, String, self._on_output, queue_size=100,
+                                         tcp_nodelay=True)
+        missing = self._wait_connected(self.connect_timeout)
+        if missing:
+            raise BridgeError("the C++ node of module %r is not ready after %gs: %s" % (
+                name, self.connect_timeout, "; ".join(missing)))
+        rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
+                      "bmtree library, no input gap" if self.library else "input gap %gs" % self._gap())
+
+    def shutdown(self) -> None:
+        for s in self._subs + [self._out_sub]:
+            if s is not None:
+                s.unregister()
+
+    def _gap(self) -> float:
+        if self.input_gap is not None:
+            return self.input_gap
+        return 0.0 if self.library else DEFAULT_INPUT_GAP
+
+    def _find_node(self) -> Optional[str]:
+        """The C++ node: whoever subscribes ``/<BM>/BM_input`` (its name is not fixed)."""
+        import rosgraph
+
+        master = rosgraph.Master(self._self_name or "/bmtree_bridge")
+        name = self.definition.name
+        pubs, subs, _ = master.getSystemState()
+        listeners = next((n for t, n in subs if t == "/%s/BM_input" % name), [])
+        talkers = next((n for t, n in pubs if t == "/%s/BM_output" % name), [])
+        nodes = [n for n in listeners if n != self._self_name]
+        nodes = [n for n in nodes if n in talkers] or nodes  # a tool may listen to BM_input too
+        if not nodes:
+            return None
+        if len(nodes) > 1:
+            log.warning("several nodes subscribe /%s/BM_input (%s); using %s", name, ", ".join(nodes), nodes[0])
+        node = nodes[0]
+        try:
+            self.cpp_uri = master.lookupNode(node)
+        except rosgraph.masterapi.Error:
+            return None
+        self.cpp_node = node
+        self.library = node in next((n for t, n in pubs if t == "/%s/BM_info" % name), [])
+        return node
+
+    def _missing(self) -> List[str]:
+        """What is not connected yet between this bridge and the C++ node, in words."""
+        name = self.definition.name
+        node = self._find_node()
+        if node is None:
+            return ["no node subscribes /%s/BM_input (is the C++ node running?)" % name]
+        out = []
+        for topic, pub in [("/%s/BM_input" % name, self._in_pub)] + sorted(self._pubs.items()):
+            if not pub.impl.has_connection(node):
+                out.append("%s does not receive %s" % (node, topic))
+        for sub in [self._out_sub] + self._subs:
+            if not sub.impl.has_connection(self.cpp_uri):
+                out.append("%s does not publish %s to the bridge" % (node, sub.resolved_name))
+        return out
+
+    def _wait_connected(self, timeout: float) -> List[str]:
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                missing = self._missing()
+            except OSError as exc:
+                missing = ["the ROS master does not answer: %s" % exc]
+            if not missing:
+                self._ready = True
+                return []
+            if time.monotonic() >= end:
+                return missing
+            time.sleep(0.05)
+
+    def _gone(self) -> bool:
+        """True if the C++ node's process is gone: its XML-RPC port refuses connections.
+
+        A node that is merely slow is not gone: only the call's deadline ends its call.
+        """
+        try:
+            host, port = urlsplit(self.cpp_uri).hostname, urlsplit(self.cpp_uri).port
+            with socket.create_connection((host, port), timeout=1.0):
+                return False
+        except ConnectionRefusedError:
+            return True
+        except (OSError, ValueError):
+            return False
+
+    # -- ROS callbacks ---------------------------------------------------------------
+    def _on_data(self, msg: Any, topic: str) -> None:
+        if msg._connection_header.get("callerid") != self.cpp_node:
+            return  # our own input, or another node's: never an output of the C++ node
+        with self._cond:
+            call = self._call
+            if call is not None and topic in call.fresh:
+                call.fresh[topic].append(msg)
+                if call.output is not None:  # before BM_output nobody waits for data: no wake-up
+                    self._cond.notify_all()
+
+    def _on_output(self, msg: Any) -> None:
+        if msg._connection_header.get("callerid") != self.cpp_node:
+            return
+        try:
+            out = load_payload(msg.data, self.max_bytes)
+        except ProtocolError as exc:
+            out = {"status": "failed", "error": "malformed BM_output from %s: %s" % (self.cpp_node, exc)}
+        with self._cond:
+            call = self._call
+            if call is None or call.output is not None:
+                log.warning("ignored a BM_output from %s with no call outstanding", self.cpp_node)
+                return
+            call.output = out
+            call.output_at = time.monotonic()
+            self._cond.notify_all()
+
+    # -- a call ----------------------------------------------------------------------
+    def _execute(self, name: str, inputs: Dict[str, Any]) -> Dict[str, Any]:
+        fn = self.definition.function(name)
+        if not self._ready or not self._out_sub.impl.has_connection(self.cpp_uri):
+            # first call after a failure, or the C++ node was restarted (new URI): find it again
+            self._ready = False
+            missing = self._wait_connected(min(2.0, self.connect_timeout))
+            if missing:
+                raise Rejected("the C++ node of module %r is not connected: %s" % (self.definition.name,
+                                                                                   "; ".join(missing)))
+        module = self.definition.name
+        in_topics = [data_topic(module, p.rostype) for p in fn.inputs]
+        call = _Call(fn, sorted({data_topic(module, p.rostype) for p in fn.outputs}))
+        with self._cond:
+            self._call = call
+        try:
+            for p, topic in zip(fn.inputs, in_topics):
+                self._pubs[topic].publish(inputs[p.name])
+            gap = self._gap()
+            if gap > 0:
+                time.sleep(gap)
+            self._in_pub.publish(self._String(json.dumps({"function": name, "inparam_topics": in_topics})))
+            self._wait_output(call)
+        finally:
+            with self._cond:
+                self._call = None
+        return self._outputs(call)
+
+    def _wait_output(self, call: _Call) -> None:
+        start = pinged = time.monotonic()
+        while True:
+            with self._cond:
+                now = time.monotonic()
+                if call.output is not None:
+                    lacking = self._lacking(call)
+                    if not lacking:
+                        return
+                    if now - call.output_at >= self.output_wait:
+                        raise Failure("BM_output of %s listed %s, but %s within %gs" % (
+                            call.fn.qualified, ", ".join(call.output.get("outparam_topics") or []),
+                            "; ".join(lacking), self.output_wait))
+                    self._cond.wait(self.output_wait - (now - call.output_at))
+                    continue
+                if self.call_timeout and now - start >= self.call_timeout:
+                    self._ready = False
+                    raise Failure("no BM_output from the C++ node %s within %gs: it hangs or crashed" % (
+                        self.cpp_node, self.call_timeout))
+                left = self.call_timeout - (now - start) if self.call_timeout else _POLL
+                self._cond.wait(min(_POLL, left))
+                if call.output is not None or time.monotonic() - pinged < _POLL:
+                    continue
+            pinged = time.monotonic()
+            if self._gone():
+                self._ready = False
+                raise Failure("the C++ node %s exited during the call (no BM_output)" % self.cpp_node)
+
+    def _lacking(self, call: _Call) -> List[str]:
+        """Output values listed in BM_output that have not arrived yet, in words."""
+        topics = call.output.get("outparam_topics") if call.output else None
+        if not isinstance(topics, list):
+            return []
+        out = []
+        for topic in sorted(set(t for t in topics if isinstance(t, str))):
+            want = topics.count(topic)
+            got = len(call.fresh.get(topic, []))
+            if topic in call.fresh and got < want:
+                out.append("%d of %d values arrived on %s" % (got, want, topic))
+        return out
+
+    def _outputs(self, call: _Call) -> Dict[str, Any]:
+        """The function's outputs by name; Failure/Rejected for an error or a malformed BM_output."""
+        out = call.output or {}
+        if out.get("error"):
+            error = str(out.get("error"))
+            if out.get("status") == "rejected":
+                raise Rejected(error)
+            raise Failure(error)
+        names = out.get("outparam_names")
+        topics = out.get("outparam_topics")
+        if not (isinstance(names, list) and isinstance(topics, list) and len(names) == len(topics)
+                and all(isinstance(x, str) for x in names + topics)):
+            raise Failure("malformed BM_output from %s: expected lists of strings 'outparam_names' and "
+                          "'outparam_topics' of equal length, got %s" % (self.cpp_node, json.dumps(out)[:200]))
+        module = self.definition.name
+        wanted = {p.name: data_topic(module, p.rostype) for p in call.fn.outputs}
+        values: Dict[str, Any] = {}
+        problems = []
+        seen: Dict[str, int] = {}
+        for name, topic in zip(names, topics):
+            k = seen.get(topic, 0)
+            seen[topic] = k + 1
+            if name not in wanted:
+                problems.append("unknown output %r" % name)
+            elif topic != wanted[name]:
+                problems.append("output %r came on %s, its type's topic is %s" % (name, topic, wanted[name]))
+            elif k < len(call.fresh.get(topic, [])):
+                values[name] = call.fresh[topic][k]
+        missing = [n for n in wanted if n not in names]
+        if missing:
+            problems.append("missing output %s" % ", ".join(repr(m) for m in missing))
+        if problems:
+            raise Failure("%s: the C++ node's BM_output does not match the definition: %s" % (
+                call.fn.qualified, "; ".join(problems)))
+        return values
+
+
+def _method(name: str) -> Any:
+    def call(self: CppBridge, **inputs: Any) -> Dict[str, Any]:
+        return self._execute(name, inputs)
+
+    call.__name__ = name
+    call.__doc__ = "Run %s on the C++ node." % name
+    return call
+
+
+def make_bridge(definition: ModuleDefinition, **options: Any) -> CppBridge:
+    """A bridge object with one method per function of ``definition`` (what the runtime binds)."""
+    data_topics(definition)
+    cls = type("CppBridge_%s" % definition.name, (CppBridge,), {n: _method(n) for n in definition.functions})
+    return cls(**options)
+
+
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bmtree-bridge", description="Serve a C++ basic module (manual §4.3) as a "
+                                "bmtree module: wire protocol v2 outside, the original C++ protocol inside.")
+    p.add_argument("--definition", required=True, help="the C++ module's definition JSON")
+    p.add_argument("--node-name", help="ROS node name of the bridge (default <module>_bridge)")
+    p.add_argument("--call-timeout", type=float, default=30.0,
+                   help="seconds a call may wait for the C++ node's BM_output, 0 = no limit (default 30)")
+    p.add_argument("--input-gap", type=float, default=None,
+                   help="seconds between the last input and BM_input (default: 0 for nodes built with bmtree's "
+                        "C++ library, %g for others)" % DEFAULT_INPUT_GAP)
+    p.add_argument("--output-wait", type=float, default=1.0,
+                   help="seconds to wait after BM_output for output values still in flight (default 1)")
+    p.add_argument("--wait", type=float, default=30.0,
+                   help="seconds to wait at start-up for the C++ node's connections (default 30)")
+    return p
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    import rospy
+
+    from modules.node import DuplicateModule, ModuleNode
+
+    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    for flag, value in (("--call-timeout", args.call_timeout), ("--output-wait", args.output_wait),
+                        ("--wait", args.wait), ("--input-gap", args.input_gap or 0.0)):
+        if value < 0:
+            sys.stderr.write("error: %s must not be negative\n" % flag)
+            return 2
+    try:
+        definition = load_definition(args.definition)
+        impl = make_bridge(definition, call_timeout=args.call_timeout, input_gap=args.input_gap,
+                           output_wait=args.output_wait, connect_timeout=args.wait)
+        ModuleServer(definition, impl, lambda t: None, lambda t: None)
+    except DefinitionError as exc:
+        sys.stderr.write("%s\n" % exc)
+        return 2
+    except BindingError as exc:
+        sys.stderr.write("error: %s\n" % exc)
+        return 2
+    rospy.init_node(args.node_name or "%s_bridge" % definition.name, anonymous=False)
+    node = ModuleNode(definition, impl)
+    try:
+        node.start()
+    except BindingError as exc:  # a bad private parameter
+        sys.stderr.write("error: %s\n" % exc)
+        return 2
+    except (BridgeError, DuplicateModule) as exc:
+        sys.stderr.write("error: %s\n" % exc)
+        return 3
+    try:
+        rospy.spin()
+    finally:
+        node.stop()
+    return 3 if node.kicked_out else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,57 @@
+// A C++ basic module written with bmtree's library: a two-finger gripper.
+// Definition: gripper.json beside this file. Run it with the bridge:
+//   ./gripper &  bmtree-bridge --definition gripper.json
+#include <bmtree/basic_module.h>
+
+#include <geometry_msgs/Point.h>
+#include <std_msgs/Bool.h>
+#include <std_msgs/Float64.h>
+#include <std_msgs/String.h>
+
+#include <chrono>
+#include <cmath>
+#include <thread>
+#include <tuple>
+
+class Gripper : public bmtree::BasicModule {
+ public:
+  explicit Gripper(ros::NodeHandle nh) : BasicModule(nh, "gripper") {
+    provide("set_fingers", &Gripper::setFingers, {"opening", "success"});
+    provide("reach", &Gripper::reach, {"final_pos", "distance"});
+    provide("squeeze", &Gripper::squeeze, {"closed_for", "label"});
+    provide("ping", &Gripper::ping, {"success"});
+  }
+
+  std::tuple<std_msgs::Float64, std_msgs::Bool> setFingers(const std_msgs::Float64& left,
+                                                          const std_msgs::Float64& right) {
+    if (left.data > right.data) throw bmtree::Failure("the left finger must stay left of the right one");
+    std_msgs::Float64 opening;
+    opening.data = right.data - left.data;
+    std_msgs::Bool ok;
+    ok.data = true;
+    return std::make_tuple(opening, ok);
+  }
+
+  std::tuple<geometry_msgs::Point, std_msgs::Float64> reach(const geometry_msgs::Point& target) {
+    std_msgs::Float64 distance;
+    distance.data = std::sqrt(target.x * target.x + target.y * target.y + target.z * target.z);
+    if (distance.data > 1.0) throw bmtree::Rejected("the target is out of reach (more than 1 m away)");
+    return std::make_tuple(target, distance);
+  }
+
+  // Stands for a slow motion: the spinner thread is busy meanwhile, as a real driver call would be.
+  std::tuple<std_msgs::Float64, std_msgs::String> squeeze(const std_msgs::Float64& seconds,
+                                                         const std_msgs::String& label) {
+    if (seconds.data < 0 || seconds.data > 60) throw bmtree::Failure("seconds must be within 0..60");
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds.data));
+    return std::make_tuple(seconds, label);
+  }
+
+  std::tuple<std_msgs::Bool> ping() {
+    std_msgs::Bool ok;
+    ok.data = true;
+    return std::make_tuple(ok);
+  }
+};
+
+int main(int argc, char** argv) { return bmtree::run<Gripper>(argc, argv, "gripper"); }

@@ -1,0 +1,119 @@
+"""What a function does with a call, as data: the one outcome type of mocks, mock nodes and sim faults.
+
+A module's method may return an :class:`Outcome` instead of its outputs (and the
+``before_call`` hook may return one instead of running the method); the runtime
+(:class:`modules.runtime.ModuleServer`) carries it out the same way on worker threads
+and on a simulated clock: wait ``delay`` seconds of the module's clock, then answer
+``succeeded`` with ``outputs``, ``failed`` or ``rejected`` with ``reason``, never answer
+(``hang``, until cancelled), or ``respond``: compute the answer with ``fn``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, Optional
+
+from comm.textenum import TextEnum
+
+__all__ = ["Outcome", "OutcomeKind", "OutcomeError", "succeed", "fail", "reject", "hang", "respond",
+           "outcome_from_dict", "outcome_to_dict"]
+
+
+class OutcomeKind(TextEnum):
+    SUCCEED = "succeed"
+    FAIL = "fail"
+    REJECT = "reject"
+    HANG = "hang"
+    RESPOND = "respond"
+
+
+class OutcomeError(ValueError):
+    """An outcome written wrongly (in a scenario, a mock node's script or a world's faults)."""
+
+
+@dataclass
+class Outcome:
+    """``kind`` after ``delay`` seconds; ``outputs`` for succeed, ``reason`` for fail and reject.
+
+    ``fn`` for respond: called with the call's inputs (as the method gets them), it returns
+    the outputs or another Outcome; without ``fn``, the module's own method answers (a fault
+    that only delays).
+    """
+
+    kind: OutcomeKind
+    outputs: Dict[str, Any] = field(default_factory=dict)
+    reason: str = ""
+    delay: float = 0.0
+    fn: Optional[Callable[..., Any]] = None
+
+    def __post_init__(self) -> None:
+        self.kind = OutcomeKind(self.kind)
+
+
+def succeed(delay: float = 0.0, **outputs: Any) -> Outcome:
+    """Answer ``succeeded`` with these outputs."""
+    return Outcome(OutcomeKind.SUCCEED, outputs=outputs, delay=delay)
+
+
+def fail(reason: str = "failed (mock)", delay: float = 0.0) -> Outcome:
+    """Answer ``failed`` with ``reason``."""
+    return Outcome(OutcomeKind.FAIL, reason=reason, delay=delay)
+
+
+def reject(reason: str = "rejected (mock)", delay: float = 0.0) -> Outcome:
+    """Answer ``rejected`` with ``reason`` (the call could not be taken now)."""
+    return Outcome(OutcomeKind.REJECT, reason=reason, delay=delay)
+
+
+def hang() -> Outcome:
+    """Never answer (until cancelled)."""
+    return Outcome(OutcomeKind.HANG)
+
+
+def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
+    """After ``delay``, answer what ``fn(**inputs)`` gives: outputs, or an Outcome."""
+    return Outcome(OutcomeKind.RESPOND, fn=fn, delay=delay)
+
+
+_WRITTEN = ("succeed", "fail", "reject", "hang")
+
+
+def outcome_from_dict(raw: Any) -> Outcome:
+    """``{succeed: {outputs}}``, ``{fail: reason}``, ``{reject: reason}`` or ``{hang: true}``,
+    with an optional ``delay`` (seconds): the written form of scenarios, mock nodes and faults."""
+    if not isinstance(raw, dict):
+        raise OutcomeError("an outcome is a mapping such as {succeed: {...}} or {fail: reason}, got %r" % (raw,))
+    kinds = [k for k in raw if k in _WRITTEN]
+    extra = [k for k in raw if k not in _WRITTEN and k != "delay"]
+    if len(kinds) != 1 or extra:
+        raise OutcomeError("an outcome has one of %s (and optionally delay), got %s" % (
+            ", ".join(_WRITTEN), ", ".join(map(str, raw))))
+    kind = kinds[0]
+    try:
+        delay = float(raw.get("delay", 0.0))
+    except (TypeError, ValueError):
+        raise OutcomeError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
+    if delay < 0:
+        raise OutcomeError("delay must not be negative, got %r" % (raw.get("delay"),))
+    if kind == "succeed":
+        outputs = raw["succeed"] or {}
+        if not isinstance(outputs, dict):
+            raise OutcomeError("succeed takes a mapping of outputs, got %r" % (outputs,))
+        return succeed(delay, **{str(k): v for k, v in outputs.items()})
+    if kind == "fail":
+        return fail(str(raw["fail"]), delay)
+    if kind == "reject":
+        return reject(str(raw["reject"]), delay)
+    return hang()
+
+
+def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
+    """The written form of ``outcome`` (respond runs Python and has none)."""
+    kind = outcome.kind
+    if kind == OutcomeKind.RESPOND:
+        raise OutcomeError("a respond(...) outcome runs Python and cannot be written down")
+    value: Any = {OutcomeKind.SUCCEED: dict(outcome.outputs), OutcomeKind.FAIL: outcome.reason,
+                  OutcomeKind.REJECT: outcome.reason, OutcomeKind.HANG: True}[kind]
+    out: Dict[str, Any] = {kind.value: value}
+    if outcome.delay:
+        out["delay"] = outcome.delay
+    return out

@@ -1,0 +1,219 @@
+"""bmtree in a catkin workspace: built with Debian's catkin, run through rosrun and roslaunch.
+
+The repository is copied into a temporary workspace beside a team package (``my_robot``) that
+exports a gripper's definition in its package.xml; ``catkin_make`` builds both with this test's
+Python (its venv has py_trees & co.); every command then runs in a shell that sourced
+``devel/setup.bash``, as a user's would. roslaunch brings up its own master on a private port.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from coordinator.graph import LOOPBACK, free_port
+from tests.conftest import DATA, ROOT
+
+GRIPPER = os.path.join(DATA, "gripper")
+IGNORE = shutil.ignore_patterns(".git", ".venv*", "build", "devel", "install", "*.egg-info", "__pycache__",
+                                ".pytest_cache", ".ruff_cache", "results")
+
+
+def _package_xml(name, export=""):
+    return ('<?xml version="1.0"?>\n<package format="3">\n  <name>%s</name>\n  <version>1.0.0</version>\n'
+            '  <description>test</description>\n  <maintainer email="t@example.org">t</maintainer>\n'
+            '  <license>MIT</license>\n  <buildtool_depend>catkin</buildtool_depend>\n'
+            '  <exec_depend>bmtree</exec_depend>\n  <export>%s</export>\n</package>\n' % (name, export))
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    if shutil.which("catkin_make") is None or shutil.which("rosrun") is None:
+        pytest.fail("catkin_make and rosrun are needed: `make setup` installs Debian's catkin and rosbash")
+    ws = tmp_path_factory.mktemp("catkin_ws")
+    shutil.copytree(ROOT, str(ws / "src" / "bmtree"), ignore=IGNORE, symlinks=True)
+    team = ws / "src" / "my_robot"
+    (team / "definitions").mkdir(parents=True)
+    (team / "nodes").mkdir()
+    shutil.copy(os.path.join(GRIPPER, "gripper.json"), str(team / "definitions"))
+    for f in ("gripper.py", "clumsy.py", "grasp.yaml"):
+        shutil.copy(os.path.join(GRIPPER, f), str(team / "nodes" / f))
+    (team / "package.xml").write_text(_package_xml("my_robot", '<bmtree definitions="definitions"/>'))
+    (team / "CMakeLists.txt").write_text("cmake_minimum_required(VERSION 3.10)\nproject(my_robot)\n"
+                                         "find_package(catkin REQUIRED)\ncatkin_package()\n")
+    env = dict(os.environ)
+    for k in ("CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH", "PYTHONPATH", "BMTREE_MODULE_PATH"):
+        env.pop(k, None)
+    env["PWD"] = str(ws)
+    out = subprocess.run(["catkin_make", "-C", str(ws), "-DPYTHON_EXECUTABLE=%s" % sys.executable], cwd=str(ws), env=env,
+                         capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    return ws
+
+
+class Shell:
+    """Commands in a shell that sourced the workspace, on a private master at ``port``."""
+
+    def __init__(self, ws, port):
+        self.ws = ws
+        self.port = port
+        self.home = str(ws / ("home-%d" % port))
+        self.procs = []
+
+    def env(self):
+        env = {k: v for k, v in os.environ.items() if k not in ("CMAKE_PREFIX_PATH", "ROS_PACKAGE_PATH", "PYTHONPATH",
+                                                                 "ROS_HOSTNAME", "BMTREE_MODULE_PATH")}
+        env.update(ROS_MASTER_URI="http://%s:%d/" % (LOOPBACK, self.port), ROS_IP=LOOPBACK, ROS_HOME=self.home, PWD=str(self.ws),
+                   PYTHONUNBUFFERED="1")
+        env.pop("ROS_LOG_DIR", None)
+        return env
+
+    def argv(self, command):
+        return ["bash", "-c", "source %s && exec %s" % (shlex.quote(str(self.ws / "devel" / "setup.bash")), command)]
+
+    def run(self, command, timeout=180):
+        return subprocess.run(self.argv(command), capture_output=True, text=True, timeout=timeout, env=self.env(),
+                              cwd=str(self.ws), stdin=subprocess.DEVNULL)
+
+    def start(self, command, name):
+        log = open(str(self.ws / ("%s-%d.out" % (name, self.port))), "w")
+        proc = subprocess.Popen(self.argv(command), stdout=log, stderr=subprocess.STDOUT, env=self.env(),
+                                cwd=str(self.ws), stdin=subprocess.DEVNULL, start_new_session=True)
+        proc.log_path = log.name
+        log.close()
+        self.procs.append(proc)
+        return proc
+
+    def wait_modules(self, *names, timeout=60.0):
+        from modules.discovery import live_modules
+
+        end = time.monotonic() + timeout
+        uri = self.env()["ROS_MASTER_URI"]
+        while True:
+            try:
+                live = set(live_modules(uri))
+            except OSError:
+                live = set()
+            if set(names) <= live:
+                return
+            for p in self.procs:
+                assert p.poll() is None, open(p.log_path).read()
+            assert time.monotonic() < end, "modules %s did not come up (live: %s)" % (names, sorted(live))
+            time.sleep(0.2)
+
+    def stop(self, p):
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGINT)  # roslaunch's own group, started by this test
+            try:
+                p.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait(10)
+        if p in self.procs:
+            self.procs.remove(p)
+
+    def close(self):
+        for p in reversed(list(self.procs)):
+            self.stop(p)
+
+
+@pytest.fixture
+def shell(workspace):
+    sh = Shell(workspace, free_port())
+    yield sh
+    sh.close()
+
+
+def test_rosrun_from_the_workspace(shell, workspace):
+    from coordinator import __version__
+
+    out = shell.run("rosrun bmtree bmtree --version")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "bmtree %s" % __version__
+    # the Python packages come from the workspace, and my_robot's exported definition is found
+    out = shell.run("rosrun bmtree bmtree modules")
+    assert out.returncode == 0, out.stderr
+    assert "src/bmtree/modules/sim/navigation.json" in out.stdout
+    assert "gripper  (src/my_robot/definitions/gripper.json)" in out.stdout
+    grasp = workspace / "src" / "my_robot" / "nodes" / "grasp.yaml"
+    out = shell.run("rosrun bmtree bmtree check %s" % grasp)
+    assert out.returncode == 0, out.stderr
+    for exe in ("bmtree-module", "bmtree-blackboard", "bmtree-sim"):
+        out = shell.run("rosrun bmtree %s --help" % exe)
+        assert out.returncode == 0 and out.stdout.startswith("usage: "), out.stdout + out.stderr
+
+
+def test_roslaunch_sim_modules_and_trees(shell, workspace):
+    team = workspace / "src" / "my_robot"
+    definition = team / "definitions" / "gripper.json"
+    launch = shell.start("roslaunch -p %d bmtree sim.launch" % shell.port, "sim")
+    shell.wait_modules("navigation", "vision", "speech")
+    gripper = shell.start("roslaunch bmtree module.launch module:=gripper definition:=%s class:=%s:Gripper" % (
+        definition, team / "nodes" / "gripper.py"), "gripper")
+    shell.wait_modules("gripper")
+    out = shell.run("rosrun bmtree bmtree run -q %s" % (team / "nodes" / "grasp.yaml"))
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "grasp_apple: SUCCESS" in out.stdout and "gripper.close" in out.stdout
+    # run.launch: the tree as a node, its options as private parameters
+    out = shell.run("roslaunch bmtree run.launch tree:=%s set:=object=apple call_timeout:=20" % (
+        workspace / "src" / "bmtree" / "trees" / "find_apple.yaml"))
+    assert "find_apple: SUCCESS" in out.stdout, out.stdout[-3000:] + out.stderr[-3000:]
+    assert launch.poll() is None
+
+    # a module whose method raises: the traceback reaches the module's screen and /rosout
+    shell.stop(gripper)
+    module = shell.start("roslaunch bmtree module.launch module:=gripper definition:=%s class:=%s:Gripper" % (
+        definition, team / "nodes" / "clumsy.py"), "clumsy")
+    shell.wait_modules("gripper")
+    out = shell.run("rosrun bmtree bmtree run -q %s" % (team / "nodes" / "grasp.yaml"))
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "ZeroDivisionError: float division by zero" in out.stdout  # the failure reason
+    end = time.monotonic() + 30
+    screen = rosout = ""
+    while time.monotonic() < end:
+        with open(module.log_path) as fh:
+            screen = fh.read()
+        logs = [os.path.join(d, f) for d, _, fs in os.walk(shell.home) for f in fs if f == "rosout.log"]
+        rosout = "".join(open(p).read() for p in logs)
+        if "Traceback" in screen and "ZeroDivisionError" in rosout:
+            break
+        time.sleep(0.2)
+    # the module's terminal (roslaunch screen output) shows where in the author's file it broke
+    assert "Traceback (most recent call last)" in screen and 'clumsy.py", line 7, in open' in screen, screen
+    # and /rosout has it (rosout.log is what the rosout node received, what rqt_console shows)
+    assert "gripper.open raised" in rosout and "ZeroDivisionError" in rosout, rosout[-3000:]
+
+
+CPP_TREE = """format: 1
+root:
+  sequence:
+    - call: gripper.set_fingers
+      inputs: {left: 0.01, right: 0.05}
+      outputs: {opening: gap}
+    - check: 'gap > 0.039'
+    - call: gripper.reach
+      inputs: {target: {x: 0.3, y: 0.4, z: 0.0}}
+      outputs: {distance: far}
+    - check: 'far > 0.49'
+"""
+
+
+def test_roslaunch_a_cpp_module_behind_the_bridge(shell, workspace):
+    """module.launch's C++ branch: the bridge and the workspace's C++ example, started together."""
+    definition = workspace / "src" / "bmtree" / "modules" / "cpp" / "example" / "gripper.json"
+    launch = shell.start("roslaunch -p %d bmtree module.launch module:=gripper definition:=%s cpp_pkg:=bmtree "
+                         "cpp_type:=gripper" % (shell.port, definition), "cpp")
+    shell.wait_modules("gripper")
+    tree = workspace / ("cpp-%d.yaml" % shell.port)
+    tree.write_text(CPP_TREE)
+    # --modules: the C++ gripper's definition replaces the team package's Python gripper of the same name
+    out = shell.run("rosrun bmtree bmtree run -q --modules %s %s" % (definition, tree))
+    assert out.returncode == 0, out.stdout + out.stderr + open(launch.log_path).read()[-3000:]
+    assert "gripper.set_fingers" in out.stdout and "gripper.reach" in out.stdout
+    assert launch.poll() is None

@@ -1,0 +1,287 @@
+"""C++ basic modules: the example built with bmtree's library, behind bmtree-bridge, driven by bmtree run."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.conftest import REFERENCE, ROOT
+from tests.integration.conftest import NODES, bmtree_cmd, wait_announced
+
+CPP = os.path.join(ROOT, "modules", "cpp")
+GRIPPER_JSON = os.path.join(CPP, "example", "gripper.json")
+SANITIZERS = "-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all"
+
+
+def _build(build_dir, *options):
+    """Configure and build modules/cpp (incremental: a second session rebuilds nothing)."""
+    for cmd in (["cmake", "-S", CPP, "-B", build_dir, "-DBMTREE_WERROR=ON", *options],
+                ["cmake", "--build", build_dir]):
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+        assert out.returncode == 0, "%s failed:\n%s%s" % (" ".join(cmd), out.stdout[-4000:], out.stderr[-4000:])
+    exe = os.path.join(build_dir, "gripper")
+    assert os.access(exe, os.X_OK)
+    return exe
+
+
+@pytest.fixture(scope="session")
+def gripper_exe():
+    """The example module, -O2, -Wall -Wextra -Wpedantic -Werror."""
+    return _build(os.path.join(ROOT, "build", "cpp"), "-DCMAKE_BUILD_TYPE=Release")
+
+
+@pytest.fixture(scope="session")
+def gripper_asan_exe():
+    return _build(os.path.join(ROOT, "build", "cpp-asan"), "-DCMAKE_BUILD_TYPE=None", "-DCMAKE_CXX_FLAGS=" + SANITIZERS)
+
+
+def start_gripper(ros_graph, exe, env=None):
+    cpp = ros_graph.start_node([exe], "/gripper", env=env)
+    bridge = ros_graph.start_node(["-m", "modules.bridge", "--definition", GRIPPER_JSON], "/gripper_bridge")
+    wait_announced("gripper")
+    return cpp, bridge
+
+
+@pytest.fixture
+def gripper(ros_graph, gripper_exe):
+    return start_gripper(ros_graph, gripper_exe)
+
+
+def gripper_caller(caller_factory):
+    """A Caller that the bridge answers: pings until one is answered (a connection the probe's
+    publisher holds to an earlier test's node of the same name may swallow the first call)."""
+    from modules.definition import load_definition
+
+    caller = caller_factory()
+    ping = load_definition(GRIPPER_JSON).function("ping")
+    end = time.monotonic() + 30
+    while True:
+        call = ping.build_call({})
+        caller.send(call)
+        try:
+            caller.result(call.call_id, timeout=1.0)
+            return caller
+        except AssertionError:
+            assert time.monotonic() < end, "bmtree-bridge never answered a ping"
+
+
+def run(*args, timeout=120):
+    return subprocess.run(bmtree_cmd(*args), capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ), stdin=subprocess.DEVNULL)
+
+
+def call_lines(stdout):
+    return [line for line in stdout.splitlines() if line.startswith("  +")]
+
+
+ALL_FUNCTIONS = """format: 1
+root:
+  sequence:
+    - call: gripper.set_fingers
+      inputs: {left: 0.02, right: 0.07}
+      outputs: {opening: opening}
+    - check: 'opening > 0.0499 and opening < 0.0501'
+    - call: gripper.reach
+      inputs: {target: {x: 0.3, y: -0.1, z: 0.5}}
+      outputs: {final_pos: at, distance: d}
+    - check: 'at.x == 0.3 and at.y == -0.1 and at.z == 0.5 and d > 0.59 and d < 0.6'
+    - call: gripper.squeeze
+      inputs: {seconds: 0.0, label: tag}
+      outputs: {label: echoed}
+    - check: 'echoed == "tag"'
+    - call: gripper.ping
+    - force_success:
+        call: gripper.set_fingers
+        name: crossed fingers
+        inputs: {left: 0.07, right: 0.02}
+    - force_success:
+        call: gripper.reach
+        name: too far
+        inputs: {target: {x: 2.0, y: 0.0, z: 0.0}}
+"""
+
+
+def test_cpp_module_through_the_bridge(gripper, tmp_path):
+    tree = tmp_path / "all.yaml"
+    tree.write_text(ALL_FUNCTIONS)
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert [line.split()[3] for line in lines[:4]] == ["succeeded"] * 4, out.stdout
+    assert "failed" in lines[4] and "the left finger must stay left of the right one" in lines[4]
+    assert "rejected" in lines[5] and "out of reach" in lines[5]
+    live = run("modules", "--live")
+    assert "gripper  (node /gripper_bridge)" in live.stdout
+    assert "set_fingers(left: std_msgs/Float64, right: std_msgs/Float64)" in live.stdout
+
+
+def test_two_inputs_of_one_type_keep_their_values(gripper, caller_factory, tmp_path):
+    """left and right travel on the same data topic (/gripper/float64): the order decides."""
+    from modules.definition import load_definition
+
+    defs = {"gripper": load_definition(GRIPPER_JSON)}
+    caller = gripper_caller(caller_factory)
+    for left, right in ((0.01, 0.09), (0.03, 0.04), (-0.2, 0.2)):
+        res = caller.call(defs, "gripper.set_fingers", left=left, right=right)
+        assert res.status == "succeeded", res.error
+        assert res.values["opening"].data == pytest.approx(right - left)
+    res = caller.call(defs, "gripper.squeeze", seconds=0.0, label="one")
+    assert (res.values["closed_for"].data, res.values["label"].data) == (0.0, "one")
+
+
+def test_unknown_function_and_bad_inputs_are_rejected_before_the_cpp_node(gripper, caller_factory, ros_probe):
+    from comm import FunctionCall
+
+    caller = gripper_caller(caller_factory)
+    bm_input = ros_probe.collect("/gripper/BM_input", publishers=1)   # connected to the bridge
+    try:
+        caller.send(FunctionCall("gripper", "dance", call_id="c-dance"))
+        res = caller.result("c-dance")
+        assert res.status == "rejected" and "module 'gripper' has no function 'dance'" in res.error
+        caller.send(json.dumps({"basic_mod": "gripper", "function": "set_fingers", "call_id": "c-bad",
+                                "names": ["left", "right"], "rostypes": ["std_msgs/String", "std_msgs/Float64"],
+                                "msgs": ['{"data": "x"}', '{"data": 1.0}']}))
+        res = caller.result("c-bad")
+        assert res.status == "rejected" and "bad inputs" in res.error and "std_msgs/String" in res.error
+        assert bm_input.items == []
+    finally:
+        ros_probe.close_collector(bm_input)
+
+
+def test_a_call_while_one_runs_is_rejected_busy(gripper, caller_factory):
+    from modules.definition import load_definition
+
+    d = load_definition(GRIPPER_JSON)
+    caller = gripper_caller(caller_factory)
+    slow = d.function("squeeze").build_call({"seconds": 1.0, "label": "slow"})
+    caller.send(slow)
+    bm_busy = d.function("set_fingers").build_call({"left": 0.0, "right": 0.01})
+    caller.send(bm_busy)
+    res = caller.result(bm_busy.call_id)
+    assert res.status == "rejected" and "busy with call %s (squeeze)" % slow.call_id in res.error
+    res = caller.result(slow.call_id, timeout=20)
+    assert res.status == "succeeded" and res.values["label"].data == "slow"
+
+
+def test_cpp_node_killed_mid_call_fails_within_the_call_timeout(ros_graph, gripper_exe, ros_probe, tmp_path):
+    cpp, _bridge = start_gripper(ros_graph, gripper_exe)
+    tree = tmp_path / "killed.yaml"
+    tree.write_text("format: 1\nroot:\n  call: gripper.squeeze\n  inputs: {seconds: 50.0, label: long}\n"
+                    "  timeout: 25\n")
+    calls = ros_probe.collect("/gripper/BM_input", publishers=1)   # the bridge's call to the C++ node
+    proc = subprocess.Popen(bmtree_cmd("run", str(tree), "-q"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=dict(os.environ))
+    try:
+        calls.wait_for(lambda t: '"squeeze"' in t, 60)
+        t0 = time.monotonic()
+        ros_graph.kill_node(cpp)
+        out, err = proc.communicate(timeout=60)
+        elapsed = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        ros_probe.close_collector(calls)
+    assert proc.returncode == 1, out + err
+    line = call_lines(out)[0]
+    assert "failed" in line and "the C++ node /gripper exited during the call" in line, out
+    assert elapsed < 25  # answered by the bridge, not by the tree's 25 s timeout
+
+
+def test_a_halted_calls_late_answer_is_not_taken_for_the_next_call(gripper, tmp_path):
+    tree = tmp_path / "late.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: gripper.squeeze
+        name: first
+        inputs: {seconds: 1.5, label: first}
+        outputs: {label: wrong}
+        timeout: 0.3
+    - force_success:
+        call: gripper.set_fingers
+        name: while busy
+        inputs: {left: 0.0, right: 0.01}
+    - retry: 100
+      child:
+        sequence:
+          - wait: 0.1
+          - call: gripper.squeeze
+            name: second
+            inputs: {seconds: 0.1, label: second}
+            outputs: {label: got, closed_for: secs}
+    - check: 'got == "second" and secs == 0.1'
+""")
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "timeout" in lines[0] or "halted" in lines[0], lines
+    assert "rejected" in lines[1] and "busy with call" in lines[1], lines
+    assert "succeeded" in lines[-1] and all("squeeze" in line for line in lines[2:]), lines
+
+
+def test_original_cpp_module_runs_unchanged_behind_the_bridge(ros_graph, tmp_path):
+    """DEMO_BM as the original C++ node behaves (last value per topic, no call ids, silence for
+    unknown functions): the bridge speaks its protocol with an input gap."""
+    ros_graph.start_node([sys.executable, os.path.join(NODES, "original_cpp_demo_bm.py")], "/DEMO_BM")
+    definition = os.path.join(REFERENCE, "DEMO_BM.json")
+    ros_graph.start_node(["-m", "modules.bridge", "--definition", definition], "/DEMO_BM_bridge")
+    wait_announced("DEMO_BM")
+    tree = tmp_path / "demo.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - call: DEMO_BM.functionA
+      inputs: {Aviso: hola, Bandera: true}
+      outputs: {status: s1}
+    - call: DEMO_BM.functionB
+      inputs: {LSB: true, Contexto: invert}
+      outputs: {flag: f}
+    - call: DEMO_BM.functionA
+      inputs: {Aviso: adios, Bandera: false}
+      outputs: {status: s2}
+    - check: 's1 == "hola:si" and f == False and s2 == "adios:no"'
+""")
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert len([line for line in call_lines(out.stdout) if "succeeded" in line]) == 3
+
+
+def test_bridge_without_its_cpp_node_says_what_is_missing(ros_master):
+    out = subprocess.run([sys.executable, "-m", "modules.bridge", "--definition", GRIPPER_JSON, "--wait", "0.5",
+                          "__name:=lonely_bridge"], capture_output=True, text=True, timeout=60,
+                         env=dict(os.environ, ROS_IP="127.0.0.1"))
+    assert out.returncode == 3, out.stdout + out.stderr
+    assert "the C++ node of module 'gripper' is not ready after 0.5s: no node subscribes /gripper/BM_input" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def test_example_runs_clean_under_address_and_undefined_sanitizers(ros_graph, gripper_asan_exe, tmp_path):
+    cpp, _bridge = start_gripper(ros_graph, gripper_asan_exe,
+                                 env={"ASAN_OPTIONS": "detect_leaks=1",
+                                      "UBSAN_OPTIONS": "print_stacktrace=1"})
+    tree = tmp_path / "all.yaml"
+    tree.write_text(ALL_FUNCTIONS)
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    cpp.send_signal(signal.SIGINT)
+    assert cpp.wait(30) == 0
+    ros_graph.nodes.remove(cpp)
+    with open(os.path.join(ros_graph.ros_home, "gripper.out"), errors="replace") as fh:
+        log = fh.read()
+    assert "AddressSanitizer" not in log and "runtime error" not in log, log[-4000:]
+
+
+def test_modules_cpp_is_also_a_catkin_package(tmp_path):
+    """Configured as catkin configures a package of a workspace; it exports the library's headers."""
+    build = tmp_path / "build"
+    out = subprocess.run(["cmake", "-S", CPP, "-B", str(build), "-DCATKIN_DEVEL_PREFIX=%s" % (tmp_path / "devel"),
+                          "-DPYTHON_EXECUTABLE=/usr/bin/python3"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    config = tmp_path / "devel" / "share" / "bmtree_cpp" / "cmake" / "bmtree_cppConfig.cmake"
+    assert os.path.join(CPP, "include") in config.read_text()

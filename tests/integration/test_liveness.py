@@ -1,0 +1,107 @@
+"""A module or Blackboard killed with SIGKILL mid-call is noticed long before the call's timeout."""
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import time
+
+from comm import BlackboardRequest, FunctionResult
+from coordinator.liveness import BlackboardLost, ModuleLost
+from coordinator.ros_transport import RosTransport
+from tests.integration.conftest import bmtree_cmd
+from tests.integration.faultkit import FULL, PROBE_JSON, figure, probe_def, scale, start_probe, wait_item
+
+
+def _transport():
+    items: queue.Queue = queue.Queue()
+    transport = RosTransport(liveness=0.25)
+    transport.connect(items.put)
+    return transport, items
+
+
+def _ready(transport, items, echo):
+    """Until the module answers (the preflight's connection counts may include a killed node's)."""
+    for n in range(40):
+        ping = echo.build_call({"tag": "ready %d" % n})
+        transport.send_call(ping)
+        if wait_item(items, lambda r, c=ping.call_id: getattr(r, "call_id", None) == c, 0.5):
+            return
+    raise AssertionError("the module never answered")
+
+
+def test_killed_module_fails_its_calls_as_module_lost_and_a_restarted_one_answers(ros_graph):
+    fn = probe_def().function("work")
+    echo = probe_def().function("echo")
+    transport, items = _transport()
+    lost_after = []
+    try:
+        for i in range(scale(3, 20)):
+            proc = start_probe(ros_graph)
+            transport.wait_ready(["probe"], 20)
+            _ready(transport, items, echo)
+            call = fn.build_call({"seconds": 120.0, "tag": "slow %d" % i})
+            transport.send_call(call)
+            # the echo sent after it on the same connection proves the module took the call
+            after = echo.build_call({"tag": "after %d" % i})
+            transport.send_call(after)
+            assert wait_item(items, lambda r, c=after.call_id: getattr(r, "call_id", None) == c, 20)
+            killed = time.monotonic()
+            ros_graph.kill_node(proc)
+            lost = wait_item(items, lambda r: isinstance(r, ModuleLost), 60)
+            assert lost is not None, "the killed module's call was not reported lost"
+            lost_after.append(time.monotonic() - killed)
+            assert lost.module == "probe" and call.call_id in lost.call_ids and "stopped" in lost.reason
+        # restarted: the next call succeeds
+        start_probe(ros_graph)
+        transport.wait_ready(["probe"], 20)
+        _ready(transport, items, echo)
+        again = echo.build_call({"tag": "again"})
+        transport.send_call(again)
+        answer = wait_item(items, lambda r: isinstance(r, FunctionResult) and r.call_id == again.call_id, 20)
+        assert answer is not None and answer.status == "succeeded"
+    finally:
+        transport.close()
+    figure("module_lost after kill -9 (x%d)" % len(lost_after), lost_after)
+    if FULL:
+        assert max(lost_after) <= 2.0, lost_after
+
+
+def test_killed_blackboard_fails_an_open_request(ros_graph, tmp_path):
+    transport, items = _transport()
+    try:
+        bb = ros_graph.start_node(["-m", "blackboard.node", "--db", str(tmp_path / "bb.sqlite")], "/blackboard")
+        transport.wait_ready([], 20, blackboard=True)
+        # 'after' names a call the Blackboard never saw: it holds the request back for a while
+        req = BlackboardRequest(var_names=["x"], after=["never-seen"])
+        transport.send_request(req)
+        killed = time.monotonic()
+        ros_graph.kill_node(bb)
+        lost = wait_item(items, lambda r: isinstance(r, (BlackboardLost,)) or getattr(r, "request_id", 0) == req.request_id, 30)
+        took = time.monotonic() - killed
+    finally:
+        transport.close()
+    assert isinstance(lost, BlackboardLost), lost
+    assert req.request_id in lost.request_ids
+    figure("blackboard lost after kill -9", [took])
+
+
+def test_a_run_reports_module_lost_long_before_the_call_timeout(ros_graph, tmp_path):
+    proc = start_probe(ros_graph)
+    tree = tmp_path / "slow.yaml"
+    tree.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: 100.0, tag: x}\n  timeout: 100\n")
+    run = subprocess.Popen(bmtree_cmd("run", str(tree), "--modules", PROBE_JSON), stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    try:
+        for line in run.stdout:
+            if "RUNNING" in line and "probe.work" in line:
+                break
+        ros_graph.kill_node(proc)
+        out, _ = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.send_signal(signal.SIGINT)
+            run.wait(10)
+    assert run.returncode == 1, out
+    assert "module_lost" in out and "module probe lost" in out, out

@@ -1,0 +1,115 @@
+"""kill -9 of rosmaster and a restart on the same port: every bmtree node registers again.
+
+These tests use their own master (the session's must not die), so the coordinator runs as
+``bmtree run`` processes against it.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import xmlrpc.client
+
+import pytest
+
+from coordinator.graph import RosGraph
+from tests.integration.faultkit import FULL, PROBE_CLASS, PROBE_JSON, figure, scale
+
+NODES_EXPECTED = {
+    ("pub", "/blackboard/output", "/blackboard"),
+    ("sub", "/function/output", "/blackboard"),
+    ("sub", "/master/output", "/bm_probe"),
+    ("pub", "/function/output", "/bm_probe"),
+}
+
+
+@pytest.fixture
+def own_graph(tmp_path):
+    graph = RosGraph(str(tmp_path / "ros"))
+    graph.start_master()
+    try:
+        yield graph
+    finally:
+        graph.close()
+
+
+def _restart_master(graph):
+    """SIGKILL the master and start a new one on the same port (the nodes keep their URI)."""
+    graph.master.send_signal(signal.SIGKILL)
+    graph.master.wait(5)
+    port = graph.uri.rstrip("/").rsplit(":", 1)[1]
+    log = open(os.path.join(graph.ros_home, "rosmaster2.out"), "ab")
+    graph._logs.append(log)
+    graph.master = subprocess.Popen([shutil.which("rosmaster"), "--core", "-p", port, "-w", "3"], env=graph.env,
+                                    stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                    start_new_session=True)
+    master = xmlrpc.client.ServerProxy(graph.uri)
+    end = time.monotonic() + 20
+    while True:
+        try:
+            if master.getPid("/t")[0] == 1:
+                return
+        except OSError:
+            pass
+        assert time.monotonic() < end, "rosmaster did not restart"
+        time.sleep(0.02)
+
+
+def _registered(graph):
+    master = xmlrpc.client.ServerProxy(graph.uri)
+    _, _, (pubs, subs, _) = master.getSystemState("/t")
+    have = {("pub", t, n) for t, ns in pubs for n in ns} | {("sub", t, n) for t, ns in subs for n in ns}
+    code, _, value = master.getParam("/t", "/bmtree/modules/probe")
+    return NODES_EXPECTED <= have and code == 1 and value.get("node") == "/bm_probe"
+
+
+def _wait_registered(graph, timeout=30.0):
+    end = time.monotonic() + timeout
+    while not _registered(graph):
+        assert time.monotonic() < end, "nodes did not register again with the restarted master"
+        time.sleep(0.02)
+
+
+def _run(graph, tree, quiet=True):
+    return subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "--modules", PROBE_JSON]
+                            + (["-q"] if quiet else []),
+                            env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def test_nodes_register_again_after_a_master_restart_and_runs_go_on(own_graph, tmp_path):
+    graph = own_graph
+    graph.start_node(["-m", "blackboard.node", "--db", str(tmp_path / "bb.sqlite")], "/blackboard")
+    graph.start_node(["-m", "modules.node", "--definition", PROBE_JSON, "--class", PROBE_CLASS], "/bm_probe")
+    _wait_registered(graph)
+    quick = tmp_path / "quick.yaml"
+    quick.write_text("format: 1\nroot:\n  sequence:\n    - call: probe.echo\n      inputs: {tag: hello}\n"
+                     "    - recall: {said: tag}\n    - check: 'said == \"hello\"'\n")
+    slow = tmp_path / "slow.yaml"
+    slow.write_text("format: 1\nroot:\n  sequence:\n    - call: probe.work\n      inputs: {seconds: 3.0, tag: a}\n"
+                    "    - call: probe.echo\n      inputs: {tag: b}\n")
+    took = []
+    for i in range(scale(1, 5)):
+        in_flight = _run(graph, slow, quiet=False) if i == 0 else None
+        seen = []
+        if in_flight is not None:  # restart while a call of this run is in flight
+            for line in in_flight.stdout:
+                seen.append(line)
+                if "RUNNING" in line and "probe.work" in line:
+                    break
+        _restart_master(graph)
+        restarted = time.monotonic()
+        _wait_registered(graph)
+        took.append(time.monotonic() - restarted)
+        if in_flight is not None:
+            out, _ = in_flight.communicate(timeout=60)
+            assert in_flight.returncode == 0, "".join(seen) + out
+        run = _run(graph, quick)
+        out, _ = run.communicate(timeout=60)
+        assert run.returncode == 0, out
+    figure("re-registered after master restart (x%d)" % len(took), took)
+    if FULL:
+        assert max(took) <= 5.0, took
+

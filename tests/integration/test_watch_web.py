@@ -1,0 +1,109 @@
+"""The web view in a real browser: headless Debian chromium driven by selenium, watching a
+``bmtree run --sim`` on a slow world as it progresses, then the recorded run with its timeline.
+
+Set BMTREE_SCREENSHOTS=DIR to keep the screenshots (docs/watch-web.png comes from here)."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+
+from tests.integration.conftest import bmtree_cmd
+from tests.integration.watchkit import LONG_TREE, Lines, SimRun, slow_world
+
+
+def browser(tmp_path):
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+    for a in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
+              "--disable-background-networking", "--disable-component-update", "--disable-sync",
+              "--window-size=1600,1000", "--user-data-dir=%s" % (tmp_path / "chromium")):
+        opts.add_argument(a)
+    return webdriver.Chrome(service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"), options=opts)
+
+
+def wait_until(driver, check, timeout=90):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    return WebDriverWait(driver, timeout, poll_frequency=0.2).until(lambda d: check(d))
+
+
+def node_status(driver, name):
+    found = driver.execute_script(
+        "const g=[...document.querySelectorAll('#tree g.node')].find(e=>e.dataset.name===arguments[0]);"
+        "return g ? g.dataset.status : null;", name)
+    return found
+
+
+def text(driver, element_id):
+    """What an element shows (its text, also when it is scrolled out of view)."""
+    return driver.execute_script("return document.getElementById(arguments[0]).textContent", element_id)
+
+
+def keep(driver, tmp_path, name):
+    path = str(tmp_path / name)
+    driver.save_screenshot(path)
+    where = os.environ.get("BMTREE_SCREENSHOTS")
+    if where:
+        shutil.copy(path, os.path.join(where, name))
+    with open(path, "rb") as fh:
+        assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def start_web(*args, env):
+    proc = subprocess.Popen(bmtree_cmd(*args, "--port", "0"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, text=True, env=env)
+    out = Lines(proc.stdout)
+    url = out.wait_for("page at http://").split("page at ", 1)[1].split()[0]
+    return proc, out, url
+
+
+def stop(proc):
+    if proc.poll() is None:
+        proc.terminate()
+        proc.wait(30)
+
+
+def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
+    driver = browser(tmp_path)  # first: its start-up is slow, the trip is not endless
+    run = SimRun(tmp_path, tree=LONG_TREE, world=slow_world(tmp_path, speed=0.3))
+    web = None
+    try:
+        run.out.wait_for("RUNNING   go to the kitchen")
+        web, _out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
+        driver.get(url)
+        wait_until(driver, lambda d: node_status(d, "go to the kitchen") == "RUNNING")
+        assert text(driver, "title") == "long_errand"
+        assert node_status(driver, "before 8") == "SUCCESS" and node_status(driver, "after 1") == "IDLE"
+        wait_until(driver, lambda d: "navigation.go_to" in text(d, "pending"))
+        assert "/ 30s" in text(driver, "pending")
+        assert driver.find_elements("css selector", "path.edge.RUNNING")  # the running path is drawn
+        assert "speech.say" in text(driver, "calls")
+        keep(driver, tmp_path, "watch-web.png")
+        # the page follows the run to its end without a reload
+        wait_until(driver, lambda d: "result: SUCCESS" in text(d, "result"), timeout=150)
+        assert node_status(driver, "after 8") == "SUCCESS" and node_status(driver, "long errand") == "SUCCESS"
+        assert "none" == text(driver, "pending")
+        assert run.finish() == 0, run.out.text()
+        stop(web)
+
+        env = dict(run.env)
+        web, _out, url = start_web("replay", "last", "--web", env=env)
+        driver.get(url)
+        wait_until(driver, lambda d: d.find_element("id", "timeline").is_displayed())
+        assert "result: SUCCESS" in text(driver, "result")
+        driver.execute_script("const s=document.getElementById('scrub'); s.value=s.max/2;"
+                              "s.dispatchEvent(new Event('input'));")
+        wait_until(driver, lambda d: node_status(d, "go to the kitchen") == "RUNNING")
+        assert text(driver, "result") == ""
+        assert node_status(driver, "after 1") == "IDLE"
+        assert "navigation.go_to" in text(driver, "pending")
+        keep(driver, tmp_path, "replay-web.png")
+    finally:
+        driver.quit()
+        if web is not None:
+            stop(web)
+        run.close()

@@ -1,0 +1,35 @@
+"""``bmtree run --sim --module DEF=FILE:CLASS``: the user's module beside the simulated robot."""
+from __future__ import annotations
+
+import os
+import subprocess
+
+from tests.conftest import DATA
+from tests.integration.conftest import bmtree_cmd
+
+GRIPPER = os.path.join(DATA, "gripper")
+
+
+def _run(*args):
+    return subprocess.run(bmtree_cmd("run", "--sim", "-q", *args), capture_output=True, text=True, timeout=180,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_your_module_runs_beside_the_simulated_ones():
+    out = _run("--module", "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"),
+                                              os.path.join(GRIPPER, "gripper.py")), os.path.join(GRIPPER, "grasp.yaml"))
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "gripper (yours)" in out.stdout and "grasp_apple: SUCCESS" in out.stdout
+    calls = [line.split()[2:4] for line in out.stdout.splitlines() if line.startswith("  +")]
+    assert calls == [["navigation.go_to", "succeeded"], ["gripper.open", "succeeded"],
+                     ["gripper.close", "succeeded"], ["speech.say", "succeeded"]]
+
+
+def test_your_module_with_a_parameter_that_is_not_an_input_is_exit_2():
+    out = _run("--module", "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"),
+                                              os.path.join(GRIPPER, "wrong_params.py")),
+               os.path.join(GRIPPER, "grasp.yaml"))
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "Traceback" not in out.stderr
+    assert "your module gripper exited with code 2" in out.stderr
+    assert "parameter 'size' is not an input; input 'width' has no parameter" in out.stderr

@@ -1,0 +1,86 @@
+"""bmtree-bridge without ROS: topic naming, output matching, binding, command-line errors."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+from std_msgs.msg import Bool, Float64
+
+from modules.bridge import CppBridge, _Call, data_topic, data_topics, main, make_bridge
+from modules.definition import DefinitionError, load_definition
+from modules.runtime import Failure, ModuleServer, Rejected
+from tests.conftest import REFERENCE, ROOT
+
+GRIPPER = os.path.join(ROOT, "modules", "cpp", "example", "gripper.json")
+
+
+def test_data_topics_follow_the_original_naming():
+    assert data_topic("DEMO_BM", "std_msgs/String") == "/DEMO_BM/string"
+    assert data_topic("gripper", "geometry_msgs/Point") == "/gripper/point"
+    ins, outs = data_topics(load_definition(os.path.join(REFERENCE, "DEMO_BM.json")))
+    assert ins == {"/DEMO_BM/string": "std_msgs/String", "/DEMO_BM/bool": "std_msgs/Bool"}
+    assert outs == ins
+
+
+def test_two_types_sharing_a_data_topic_are_a_definition_error():
+    # no two message packages installed here share a type name: build the model directly
+    from modules.definition import FunctionDefinition, ModuleDefinition, Param
+
+    fns = {"f": FunctionDefinition(name="f", inputs=(Param("a", "std_msgs/Header"),), outputs=(), module="m"),
+           "g": FunctionDefinition(name="g", inputs=(), outputs=(Param("b", "other_msgs/Header"),), module="m")}
+    with pytest.raises(DefinitionError, match="types std_msgs/Header and other_msgs/Header would share the data "
+                                              "topic /m/header"):
+        data_topics(ModuleDefinition(name="m", functions=fns, source="m.json"))
+
+
+def test_the_runtime_binds_one_method_per_function():
+    d = load_definition(GRIPPER)
+    bridge = make_bridge(d)
+    ModuleServer(d, bridge, lambda t: None, lambda t: None)   # raises BindingError on a mismatch
+    assert isinstance(bridge, CppBridge) and callable(bridge.set_fingers)
+
+
+def _answered(fn, output, fresh):
+    call = _Call(fn, sorted(fresh))
+    call.fresh.update(fresh)
+    call.output = output
+    return call
+
+
+def test_outputs_are_matched_by_occurrence_and_checked():
+    d = load_definition(GRIPPER)
+    bridge = make_bridge(d)
+    ModuleServer(d, bridge, lambda t: None, lambda t: None)
+    fn = d.function("set_fingers")
+    call = _answered(fn, {"outparam_names": ["opening", "success"],
+                          "outparam_topics": ["/gripper/float64", "/gripper/bool"]},
+                     {"/gripper/float64": [Float64(0.05)], "/gripper/bool": [Bool(True)]})
+    assert bridge._lacking(call) == []
+    out = bridge._outputs(call)
+    assert out["opening"].data == 0.05 and out["success"].data is True
+    squeeze = d.function("squeeze")
+    call = _answered(squeeze, {"outparam_names": ["closed_for", "label"],
+                               "outparam_topics": ["/gripper/float64", "/gripper/float64"]},
+                     {"/gripper/float64": [Float64(1.0)], "/gripper/string": []})
+    assert bridge._lacking(call) == ["1 of 2 values arrived on /gripper/float64"]
+    with pytest.raises(Failure, match="output 'label' came on /gripper/float64, its type's topic is /gripper/string"):
+        bridge._outputs(call)
+    with pytest.raises(Failure, match="missing output 'success'"):
+        bridge._outputs(_answered(fn, {"outparam_names": ["opening"], "outparam_topics": ["/gripper/float64"]},
+                                  {"/gripper/float64": [Float64(0.05)], "/gripper/bool": []}))
+    with pytest.raises(Failure, match="malformed BM_output"):
+        bridge._outputs(_answered(fn, {"outparam_names": "opening"}, {}))
+    with pytest.raises(Rejected, match="out of reach"):
+        bridge._outputs(_answered(fn, {"status": "rejected", "error": "out of reach"}, {}))
+    with pytest.raises(Failure, match="not calibrated"):
+        bridge._outputs(_answered(fn, {"status": "failed", "error": "not calibrated"}, {}))
+
+
+def test_command_line_errors_exit_2_without_a_traceback(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"Basic Module": "m"}))
+    assert main(["bmtree-bridge", "--definition", str(bad)]) == 2
+    assert "Functions" in capsys.readouterr().err
+    assert main(["bmtree-bridge", "--definition", GRIPPER, "--call-timeout", "-1"]) == 2
+    assert "--call-timeout must not be negative" in capsys.readouterr().err

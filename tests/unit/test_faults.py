@@ -1,0 +1,306 @@
+"""Fault handling without ROS: hostile input at every boundary, correlation checks, lost modules."""
+from __future__ import annotations
+
+import json
+import sys
+import threading
+
+import pytest
+from std_msgs.msg import String
+
+from blackboard.service import BlackboardService
+from blackboard.store import Store
+from comm import BlackboardAnswer, BlackboardRequest, FunctionCall, FunctionResult, ProtocolError
+from comm.limits import check_depth
+from comm.messages import load_payload
+from comm.rostypes import resolve_type
+from coordinator.cli import main as bmtree
+from coordinator.clock import SimClock
+from coordinator.context import RunContext
+from coordinator.liveness import BlackboardLost, ModuleLost
+from coordinator.transport import Transport
+from modules.definition import DefinitionError, load_definition, parse_definition
+from modules.runtime import BasicModule, ModuleServer
+
+DEF = {"Basic Module": "probe", "Brief Description": "", "Hardware Required": [], "Functions": [
+    {"Name": "echo", "Exec-condition": "", "Description": "", "Concurrent": True,
+     "Input-params": [{"Name": "tag", "Data-type": "std_msgs/String", "Description": ""}],
+     "Output-params": [{"Name": "tag", "Data-type": "std_msgs/String", "Description": ""}]},
+    {"Name": "other", "Exec-condition": "", "Description": "", "Input-params": [], "Output-params": []}]}
+
+
+@pytest.fixture
+def probe():
+    return parse_definition(json.loads(json.dumps(DEF)), "probe.json")
+
+
+# comm -------------------------------------------------------------------------------------
+def test_depth_is_checked_before_parsing():
+    check_depth("[" * 100 + "]" * 100)
+    check_depth('["' + "[" * 5000 + '"]')  # brackets inside strings do not count
+    with pytest.raises(ProtocolError, match="nested deeper than 100"):
+        check_depth("[" * 10000 + "]" * 10000)
+    with pytest.raises(ProtocolError, match="nested deeper"):
+        load_payload('{"a": %s}' % ("[" * 10000 + "]" * 10000))
+
+
+def test_lone_surrogates_are_refused_and_pairs_accepted():
+    with pytest.raises(ProtocolError, match="lone surrogate"):
+        load_payload('{"names": ["\\ud800"]}')
+    assert load_payload('{"x": "\\ud83d\\ude00"}') == {"x": "\U0001F600"}
+
+
+@pytest.mark.parametrize("name", ["this/Zen", "antigravity/X", "os/path", "json/decoder", "std_msgs/Nope",
+                                  "../x/Y", "std_msgs/String\x00", "a" * 500 + "/B", "std_msgs/__init__"])
+def test_type_names_never_import_anything(name):
+    before = set(sys.modules)
+    assert resolve_type(name) is None
+    assert set(sys.modules) - before == set()
+
+
+def test_values_that_break_the_converter_are_protocol_errors():
+    for text in ['{"data": %s}' % ("9" * 400), '{"data": 1e999}', "[" * 5000 + "]" * 5000]:
+        with pytest.raises(ProtocolError):
+            FunctionCall.decode(json.dumps({"basic_mod": "m", "function": "f", "rostypes": ["std_msgs/Int32"],
+                                            "msgs": [text]}))
+
+
+# module runtime ----------------------------------------------------------------------------
+class Probe(BasicModule):
+    concurrent = True
+
+    def echo(self, tag):
+        return {"tag": tag}
+
+    def other(self):
+        return {}
+
+
+def test_a_deep_call_gets_a_rejected_answer(probe):
+    out = []
+    server = ModuleServer(probe, Probe(), out.append, lambda t: None)
+    server.handle_call('{"basic_mod": "probe", "function": "echo", "call_id": "c1", "msgs": %s}'
+                       % ("[" * 10000 + "]" * 10000))
+    server.handle_call(json.dumps({"basic_mod": "probe", "function": "echo", "call_id": "c2", "names": ["tag"],
+                                   "rostypes": ["std_msgs/String"], "msgs": ["[" * 10000 + "]" * 10000]}))
+    server.handle_call('{"basic_mod": "probe", "function": "echo", "call_id": "c3", "x": "%s"}' % ("y" * (2 << 20)))
+    got = {r.call_id: r for r in map(FunctionResult.decode, out)}
+    assert set(got) == {"c1", "c2", "c3"}
+    assert all(r.status == "rejected" for r in got.values())
+    assert "nested deeper" in got["c1"].error and "exceeds the limit" in got["c3"].error
+
+
+def test_garbage_cancels_never_raise(probe):
+    server = ModuleServer(probe, Probe(), lambda t: None, lambda t: None)
+    for text in ["", "[" * 10000, '{"call_id": ["x"]}', b"\xff", None, 5, '{"call_id": "\\ud800"}']:
+        server.handle_cancel(text)
+        server.handle_call(text)
+
+
+# blackboard --------------------------------------------------------------------------------
+@pytest.fixture
+def bb(tmp_path):
+    answers, acks = [], []
+    store = Store(str(tmp_path / "bb.sqlite"))
+    svc = BlackboardService(store, answers.append, acks.append, after_wait=0.5)
+    yield svc, answers, acks
+    svc.stop()
+    store.close()
+
+
+def _result(call_id, name="v", value="x"):
+    return FunctionResult([name], [String(value)], call_id=call_id, basic_mod="m", function="f").encode()
+
+
+def test_a_bad_row_does_not_cost_its_neighbours(bb, monkeypatch):
+    svc, answers, acks = bb
+    real_add = svc.store.add
+
+    def add(rows):  # what SQLite does with a text it cannot encode
+        if any(r[0] == "bad" for r in rows):
+            raise UnicodeEncodeError("utf-8", "\ud800", 0, 1, "surrogates not allowed")
+        return real_add(rows)
+
+    monkeypatch.setattr(svc.store, "add", add)
+    svc._handle([(0, _result("a"), 1.0), (0, _result("b", name="bad"), 1.0), (0, _result("c"), 1.0)])
+    assert json.loads(acks[-1])["call_ids"] == ["a", "c"]
+    assert svc.store.has_call("a") and svc.store.has_call("c") and not svc.store.has_call("b")
+
+
+def test_deep_and_hostile_input_keeps_the_writer_alive(bb):
+    svc, answers, acks = bb
+    for text in ['{"names": %s}' % ("[" * 10000 + "]" * 10000), '{"names": ["\\ud800"], "rostypes": [], "msgs": []}',
+                 json.dumps({"names": ["v"], "rostypes": ["this/Zen"], "msgs": ["{}"]})]:
+        svc.on_result(text)
+    for text in ["[" * 10000, '{"var_names": ["v"], "history": 1e400, "request_id": "h"}',
+                 '{"var_names": ["v"], "history": %s, "request_id": "h2"}' % ("9" * 50)]:
+        svc.on_request(text)
+    svc.on_result(_result("good"))
+    req = BlackboardRequest(var_names=["v"])
+    svc.on_request(req.encode())
+    assert svc.flush()
+    last = BlackboardAnswer.decode(answers[-1])
+    assert last.request_id == req.request_id and last.values["v"].data == "x"
+    assert {json.loads(a)["request_id"] for a in answers[:-1]} == {"h", "h2"}  # bad requests answered too
+
+
+def test_a_request_waits_for_the_results_it_names(bb):
+    svc, answers, acks = bb
+    req = BlackboardRequest(var_names=["v"], after=["late"])
+    svc.on_request(req.encode())
+    assert svc.flush() and answers == []  # held back: 'late' is not stored yet
+    svc.on_result(_result("late", value="fresh"))
+    assert svc.flush()
+    done = threading.Event()
+    for _ in range(100):
+        if answers:
+            break
+        done.wait(0.01)
+    ans = BlackboardAnswer.decode(answers[-1])
+    assert ans.request_id == req.request_id and ans.values["v"].data == "fresh"
+    # a result that never comes: answered with what is there after the bounded wait
+    svc.on_request(BlackboardRequest(var_names=["v"], after=["never"], request_id="n").encode())
+    for _ in range(500):
+        if len(answers) == 2:
+            break
+        done.wait(0.01)
+    assert json.loads(answers[-1])["request_id"] == "n"
+
+
+# coordinator -------------------------------------------------------------------------------
+class _Sent(Transport):
+    def __init__(self):
+        self.sent = []
+
+    def connect(self, deliver):
+        pass
+
+    def send_call(self, call):
+        self.sent.append(call)
+
+    def send_cancel(self, cancel):
+        self.sent.append(cancel)
+
+    def send_request(self, request):
+        self.sent.append(request)
+
+
+def test_results_must_match_the_calls_module_and_function(probe):
+    ctx = RunContext(_Sent(), SimClock(), {"probe": probe})
+    fn = probe.function("echo")
+    rec = ctx.start_call(fn, fn.build_call({"tag": "x"}, "id1"))
+    wrong = FunctionResult(call_id="id1", basic_mod="probe", function="other")
+    assert ctx.correlate(wrong) is None
+    assert ctx.correlate(FunctionResult(call_id="id1", basic_mod="other", function="echo")) is None
+    right = probe.function("echo").build_result({"tag": "x"}, "id1")
+    assert ctx.correlate(right) is rec
+
+
+def test_lost_modules_and_blackboards_end_what_waits_on_them(probe):
+    transport = _Sent()
+    ctx = RunContext(transport, SimClock(), {"probe": probe})
+    fn = probe.function("echo")
+    rec = ctx.start_call(fn, fn.build_call({"tag": "x"}, "id1"))
+    ctx.dispatch(ModuleLost(module="probe", node="/bm_probe", reason="node /bm_probe stopped", call_ids=["id1"]))
+    assert rec.status == "module_lost" and "stopped" in rec.error and not ctx.pending
+    ctx.dispatch(FunctionResult(names=["tag"], msgs=[String("x")], call_id="id9", basic_mod="probe",
+                                function="echo"))
+    rid = ctx.request(["tag"])
+    ctx.dispatch(BlackboardLost(node="/blackboard", reason="gone", request_ids=[rid]))
+    assert "Blackboard node lost" in ctx.answers[rid].error
+
+
+def test_a_recall_names_the_results_it_must_see(probe):
+    transport = _Sent()
+    ctx = RunContext(transport, SimClock(), {"probe": probe})
+    fn = probe.function("echo")
+    ctx.start_call(fn, fn.build_call({"tag": "x"}, "id1"))
+    ctx.dispatch(fn.build_result({"tag": "x"}, "id1"))
+    ctx.request(["tag"])
+    ctx.request(["tag"])
+    assert transport.sent[-2].after == ["id1"] and transport.sent[-1].after == []
+
+
+# loaders and arguments ---------------------------------------------------------------------
+def test_loaders_refuse_deep_tagged_and_recursive_documents(tmp_path, capsys):
+    cases = {
+        "deep.yaml": "[" * 50000 + "]" * 50000,
+        "dash.yaml": "- " * 50000 + "x",
+        "tagged.yaml": 'format: 1\nroot: !!python/object/apply:os.system ["true"]\n',
+        "tagged_map.yaml": "format: 1\nroot: !!python/object:os.system {a: 1}\n",
+        "rec.yaml": "a: &a [*a]\nroot: *a\n",
+        "stamp.yaml": "format: 1\nroot: !!timestamp nonsense\n",
+        "latin1.yaml": b"format: 1\nroot: \xe9\n",
+    }
+    for name, text in cases.items():
+        path = tmp_path / name
+        (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)
+        assert bmtree(["check", str(path)]) == 2, name
+        err = capsys.readouterr().err
+        assert "%s:1:" % name in err or "%s:2:" % name in err, err
+        assert "Traceback" not in err
+    (tmp_path / "deep.json").write_text('{"a":' * 50000 + "1" + "}" * 50000)
+    with pytest.raises(DefinitionError, match="nested deeper"):
+        load_definition(str(tmp_path / "deep.json"))
+
+
+def test_unsafe_set_values_are_usage_errors(capsys):
+    assert bmtree(["run", "trees/find_apple.yaml", "--set", 'x=!!python/object/apply:os.system ["true"]']) == 2
+    assert "not a plain YAML value" in capsys.readouterr().err
+
+
+def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls(monkeypatch):
+    from coordinator import liveness
+
+    state = {"uri": "http://h:1/", "pid": 10}
+
+    def pid(uri, timeout):
+        if uri != state["uri"]:
+            raise OSError("refused")
+        return state["pid"]
+
+    monkeypatch.setattr(liveness, "_pid", pid)
+    got = []
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: state["uri"], period=0)
+    dog.call_sent("a", "probe")
+    dog.check()                       # the watch begins: pid 10
+    dog.call_done("a")
+    dog.check()                       # nothing owed: forgotten
+    state.update(uri="http://h:2/", pid=11)  # respawned between calls
+    dog.call_sent("b", "probe")
+    dog.check()
+    dog.check()
+    assert got == []
+    state.update(uri="http://h:3/", pid=12)  # restarted while 'b' runs
+    dog.check()
+    assert len(got) == 1 and got[0].call_ids == ["b"] and "restarted" in got[0].reason
+
+
+def test_a_call_answered_by_two_nodes_is_reported(probe):
+    import logging
+
+    from coordinator.ros_transport import RosTransport
+
+    class Msg:
+        def __init__(self, data, node):
+            self.data = data
+            self._connection_header = {"callerid": node}
+
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logging.getLogger("bmtree.coordinator").addHandler(handler)
+    try:
+        transport = RosTransport(liveness=0)
+        delivered = []
+        transport._deliver = delivered.append
+        text = probe.function("echo").build_result({"tag": "x"}, "id1").encode()
+        on_result = transport._on(FunctionResult)
+        on_result(Msg(text, "/bm_a"))
+        on_result(Msg(text, "/bm_a"))
+        assert records == []
+        on_result(Msg(text, "/bm_b"))
+    finally:
+        logging.getLogger("bmtree.coordinator").removeHandler(handler)
+    assert len(delivered) == 3
+    assert len(records) == 1 and "answered by two nodes, /bm_a and /bm_b" in records[0].getMessage()

@@ -1,0 +1,362 @@
+"""Run observers, run logs, replay and scenarios from runs, failure reasons (no ROS master)."""
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import types
+
+import py_trees
+import pytest
+from py_trees.common import Status
+
+from coordinator import cli
+from coordinator.replay import Replay, cmd_replay, find_run
+from coordinator.runevents import RunObserver, StatusWatcher
+from coordinator.runlog import RunLogError, RunLogWriter, list_runs, plan_run_files, prune, read_log
+from coordinator.runstream import RunStream, Sink
+from coordinator.scenariogen import write_scenario
+from coordinator.testing.kit import TreeTest
+from coordinator.testing.mocks import fail, succeed
+from coordinator.testing.scenario import run_scenario_file
+from tests.conftest import DATA, TREES
+
+GO = os.path.join(DATA, "record", "go_kitchen.yaml")
+GO_RETRY = os.path.join(DATA, "record", "go_kitchen_retry.yaml")
+
+
+class Lines(Sink):
+    def __init__(self):
+        self.records = []
+        self.flushes = 0
+        self.closed = False
+
+    def write(self, channel, text):
+        self.records.append((channel, json.loads(text)))
+
+    def flush(self):
+        self.flushes += 1
+
+    def close(self):
+        self.closed = True
+
+
+def recorded(path, sim_defs, tmp_path, script, inputs=None, **run):
+    """Run ``path`` on mocks scripted by ``script(mocks)`` with a run log; the log's path and the run."""
+    t = TreeTest(path, definitions=sim_defs, inputs=inputs)
+    script(t.mocks)
+    log = str(tmp_path / "run.jsonl")
+    stream = RunStream([RunLogWriter(log, fsync=False)], {"inputs": inputs or {}})
+    return log, t.run(observers=[stream], **run)
+
+
+def blocked_once(m):
+    m["navigation.go_to"].script(fail("blocked"), succeed(room="kitchen"))
+
+
+# observers ---------------------------------------------------------------------------------------------
+def test_status_watcher_sees_a_retried_failure_and_a_halt():
+    leaf = py_trees.behaviours.Failure(name="leaf")
+    w = StatusWatcher()
+    leaf.status = Status.FAILURE
+    assert w.changes([(leaf, Status.FAILURE)]) == [(leaf, Status.INVALID, Status.FAILURE)]
+    leaf.stop(Status.INVALID)  # reset by a parent, never visited
+    assert w.changes([]) == [(leaf, Status.FAILURE, Status.INVALID)]
+    assert w.changes([]) == []
+
+
+def test_observers_see_start_ticks_calls_writes_and_end(sim_defs):
+    seen = []
+
+    class Spy(RunObserver):
+        def on_start(self, tree, root, ctx):
+            seen.append(("start", tree.name))
+
+        def on_call_start(self, rec):
+            seen.append(("call", rec.target, rec.owner.name))
+
+        def on_call_end(self, rec):
+            seen.append(("end_call", rec.target, rec.status))
+
+        def on_blackboard_write(self, key, value, now):
+            seen.append(("write", key))
+
+        def on_end(self, result):
+            seen.append(("end", result.status.value))
+
+    t = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
+    t.mocks["vision.find_object"].succeed(success=True, room="kitchen")
+    t.run(observers=[Spy()])
+    assert seen[0] == ("start", "find_apple")
+    assert ("call", "speech.say", "announce the search") in seen
+    assert ("end_call", "vision.find_object", "succeeded") in seen
+    assert ("write", "object_room") in seen
+    assert seen[-1] == ("end", "SUCCESS")
+
+
+def test_a_failing_observer_is_detached_and_the_run_goes_on(sim_defs):
+    class Broken(RunObserver):
+        def on_tick(self, root, changes, now):
+            raise RuntimeError("boom")
+
+    run = TreeTest(GO, definitions=sim_defs).run(observers=[Broken()])
+    assert run.succeeded
+
+
+# failure reasons ---------------------------------------------------------------------------------------
+def test_reason_names_the_leaf_its_call_and_the_attempts(sim_defs):
+    t = TreeTest(GO_RETRY, definitions=sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    run = t.run()
+    assert run.failed
+    assert run.reason == "go to the kitchen: navigation.go_to failed: blocked (3 of 3 attempts)"
+
+
+def test_reason_is_the_cause_not_force_failure(sim_defs):
+    t = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
+    t.mocks["vision.find_object"].succeed(success=False)
+    run = t.run()
+    assert run.failed
+    assert run.reason == "look for the object: vision.find_object answered success: false"
+    assert "success is failure" not in run.reason
+
+
+def test_a_recovered_failure_is_not_the_reason(sim_defs):
+    t = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
+    t.mocks["navigation.go_to"].script(fail("blocked"), succeed())
+    t.mocks["vision.find_object"].succeed(success=True)
+    t.mocks["navigation.approach"].fail("arm folded")
+    run = t.run()
+    assert run.reason == "approach the apple: navigation.approach failed: arm folded"
+
+
+def test_retry_says_how_far_it_got(sim_defs):
+    t = TreeTest(GO_RETRY, definitions=sim_defs)
+    t.mocks["navigation.go_to"].script(fail("blocked"))
+    run = t.run()
+    assert run.statuses("go to the kitchen")[-1] == "FAILURE"
+    retry = [b for b in run.result.history if b.name == "go to the kitchen"][0]
+    assert retry.feedback_message == "failed in run 3 of 3"
+
+
+def test_max_duration_ends_in_failure_with_its_reason(sim_defs):
+    t = TreeTest(GO, definitions=sim_defs)
+    t.mocks["navigation.go_to"].hang()
+    run = t.run(max_duration=5.0)
+    assert run.status == Status.FAILURE
+    assert run.reason == "stopped after 5 s"
+    assert run.calls("navigation.go_to")[0].status == "halted"
+
+
+def test_max_duration_halts_show_in_the_log(sim_defs, tmp_path):
+    from coordinator.runner import Display
+
+    log_path, run = recorded(GO, sim_defs, tmp_path, lambda m: m["navigation.go_to"].hang(), max_duration=5.0)
+    log = read_log(log_path)
+    assert log.end["status"] == "FAILURE" and log.end["reason"] == "stopped after 5 s"
+    ids = {n["name"]: n["id"] for n in log.tree["nodes"]}
+    last = log.of_type("tick")[-1]
+    assert [ids["go to the kitchen"], "INVALID"] in last["changes"] and last["t"] >= 5.0
+    replay = Replay(log)
+    shown = io.StringIO()
+    display = Display(shown, tty=False)
+    while replay.next(display) is not None:
+        pass
+    assert "HALTED    go to the kitchen" in shown.getvalue()
+
+
+# run log -----------------------------------------------------------------------------------------------
+def test_the_log_has_every_kind_of_record(sim_defs, tmp_path):
+    log_path, run = recorded(GO, sim_defs, tmp_path, blocked_once)
+    log = read_log(log_path)
+    tree = log.tree
+    assert tree["v"] == 1 and tree["name"] == "go_kitchen" and tree["path"] == os.path.abspath(GO)
+    kinds = {n["name"]: n for n in tree["nodes"]}
+    assert kinds["go to the kitchen"]["kind"] == "call" and kinds["go to the kitchen"]["line"] == 12
+    assert kinds["go to the kitchen"]["target"] == "navigation.go_to"
+    assert tree["nodes"][0]["parent"] is None and tree["nodes"][0]["kind"] == "sequence"
+    starts = log.of_type("call_start")
+    assert [s["target"] for s in starts] == ["speech.say", "navigation.go_to"]
+    assert starts[1]["inputs"] == {"place": "kitchen"}
+    assert starts[1]["node"] == kinds["go to the kitchen"]["id"]
+    ends = log.of_type("call_end")
+    assert ends[1]["status"] == "failed" and ends[1]["error"] == "blocked" and ends[1]["answer"] == "failed"
+    ticks = log.of_type("tick")
+    assert all(t["changes"] for t in ticks)  # only ticks that changed something
+    failed = [c for t in ticks for c in t["changes"] if c[1] == "FAILURE"]
+    assert failed[0] == [kinds["go to the kitchen"]["id"], "FAILURE", "navigation.go_to failed: blocked"]
+    assert log.end["status"] == "FAILURE"
+    assert log.end["reason"] == "go to the kitchen: navigation.go_to failed: blocked"
+    assert run.reason == log.end["reason"]
+
+
+def test_stream_flushes_every_tick_and_closes_at_the_end(sim_defs):
+    sink = Lines()
+    t = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
+    t.mocks["vision.find_object"].succeed(success=True, room="kitchen")
+    run = t.run(observers=[RunStream([sink])])
+    assert sink.flushes >= run.result.ticks and sink.closed
+    channels = {c for c, _ in sink.records}
+    assert channels == {"tree", "status", "calls", "blackboard", "end"}
+    writes = [r for c, r in sink.records if c == "blackboard"]
+    assert {"key": "object_room", "value": "kitchen"}.items() <= writes[-1].items()
+
+
+def test_a_cut_last_line_is_dropped_and_a_bad_line_is_an_error(sim_defs, tmp_path):
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    with open(log_path) as fh:
+        lines = fh.read().splitlines()
+    cut = tmp_path / "cut.jsonl"
+    cut.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][: len(lines[-1]) // 2])
+    log = read_log(str(cut))
+    assert log.truncated and log.end is None and len(log.records) == len(lines) - 1
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(lines[0] + "\n{oops\n" + lines[1] + "\n")
+    with pytest.raises(RunLogError, match=r"bad.jsonl:2: not a JSON record"):
+        read_log(str(bad))
+    other = tmp_path / "other.jsonl"
+    other.write_text('{"type": "tick"}\n')
+    with pytest.raises(RunLogError, match="not a bmtree run log"):
+        read_log(str(other))
+
+
+def test_retention_keeps_the_newest_runs(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROS_HOME", str(tmp_path))
+    runs = tmp_path / "bmtree" / "runs"
+    runs.mkdir(parents=True)
+    for i in range(5):
+        (runs / ("2026010%d-120000-abcdef-t.jsonl" % i)).write_text("{}\n")
+        (runs / ("2026010%d-120000-abcdef-t.sim" % i)).mkdir()
+    (runs / "notes.txt").write_text("mine")
+    files = plan_run_files("trees/x.yaml", None, False, 3)
+    left = sorted(os.listdir(runs))
+    assert left == ["20260103-120000-abcdef-t.jsonl", "20260103-120000-abcdef-t.sim",
+                    "20260104-120000-abcdef-t.jsonl", "20260104-120000-abcdef-t.sim", "notes.txt"]
+    assert files.log_path.startswith(str(runs)) and files.sim_dir == files.log_path[:-len(".jsonl")] + ".sim"
+    assert plan_run_files("x.yaml", str(tmp_path / "mine.jsonl"), False, 3).log_path == str(tmp_path / "mine.jsonl")
+    assert plan_run_files("x.yaml", None, True, 3).log_path is None
+    with pytest.raises(RunLogError, match="at least 1"):
+        plan_run_files("x.yaml", None, False, 0)
+    assert prune(str(runs), 1)  # the newest stays
+    assert sorted(os.listdir(runs)) == ["20260104-120000-abcdef-t.jsonl", "20260104-120000-abcdef-t.sim", "notes.txt"]
+
+
+# replay ------------------------------------------------------------------------------------------------
+def _args(**kw):
+    base = dict(run="", dir=None, at=None, step=False, failure=False, scenario=None, speed=None)
+    base.update(kw)
+    return types.SimpleNamespace(**base)
+
+
+def test_replay_prints_what_the_live_display_printed(sim_defs, tmp_path, capsys):
+    from coordinator.runner import Display
+
+    live = io.StringIO()
+    t = TreeTest(GO, definitions=sim_defs)
+    blocked_once(t.mocks)
+    log = str(tmp_path / "run.jsonl")
+    t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), Display(live, tty=False)])
+    replay = Replay(read_log(log))
+    shown = io.StringIO()
+    display = Display(shown, tty=False)
+    while replay.next(display) is not None:
+        pass
+    assert "FAILURE   go to the kitchen (navigation.go_to failed: blocked)" in shown.getvalue()
+    assert shown.getvalue() == live.getvalue()  # the same view as while it ran
+    log_path = log
+    assert cmd_replay(_args(run=log_path)) == 0
+    out = capsys.readouterr().out
+    assert "go_kitchen: FAILURE" in out and "reason: go to the kitchen: navigation.go_to failed: blocked" in out
+    assert cmd_replay(_args(run=log_path, speed=1000.0)) == 0  # paced: the same lines
+    assert capsys.readouterr().out == out
+
+
+def test_replay_at_a_moment_and_at_the_failure(sim_defs, tmp_path, capsys):
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: m["navigation.go_to"].script(fail("blocked", delay=4.0)))
+    assert cmd_replay(_args(run=log_path, at=2.0)) == 0
+    out = capsys.readouterr().out
+    assert "at 2.000s" in out and "navigation.go_to" in out and "since" in out and '{"place": "kitchen"}' in out
+    assert "go to the kitchen [" in out
+    assert cmd_replay(_args(run=log_path, failure=True)) == 0
+    out = capsys.readouterr().out
+    assert "first failing leaf at 4.0" in out and "'go to the kitchen' (" in out
+    assert "go_kitchen.yaml:12" in out and "calls in flight: none" in out
+    assert cmd_replay(_args(run=log_path, step=True)) == 0
+    assert "--- tick 1 at" in capsys.readouterr().out
+
+
+def test_find_run_by_number_name_and_last(sim_defs, tmp_path):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    for name in ("20260101-100000-aaaaaa-go.jsonl", "20260102-100000-bbbbbb-go.jsonl"):
+        shutil.copy(log_path, str(runs / name))
+    assert find_run("last", str(runs)).endswith("bbbbbb-go.jsonl")
+    assert find_run("2", str(runs)).endswith("aaaaaa-go.jsonl")
+    assert find_run("20260101", str(runs)).endswith("aaaaaa-go.jsonl")
+    with pytest.raises(RunLogError, match="2 recorded runs"):
+        find_run("3", str(runs))
+    assert [r.status for r in list_runs(str(runs))] == ["SUCCESS", "SUCCESS"]
+
+
+def test_cli_replay_of_a_bad_file_exits_2(tmp_path, capsys):
+    bad = tmp_path / "x.jsonl"
+    bad.write_text("not json\n{}\n")
+    assert cli.main(["replay", str(bad)]) == 2
+    assert "x.jsonl:1: not a JSON record" in capsys.readouterr().err
+    assert cli.main(["runs", "--dir", str(tmp_path / "none")]) == 0
+    assert "no recorded runs" in capsys.readouterr().out
+
+
+# scenarios from runs -----------------------------------------------------------------------------------
+def test_scenario_from_a_run_passes_and_a_changed_tree_shows_the_changed_calls(sim_defs, tmp_path):
+    tree = tmp_path / "go_kitchen.yaml"
+    shutil.copy(GO, str(tree))
+    def script(m):
+        m["navigation.go_to"].script(fail("blocked", delay=1.5), succeed(room="kitchen"))
+        m.event(0.5, "navigation.arrived", place="hall")
+
+    log_path, run = recorded(str(tree), sim_defs, tmp_path, script)
+    out_path = str(tmp_path / "replayed.yaml")
+    write_scenario(read_log(log_path), out_path)
+    text = open(out_path).read()
+    assert "fail: blocked" in text and "delay: 1.5" in text and "navigation.arrived" in text
+    out = io.StringIO()
+    assert run_scenario_file(out_path, sim_defs, out) == [True], out.getvalue()
+    shutil.copy(GO_RETRY, str(tree))  # the fix: retry the navigation
+    out = io.StringIO()
+    assert run_scenario_file(out_path, sim_defs, out) == [False]
+    report = out.getvalue()
+    assert "expected 2 calls, got 4" in report and "calls changed" in report
+    diff = [line.strip() for line in report.splitlines() if line.strip()[:2] in ("= ", "+ ", "- ")]
+    assert diff == ['= speech.say {"text": "I am going to the kitchen."}', '= navigation.go_to {"place": "kitchen"}',
+                    '+ navigation.go_to {"place": "kitchen"}', '+ navigation.go_to {"place": "kitchen"}']
+
+
+def test_scenario_needs_the_end_of_the_run(sim_defs, tmp_path):
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    lines = open(log_path).read().splitlines()
+    cut = tmp_path / "cut.jsonl"
+    cut.write_text("\n".join(lines[:-1]) + "\n")
+    with pytest.raises(RunLogError, match="no end record"):
+        write_scenario(read_log(str(cut)), str(tmp_path / "s.yaml"))
+
+
+def test_a_malformed_record_is_a_clear_error(sim_defs, tmp_path, capsys):
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    lines = open(log_path).read().splitlines()
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("\n".join([lines[0], '{"v":1,"type":"tick","t":0.1,"changes":[[[1],"BOGUS"]]}'] + lines[1:]) + "\n")
+    assert cli.main(["replay", str(bad)]) == 2
+    assert "bad.jsonl: record 2 (tick) is malformed" in capsys.readouterr().err
+
+
+def test_a_timeout_says_what_was_still_running(sim_defs, tmp_path):
+    tree = tmp_path / "t.yaml"
+    tree.write_text("format: 1\nroot:\n  timeout: 5\n  name: reach the kitchen in time\n"
+                    "  child:\n    call: navigation.go_to\n    name: drive\n    inputs: {place: kitchen}\n")
+    t = TreeTest(str(tree), definitions=sim_defs)
+    t.mocks["navigation.go_to"].hang()
+    run = t.run()
+    assert run.reason == "reach the kitchen in time: timed out after 5s while 'drive' was running"

@@ -1,0 +1,325 @@
+"""On the robot, without a master: CLI details, definitions from ROS packages, node options,
+start-up checks of a module class, the catkin package's files."""
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from coordinator.cli import main
+from tests.conftest import DATA, ROOT, TREES
+
+GRIPPER = os.path.join(DATA, "gripper")
+GRASP = os.path.join(GRIPPER, "grasp.yaml")
+FIND_APPLE = os.path.join(TREES, "find_apple.yaml")
+NO_MASTER = "http://127.0.0.1:9/"  # the discard port: nothing listens there
+
+
+@pytest.fixture
+def no_master(monkeypatch):
+    monkeypatch.setenv("ROS_MASTER_URI", NO_MASTER)
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("BMTREE_MODULE_PATH", raising=False)
+
+
+# small CLI things -----------------------------------------------------------------------------
+def test_version_is_the_same_everywhere(capsys):
+    with pytest.raises(SystemExit) as exc:
+        from coordinator.cli import make_parser
+
+        make_parser().parse_args(["--version"])
+    assert exc.value.code == 0
+    printed = capsys.readouterr().out.strip()
+    assert main(["--version"]) == 0
+    from coordinator import __version__
+
+    assert printed == "bmtree %s" % __version__
+    assert ET.parse(os.path.join(ROOT, "package.xml")).getroot().findtext("version") == __version__
+    with open(os.path.join(ROOT, "setup.py")) as fh:
+        assert 'version="%s"' % __version__ in fh.read()
+
+
+def test_a_set_key_the_tree_does_not_declare_is_exit_2_with_a_suggestion(no_master, capsys):
+    assert main(["run", "--sim", "--set", "objet=book", FIND_APPLE]) == 2
+    err = capsys.readouterr().err
+    assert "declares no input 'objet'" in err and "did you mean 'object'?" in err
+    # without --sim too, and at once: the tree is checked before bmtree waits for a master
+    assert main(["run", "--wait", "600", "--set", "objet=book", FIND_APPLE]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'object'?" in err and "waiting" not in err
+
+
+def test_run_validates_the_tree_before_it_waits_for_a_master(no_master, tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: 1\nroot:\n  sequence:\n    - call: speech.sya\n      inputs: {text: hi}\n")
+    assert main(["run", "--wait", "600", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "%s:4:" % bad in err and "did you mean 'say'?" in err and "waiting" not in err
+
+
+def test_a_module_known_only_to_the_live_graph_is_checked_once_the_master_answers(no_master, tmp_path, capsys):
+    tree = tmp_path / "arm.yaml"
+    tree.write_text("format: 1\nroot:\n  call: arm.grasp\n")
+    assert main(["run", "--wait", "0.2", str(tree)]) == 3  # not refused offline: a live module may define it
+    assert "no ROS master at %s yet" % NO_MASTER in capsys.readouterr().err
+
+
+def test_run_without_a_master_says_so_at_once_and_how_long_it_waits(no_master, capsys):
+    assert main(["run", "--wait", "0.3", FIND_APPLE]) == 3
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "no ROS master at %s yet; waiting up to 0.3 s (--wait) ..." % NO_MASTER
+    assert err[-1] == "error: no ROS master at %s after 0.3 s (start one, or use --sim)" % NO_MASTER
+
+
+def _scenario(tmp_path, body):
+    path = tmp_path / "s.scenarios.yaml"
+    path.write_text("tree: %s\nscenarios:\n%s" % (FIND_APPLE, body))
+    return str(path)
+
+
+def _no_traceback(text):
+    assert "Traceback" not in text, text
+
+
+def test_scenario_event_without_event_key_is_a_positioned_error(tmp_path, capsys):
+    path = _scenario(tmp_path, "  - name: x\n    events:\n      - {at: 1.0, params: {person: Ana}}\n")
+    assert main(["test", path]) == 2
+    err = capsys.readouterr().err
+    _no_traceback(err)
+    assert "%s:5:9: an event needs 'event: module.event'" % path in err
+
+
+def test_scenario_max_duration_not_a_number_names_file_and_line(tmp_path, capsys):
+    path = _scenario(tmp_path, "  - name: x\n    max_duration: ten\n")
+    assert main(["test", path]) == 2
+    err = capsys.readouterr().err
+    _no_traceback(err)
+    assert "%s:4:19: max_duration must be a number of seconds >= 0, got 'ten'" % path in err
+
+
+def test_blackboard_dump_of_a_file_that_is_not_a_store(tmp_path, capsys):
+    path = tmp_path / "not-a-database"
+    path.write_text("hello, I am text\n" * 100)
+    assert main(["blackboard", "dump", "--db", str(path)]) == 2
+    err = capsys.readouterr().err
+    _no_traceback(err)
+    assert "is not a Blackboard store" in err
+    assert path.read_text() == "hello, I am text\n" * 100  # untouched
+
+
+def test_blackboard_dump_of_an_unknown_name_says_so(tmp_path, capsys):
+    from blackboard.store import Store
+
+    db = str(tmp_path / "bb.sqlite")
+    store = Store(db)
+    store.add([("room", "std_msgs/String", '{"data": "kitchen"}', "navigation", "go_to", "c1", 1.0)])
+    store.close()
+    assert main(["blackboard", "dump", "--db", db, "--name", "rooom"]) == 1
+    err = capsys.readouterr().err
+    assert "has no value named 'rooom' (did you mean 'room'?)" in err
+    assert main(["blackboard", "dump", "--db", db, "--name", "room"]) == 0
+    assert "kitchen" in capsys.readouterr().out
+
+
+# --modules adds; definitions from ROS packages ----------------------------------------------
+def test_modules_option_adds_to_the_default_definitions(no_master, capsys):
+    assert main(["check", "--modules", os.path.join(GRIPPER, "gripper.json"), GRASP]) == 0
+    assert main(["check", GRASP]) == 2
+    assert "unknown module 'gripper'" in capsys.readouterr().err
+
+
+def test_a_given_definition_replaces_the_simulated_one_of_the_same_name(no_master, tmp_path, capsys):
+    import json
+
+    from modules.sim import definition_path
+
+    with open(definition_path("speech")) as fh:
+        speech = json.load(fh)
+    speech["Functions"] = [f for f in speech["Functions"] if f["Name"] != "say"]
+    (tmp_path / "speech.json").write_text(json.dumps(speech))
+    assert main(["check", "--modules", str(tmp_path / "speech.json"), FIND_APPLE]) == 2
+    assert "module 'speech' has no function 'say'" in capsys.readouterr().err
+
+
+def _package(root, name, export='<export><bmtree definitions="definitions"/></export>', defs=True):
+    pkg = root / name
+    (pkg / "definitions").mkdir(parents=True)
+    if defs:
+        with open(os.path.join(GRIPPER, "gripper.json")) as fh:
+            (pkg / "definitions" / "gripper.json").write_text(fh.read())
+    (pkg / "package.xml").write_text('<?xml version="1.0"?>\n<package format="3"><name>%s</name>'
+                                     '<version>1.0.0</version>%s</package>\n' % (name, export))
+    return pkg
+
+
+def test_definitions_exported_by_a_package_on_ros_package_path(no_master, tmp_path, monkeypatch, capsys):
+    _package(tmp_path / "src", "my_robot")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "src"))
+    assert main(["modules"]) == 0
+    out = capsys.readouterr().out
+    assert "gripper  (" in out and "navigation  (" in out
+    assert main(["check", GRASP]) == 0
+    assert main(["test", os.path.join(ROOT, "tests", "scenarios", "find_apple.scenarios.yaml")]) == 0
+
+
+def test_package_search_is_bounded_and_careful(tmp_path):
+    from modules.search import MAX_DEPTH, package_exports
+
+    src = tmp_path / "src"
+    _package(src, "plain")
+    deep = src
+    for i in range(MAX_DEPTH + 1):
+        deep = deep / ("d%d" % i)
+    _package(deep, "too_deep")
+    _package(src / "ignored_dir", "ignored")
+    (src / "ignored_dir" / "CATKIN_IGNORE").write_text("")
+    _package(src / "hidden" / ".cache", "hidden")
+    _package(src, "bomb", export='<export><bmtree definitions="&lol;"/></export>')
+    bomb = src / "bomb" / "package.xml"
+    bomb.write_text('<?xml version="1.0"?>\n<!DOCTYPE package [<!ENTITY lol "definitions">]>\n'
+                    + bomb.read_text().split("\n", 1)[1])
+    _package(src, "missing", export='<export><bmtree definitions="nowhere"/></export>')
+    (src / "linked").symlink_to(src / "plain")
+    problems = []
+    found = package_exports(str(src), problems)
+    assert [e.package for e in found] == ["plain"]
+    assert len(problems) == 1 and "package missing exports definitions" in problems[0]
+
+
+# a module's class at start-up -----------------------------------------------------------------
+def _module_main(*argv):
+    return subprocess.run([sys.executable, "-m", "modules.node", *argv], capture_output=True, text=True,
+                          timeout=60, env=dict(os.environ, ROS_MASTER_URI=NO_MASTER), stdin=subprocess.DEVNULL)
+
+
+def test_a_method_whose_parameters_do_not_match_the_inputs_names_both():
+    out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"),
+                       "--class", os.path.join(GRIPPER, "wrong_params.py") + ":Gripper")
+    assert out.returncode == 2
+    _no_traceback(out.stderr)
+    assert "method Gripper.open(size) does not match function 'open'" in out.stderr
+    assert "parameter 'size' is not an input; input 'width' has no parameter" in out.stderr
+
+
+def test_signature_check_accepts_defaults_and_kwargs():
+    from modules import BasicModule
+    from modules.binding import signature_problems
+    from modules.definition import load_definition
+
+    d = load_definition(os.path.join(GRIPPER, "gripper.json"))
+
+    class Ok(BasicModule):
+        def open(self, width, speed=1.0):
+            return {}
+
+        def close(self, **extra):
+            return {}
+
+    class Bad(BasicModule):
+        def open(self, **inputs):
+            return {}
+
+        def close(self, force):
+            return {}
+
+    assert signature_problems(d, Ok()) == []
+    assert signature_problems(d, Bad()) == [
+        "method Bad.close(force) does not match function 'close' of %s (inputs: none): parameter 'force' is "
+        "not an input" % d.source]
+
+
+def test_a_syntax_error_in_the_class_file_is_one_line(tmp_path):
+    bad = tmp_path / "gripper_bad.py"
+    bad.write_text("from modules import BasicModule\n\n\nclass Gripper(BasicModule)\n    pass\n")
+    out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"), "--class", "%s:Gripper" % bad)
+    assert out.returncode == 2
+    one_line = re.compile(r"^%s:4:\d+: syntax error: \S.*$" % re.escape(str(bad)))  # the text varies by Python
+    assert one_line.match(out.stderr.strip()) and out.stderr.count("\n") == 1, out.stderr
+    # and bmtree run --sim --module says the same before it starts anything
+    run = subprocess.run([sys.executable, "-m", "coordinator", "run", "--sim", "--module",
+                          "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"), bad), GRASP],
+                         capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert run.returncode == 2
+    assert run.stderr == out.stderr
+    assert "starting" not in run.stdout
+
+
+def test_an_exception_while_loading_the_class_file_names_file_and_line(tmp_path):
+    bad = tmp_path / "boom.py"
+    bad.write_text("from modules import BasicModule\nWIDTH = 1 / 0\n")
+    out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"), "--class", "%s:Gripper" % bad)
+    assert out.returncode == 2
+    assert out.stderr.strip() == "error: %s:2: ZeroDivisionError: division by zero" % bad
+
+
+def test_run_module_option_errors(no_master, capsys):
+    spec = "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"), os.path.join(GRIPPER, "gripper.py"))
+    assert main(["run", "--module", spec, GRASP]) == 2
+    assert "it needs --sim" in capsys.readouterr().err
+    assert main(["run", "--sim", "--module", "gripper.json", GRASP]) == 2
+    assert "--module takes DEFINITION.json=FILE.py:CLASS" in capsys.readouterr().err
+    assert main(["run", "--sim", "--modules", os.path.join(GRIPPER, "gripper.json"), GRASP]) == 2
+    assert "which --sim does not start" in capsys.readouterr().err
+
+
+# node options: command line or private parameters ------------------------------------------
+def test_node_options_from_private_parameter_arguments(no_master):
+    from comm.nodeopts import parse_node_args, private_namespace
+    from modules.node import make_parser
+
+    args = parse_node_args(make_parser(), ["_definition:=g.json", "_class:=g.py:G", "__name:=bm_g"], None)
+    assert (args.definition, args.cls) == ("g.json", "g.py:G")
+    args = parse_node_args(make_parser(), ["--definition", "cli.json", "_definition:=g.json"], None)
+    assert args.definition == "cli.json"  # the command line wins
+    assert private_namespace(["__name:=bm_g", "__ns:=/robot"], "x") == "/robot/bm_g/"
+    assert private_namespace([], "blackboard") == "/blackboard/"
+
+
+def test_node_option_from_a_parameter_is_checked_like_the_option(no_master, capsys):
+    from modules.sim.__main__ import main as sim_main
+
+    with pytest.raises(SystemExit) as exc:
+        sim_main(["sim", "_module:=navi"])
+    assert exc.value.code == 2
+    assert "private parameter ~module: 'navi' is not one of navigation, speech, vision" in capsys.readouterr().err
+
+
+def test_run_options_from_private_parameters(no_master, monkeypatch):
+    from comm.nodeopts import fill_from_params
+    from coordinator.cli import make_parser
+
+    parser = make_parser()
+    args = parser.parse_args(["run", "t.yaml", "--set", "a=1"])
+    run_parser = args.command_parser
+    fill_from_params(run_parser, args, ["t.yaml", "--set", "a=1"],
+                     {"call_timeout": 5, "set": {"b": 2}, "wait": 1.5, "quiet": True})
+    assert (args.call_timeout, args.set, args.wait, args.quiet) == (5.0, ["a=1"], 1.5, True)
+
+
+# the catkin package's files ------------------------------------------------------------------
+def test_launch_files_use_the_package_executables():
+    nodes = set(os.listdir(os.path.join(ROOT, "nodes")))
+    for name in ("blackboard", "module", "sim", "run"):
+        root = ET.parse(os.path.join(ROOT, "launch", "%s.launch" % name)).getroot()
+        for node in root.iter("node"):
+            if node.get("pkg") == "bmtree":
+                assert node.get("type") in nodes, (name, node.get("type"))
+    for n in nodes:
+        path = os.path.join(ROOT, "nodes", n)
+        assert os.access(path, os.X_OK), path
+        with open(path) as fh:
+            module = re.search(r"^from (\S+) import main$", fh.read(), re.M).group(1)
+        if n != "bmtree-bridge" or os.path.exists(os.path.join(ROOT, "modules", "bridge.py")):
+            __import__(module)
+
+
+def test_package_xml_names_its_dependencies_by_rosdep_keys():
+    root = ET.parse(os.path.join(ROOT, "package.xml")).getroot()
+    assert root.get("format") in ("2", "3") and root.findtext("name") == "bmtree"
+    deps = {e.text for e in root if e.tag.endswith("depend")}
+    assert {"catkin", "rospy", "std_msgs", "geometry_msgs", "rospy_message_converter", "py_trees",
+            "python3-yaml", "python3-jsonschema"} <= deps

@@ -1,0 +1,101 @@
+"""WatchState and the terminal view from hand-made run-stream records: catch-up from a
+snapshot, halted leaves, folding around the running branch, lines cut to the width."""
+from __future__ import annotations
+
+import io
+import json
+
+from rich.console import Console
+
+from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchview import LinePrinter, render, tree_lines
+
+
+def tree_record(run="r1", leaves=3, groups=1):
+    nodes = [{"id": 0, "parent": None, "kind": "sequence", "shape": "sequence", "name": "root"}]
+    for g in range(groups):
+        gid = len(nodes)
+        nodes.append({"id": gid, "parent": 0, "kind": "sequence", "shape": "sequence", "name": "group %d" % g})
+        for k in range(leaves):
+            nodes.append({"id": len(nodes), "parent": gid, "kind": "call", "shape": "leaf", "name": "leaf %d.%d" % (g, k)})
+    return {"v": 1, "type": "tree", "run": run, "t": 0.0, "name": "t", "blackboard": {"x": 1}, "nodes": nodes}
+
+
+def shown(group):
+    buf = io.StringIO()
+    Console(file=buf, width=80, no_color=True).print(group)
+    return buf.getvalue()
+
+
+def test_halted_leaf_shows_as_halted_and_a_reset_one_as_not_ticked():
+    s = WatchState()
+    s.apply(tree_record())
+    s.apply({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[0, "RUNNING"], [1, "RUNNING"], [2, "RUNNING"]]})
+    s.apply({"type": "tick", "run": "r1", "n": 2, "t": 0.2, "changes": [[2, "INVALID"], [3, "SUCCESS"]]})
+    assert s.label(2) == "HALTED" and s.label(3) == "SUCCESS" and s.label(4) == ""
+    out = io.StringIO()
+    p = LinePrinter(out)
+    p.record({"type": "tick", "run": "r1", "n": 2, "t": 0.2, "changes": [[2, "INVALID"]]}, s)
+    assert "HALTED    leaf 0.0" in out.getvalue()
+
+
+def test_a_late_watcher_catches_up_from_the_snapshot_and_ignores_older_ticks():
+    sink = SnapshotSink(publish=lambda text: None)
+    live = sink.state
+    for rec in [tree_record(),
+                {"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[0, "RUNNING"], [1, "RUNNING"], [2, "RUNNING"]]},
+                {"type": "call_start", "run": "r1", "t": 0.1, "call_id": "c1", "target": "m.f", "node": 2,
+                 "inputs": {}, "timeout": 5},
+                {"type": "write", "run": "r1", "t": 0.2, "key": "x", "value": 7}]:
+        sink.write("any", json.dumps(rec))
+    late = WatchState()
+    late.apply(tree_record())
+    late.apply(json.loads(json.dumps(live.snapshot())))
+    assert late.caught_up and late.label(2) == "RUNNING" and late.blackboard == {"x": 7}
+    assert list(late.pending) == ["c1"] and late.pending["c1"]["timeout"] == 5
+    late.apply({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[2, "FAILURE"]]})  # already in it
+    assert late.label(2) == "RUNNING"
+    late.apply({"type": "tick", "run": "r1", "n": 2, "t": 0.3, "changes": [[2, "SUCCESS"]]})
+    assert late.label(2) == "SUCCESS"
+    late.apply({"type": "tick", "run": "other", "n": 9, "t": 0.3, "changes": [[2, "FAILURE"]]})
+    assert late.label(2) == "SUCCESS"
+    late.apply_text("not json {")  # ignored, never raises
+    late.apply({"type": "tick", "run": "r1", "n": 3, "changes": [["bad"]]})
+    assert late.label(2) == "SUCCESS"
+
+
+def test_a_long_tree_folds_then_windows_around_the_running_branch():
+    s = WatchState()
+    s.apply(tree_record(leaves=6, groups=4))  # 29 nodes
+    s.apply({"type": "tick", "run": "r1", "n": 1, "t": 0.1,
+             "changes": [[0, "RUNNING"], [1, "SUCCESS"], [8, "SUCCESS"], [15, "RUNNING"], [19, "RUNNING"]]})
+    folded = [t.plain for t in tree_lines(s, 12)]
+    assert len(folded) <= 12
+    assert any("group 0" in line and "(+6 folded)" in line for line in folded)
+    assert any("leaf 2.3" in line and "RUNNING" in line for line in folded)
+    tiny = [t.plain for t in tree_lines(s, 5)]
+    assert len(tiny) <= 5 and any("leaf 2.3" in line for line in tiny) and "more" in tiny[0] + tiny[-1]
+
+
+def test_render_fits_the_terminal_and_cuts_long_lines():
+    s = WatchState()
+    s.apply(tree_record(leaves=6, groups=4))
+    s.apply({"type": "write", "run": "r1", "t": 0.2, "key": "note", "value": "x" * 500})
+    for k in range(30):
+        s.apply({"type": "call_end", "run": "r1", "t": k, "call_id": "c%d" % k, "target": "m.f",
+                 "status": "succeeded", "duration": 0.1})
+    text = shown(render(s, 80, 24))
+    lines = text.rstrip("\n").split("\n")
+    assert len(lines) <= 24 and all(len(line) <= 80 for line in lines)
+    assert "call log (" in text and "tree blackboard" in text and "pending calls: none" in text
+
+
+def test_records_before_the_tree_are_kept_until_it_comes():
+    sink = SnapshotSink(publish=lambda text: None)
+    sink.write("tree", json.dumps(tree_record()))
+    sink.write("status", json.dumps({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[0, "RUNNING"], [2, "RUNNING"]]}))
+    late = WatchState()
+    late.apply(json.loads(json.dumps(sink.state.snapshot())))  # the snapshot topic answered first
+    assert not late.nodes
+    late.apply(tree_record())
+    assert late.caught_up and late.label(2) == "RUNNING"
