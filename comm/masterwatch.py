@@ -20,6 +20,7 @@ not replayed.
 """
 from __future__ import annotations
 
+import http.client
 import logging
 import socket
 import threading
@@ -47,6 +48,7 @@ class MasterWatch:
         self.on_restart: List[Callable[[], None]] = []
         self.restarts = 0
         self._pid: Optional[int] = None
+        self._pid_proxy: Any = None
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self.registered = threading.Event()  # set after each successful re-registration
@@ -71,10 +73,16 @@ class MasterWatch:
         return proxy(self.master_uri, self.timeout)
 
     def _master_pid(self) -> Optional[int]:
+        """The master's pid over one kept-alive connection: a new connection per look costs the
+        master a thread and this process a TCP handshake, twice a second per node (with 50
+        module nodes that was a tenth of a core while nothing ran)."""
+        if self._pid_proxy is None:
+            self._pid_proxy = self._master()
         try:
-            code, _, pid = self._master().getPid("/bmtree_masterwatch")
+            code, _, pid = self._pid_proxy.getPid("/bmtree_masterwatch")
             return pid if code == 1 else None
-        except (OSError, socket.timeout, xmlrpc.client.Error):
+        except (OSError, socket.timeout, xmlrpc.client.Error, http.client.HTTPException):
+            self._pid_proxy = None  # a fresh connection next time (a restarted master closed this one)
             return None
 
     def _loop(self) -> None:

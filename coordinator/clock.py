@@ -21,7 +21,7 @@ class Clock(abc.ABC):
         """Seconds on this clock (monotonic)."""
 
     @abc.abstractmethod
-    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
+    def wait(self, inbox: Any, timeout: float) -> Optional[Any]:
         """The next inbox item, or None after ``timeout`` seconds of this clock."""
 
     @abc.abstractmethod
@@ -63,7 +63,7 @@ class RealClock(Clock):
     def call_later(self, delay: float, fn: Callable[[], None]) -> None:
         self._timers.push(time.monotonic() + max(0.0, delay), fn)
 
-    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
+    def wait(self, inbox: Any, timeout: float) -> Optional[Any]:
         end = time.monotonic() + max(0.0, timeout)
         while True:
             now = time.monotonic()
@@ -95,7 +95,7 @@ class SimClock(Clock):
     def call_later(self, delay: float, fn: Callable[[], None]) -> None:
         self._timers.push(self._now + max(0.0, delay), fn)
 
-    def wait(self, inbox: queue.Queue, timeout: float) -> Optional[Any]:
+    def wait(self, inbox: Any, timeout: float) -> Optional[Any]:
         """Jump from one due timer to the next until one of them fills the inbox."""
         end = self._now + max(0.0, timeout)
         while True:

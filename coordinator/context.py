@@ -97,7 +97,7 @@ class RunContext:
         self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
         self.dropped: List[FunctionResult] = []
-        self.inbox: queue.Queue = queue.Queue()
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()  # in C: a cheap hand-off from the receiving threads
         self.unstored: List[str] = []  # calls whose results the next recall must see stored
 
     # values ------------------------------------------------------------------------

@@ -17,7 +17,6 @@ import threading
 import time
 import typing
 from collections import OrderedDict
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
 from blackboard.node import TOPIC_STORED
@@ -31,7 +30,7 @@ from comm import (
     sync_publisher,
 )
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
-from comm.errors import EnvironmentProblem, ProtocolError
+from comm.errors import ProtocolError
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
@@ -40,52 +39,20 @@ from comm.messages import (
     Event,
     FunctionCall,
     FunctionResult,
-    new_id,
 )
 from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, Watchdog
+from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runstream import CHANNELS, Sink
-from coordinator.sender import TopicSender
+from coordinator.sender import TopicSender, topic_senders, widen_accept_queue
 from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
-from modules.discovery import (
-    PARAM_ROOT,
-    LiveModule,
-    announced_modules,
-    legacy_announcement,
-    live_modules,
-    node_alive,
-)
+from modules.discovery import PARAM_ROOT, LiveModule, live_modules, node_alive
 
 __all__ = ["RosTransport", "RosStreamSink", "diff_definitions", "address_problem", "SEND_QUEUE"]
 
 log = logging.getLogger("bmtree.coordinator")
 
 SEND_QUEUE = 10000  # messages queued per subscriber connection before the oldest is dropped
-PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
-ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
-PING_PATIENCE = 1.0  # seconds after which a module without its own topics may do with connections alone
-
-
-def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[str]:
-    """What differs between the definition a tree was checked against and the running module's."""
-    out = []
-    for name, fn in local.functions.items():
-        other = live.functions.get(name)
-        if other is None:
-            out.append("function %r is not served by the running module" % name)
-            continue
-        if fn.concurrent != other.concurrent:  # checks and mocks assumed the local one
-            out.append("function %r is %sconcurrent here, %sconcurrent in the running module" % (
-                name, "" if fn.concurrent else "not ", "" if other.concurrent else "not "))
-        for kind, a, b in (("input", fn.inputs, other.inputs), ("output", fn.outputs, other.outputs)):
-            if [(p.name, p.rostype) for p in a] != [(p.name, p.rostype) for p in b]:
-                out.append("%s %ss differ: here %s, running %s" % (name, kind, ", ".join(
-                    "%s:%s" % (p.name, p.rostype) for p in a), ", ".join("%s:%s" % (p.name, p.rostype) for p in b)))
-    for name, ev in local.events.items():
-        other_ev = live.events.get(name)
-        if other_ev is None or [(p.name, p.rostype) for p in ev.params] != [(p.name, p.rostype) for p in other_ev.params]:
-            out.append("event %r differs or is missing in the running module" % name)
-    return out
 
 
 def address_problem() -> str:
@@ -143,6 +110,7 @@ class RosTransport(Transport):
         self._String = String
         if not rospy.core.is_initialized():
             rospy.init_node(self.node_name, anonymous=True, disable_signals=True)
+        widen_accept_queue()  # every module connects to this node at once in the preflight
         from comm.masterwatch import watch_master
 
         watch_master()  # a restarted master gets this node's topics again; the run goes on
@@ -161,12 +129,6 @@ class RosTransport(Transport):
         import rospy
 
         return rospy.Publisher(topic, self._String, queue_size=SEND_QUEUE, tcp_nodelay=True)
-
-    def _sender(self, topic: str) -> TopicSender:
-        """A module's own call topic (one subscriber): its own writer thread, no GIL hand-off per
-        call. One publisher per module, not two: registering publishers one at a time with the
-        master is most of the preflight's time."""
-        return TopicSender(topic, self._String, SEND_QUEUE)
 
     def _on(self, cls: Any, intercept: Optional[Callable[[Any], bool]] = None) -> Callable[[Any], None]:
         def callback(msg: Any) -> None:
@@ -256,7 +218,7 @@ class RosTransport(Transport):
                 return entry["node"]
         except rosgraph.masterapi.MasterError:
             pass
-        found = RosTransport._legacy_nodes([module]).get(module)
+        found = legacy_nodes([module]).get(module)
         return found[0] if found else None
 
     @staticmethod
@@ -310,10 +272,11 @@ class RosTransport(Transport):
                    legacy: Optional[Mapping[str, str]] = None) -> None:
         """Wait (bounded) until a first call to every module would be taken and answered.
 
-        All modules at once: one master query for the announcements, then each announced
-        module is pinged where its calls will go, as soon as both its call topic and its
-        results are connected; the answer on ``/function/output`` proves both directions.
-        An original module (not announced: a node ``/<module>`` listening on
+        All modules at once (:mod:`coordinator.preflight`): one master query for the
+        announcements, the publishers of their own call topics registered concurrently, then
+        each announced module is pinged where its calls will go, as soon as both its call
+        topic and its results are connected; the answer on ``/function/output`` proves both
+        directions. An original module (not announced: a node ``/<module>`` listening on
         ``/master/output``) must be connected both ways to this node.
 
         ``legacy`` names the node of an original module (``{"DEMO_BM": "/some/node"}``) whose
@@ -324,200 +287,29 @@ class RosTransport(Transport):
         Raises:
             EnvironmentProblem: what is missing or different, after ``timeout`` seconds.
         """
-        self.open()
-        wanted = sorted(set(modules))
-        with self._cond:  # a fresh proof each time: a module may have restarted since
-            self._ponged.difference_update(wanted)
-        end = time.monotonic() + timeout
-        given = {m: n for m, n in (legacy or {}).items() if m in wanted}
-        announced: Dict[str, LiveModule] = {}
-        originals: Dict[str, Tuple[str, str]] = {}
-        blackboards: List[str] = []
-        pinged: Dict[str, float] = {}
-        first_ping: Dict[str, float] = {}
-        next_look = 0.0
-        while True:
-            now = time.monotonic()
-            with self._cond:
-                answered = set(self._ponged)
-            if now >= next_look and set(wanted) - answered:
-                every = announced_modules()
-                announced = {n: m for n, m in every.items() if not m.legacy and n not in given}
-                originals = {n: (m.node, m.uri) for n, m in every.items() if m.legacy and n in wanted and n not in given}
-                originals.update(self._legacy_nodes([n for n in wanted if n not in announced and n not in originals
-                                                     and n not in given]))
-                found_given, _missing = self._given_nodes(given)
-                originals.update(found_given)
-                blackboards = self._blackboard_listeners()
-                for name in wanted:
-                    if name in announced:
-                        self._set_route(announced[name])
-                next_look = now + ANNOUNCEMENTS_EVERY
-            problems: Dict[str, List[str]] = {}
-            for name in wanted:
-                if name in announced:
-                    found = self._announced_problems(announced[name], definitions, name in answered, pinged,
-                                                     first_ping, now)
-                elif name in originals:
-                    found = self._legacy_problems(name, *originals[name])
-                elif name in given:
-                    found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
-                             % (given[name], name, TOPIC_CALL)]
-                else:
-                    found = ["module %r is not running (no bmtree module announced it and no node named /%s "
-                             "listens on %s; name its node with --legacy %s=/node)" % (name, name, TOPIC_CALL, name)]
-                if found:
-                    problems[name] = found
-            if blackboard and (self._pubs["request"].get_num_connections() < 1 or self._subs[2].get_num_connections() < 1):
-                problems[""] = ["the Blackboard node is not running or not connected"]
-            # a Blackboard node learns the pending calls from /master/output (to store original
-            # modules' results under their call): it must hear the first call too
-            for bb in blackboards:
-                if not self._shared("call").impl.has_connection(bb):
-                    problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s" % (bb, TOPIC_CALL)]
-            if not problems:
-                self.node_modules = {m.node: n for n, m in announced.items() if n in wanted}
-                self.node_modules.update({node: n for n, (node, _uri) in originals.items()})
-                self._announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
-                return
-            if time.monotonic() >= end:
-                problems.update(self._dead([announced[n] for n in problems if n in announced]))
-                hint = address_problem()
-                raise EnvironmentProblem("; ".join([p for name in sorted(problems) for p in problems[name]]
-                                                   + ([hint] if hint else [])))
-            with self._cond:
-                self._cond.wait(0.02)
+        wait_ready(self, modules, timeout, definitions, blackboard, legacy)
 
-    def _set_route(self, live: LiveModule) -> None:
-        """Publishers for the module's own topics (once), or none for a module that has none."""
-        route = self._routes.get(live.name)
-        if route is not None and route.resolved_name != live.call_topic:
-            del self._routes[live.name]
-            route.unregister()
-            route = None
-        if route is None and live.call_topic is not None:
-            self._routes[live.name] = self._sender(live.call_topic)
+    def _set_routes(self, lives: List[LiveModule]) -> None:
+        """Publishers for the modules' own topics (once; all new ones registered with the
+        master at once), or none for a module that has none."""
+        fresh = []
+        for live in lives:
+            route = self._routes.get(live.name)
+            if route is not None and route.resolved_name != live.call_topic:
+                del self._routes[live.name]
+                route.unregister()
+                route = None
+            if route is None and live.call_topic is not None:
+                fresh.append(live)
+        senders = topic_senders([live.call_topic or "" for live in fresh], self._String, SEND_QUEUE,
+                                on_connect=self._connected)
+        for live, sender in zip(fresh, senders):
+            self._routes[live.name] = sender
 
-    def _announced_problems(self, live: LiveModule, definitions: Optional[Mapping[str, ModuleDefinition]],
-                            answered: bool, pinged: Dict[str, float], first_ping: Dict[str, float],
-                            now: float) -> List[str]:
-        """Why ``live`` cannot be called yet (nothing once it answered a ping).
-
-        A module announced without its own topics (a bmtree module older than pings
-        answers one ``rejected``) is also taken once connected both ways and
-        :data:`PING_PATIENCE` seconds without an answer, as an original module is.
-        """
-        name = live.name
-        if definitions and name in definitions:
-            diff = diff_definitions(definitions[name], live.definition)
-            if diff:
-                return ["module %r runs with another definition: %s" % (name, "; ".join(diff))]
-        call_pub = self._route(name)
-        problems: List[str] = []
-        if answered:
-            return problems
-        if not call_pub.impl.has_connection(live.node) or not self._subs[0].impl.has_connection(live.uri):
-            return problems + ["module %r (node %s) is not connected to %s and %s yet" % (
-                name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
-        if name not in self._routes and now - first_ping.setdefault(name, now) >= PING_PATIENCE:
-            return problems
-        if now - pinged.get(name, -1e9) >= PING_EVERY:
-            ping = FunctionCall(name, PING_FUNCTION, [], names=[], call_id=new_id())
-            with self._cond:
-                self._pings[ping.call_id or ""] = name
-            call_pub.publish(self._String(ping.encode()))
-            pinged[name] = now
-        return problems + ["module %r (node %s) has not answered a ping on %s" % (name, live.node,
-                                                                                 call_pub.resolved_name)]
-
-    @staticmethod
-    def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
-        """Which announced modules are not running at all (a node killed hard leaves its
-        announcement behind), all asked at once."""
-        if not modules:
-            return {}
-        with ThreadPoolExecutor(max_workers=min(32, len(modules))) as pool:
-            alive = list(pool.map(lambda m: node_alive(m.uri, 1.0), modules))
-        return {m.name: ["module %r is not running (node %s announced it but does not answer)" % (m.name, m.node)]
-                for m, up in zip(modules, alive) if not up}
-
-    def _legacy_problems(self, name: str, node: str, uri: str) -> List[str]:
-        if self._shared("call").impl.has_connection(node) and self._subs[0].impl.has_connection(uri):
-            return []
-        return ["original module %r (node %s) is not connected to %s and %s yet" % (name, node, TOPIC_CALL,
-                                                                                   TOPIC_RESULT)]
-
-    @staticmethod
-    def _given_nodes(given: Mapping[str, str]) -> Tuple[Dict[str, Tuple[str, str]], List[str]]:
-        """Nodes named with ``--legacy MODULE=/node`` that run and listen on the call topic
-        (node and URI), and the modules whose node does not."""
-        if not given:
-            return {}, []
-        import rosgraph
-
-        master = rosgraph.Master("/bmtree_ready")
-        _, subs, _ = master.getSystemState()
-        listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
-        found, missing = {}, []
-        for module, node in given.items():
-            try:
-                if node in listeners:
-                    found[module] = (node, master.lookupNode(node))
-                    continue
-            except rosgraph.masterapi.MasterError:
-                pass
-            missing.append(module)
-        return found, missing
-
-    @staticmethod
-    def _blackboard_listeners() -> List[str]:
-        """Running Blackboard nodes that listen to the calls (a killed node stays registered)."""
-        import rosgraph
-
-        master = rosgraph.Master("/bmtree_ready")
-        _, subs, _ = master.getSystemState()
-        subs_of = {t: set(n) for t, n in subs}
-        out = []
-        for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
-            try:
-                if node_alive(master.lookupNode(node), 0.5):
-                    out.append(node)
-            except rosgraph.masterapi.MasterError:
-                continue
-        return out
-
-    @staticmethod
-    def _announce_legacy(found: Mapping[str, str], definitions: Mapping[str, ModuleDefinition]) -> None:
-        import rospy
-
-        for module, node in found.items():
-            if module in definitions:
-                rospy.set_param("%s/%s" % (PARAM_ROOT, module), legacy_announcement(node, definitions[module]))
-
-    @staticmethod
-    def _legacy_nodes(names: List[str]) -> Dict[str, Tuple[str, str]]:
-        """Original modules do not announce themselves; they are found by node name.
-
-        A node called ``/<module>`` (in any namespace) that subscribes to
-        ``/master/output`` is taken as that module, the convention of the original
-        template modules. Gives the node and its URI.
-        """
-        if not names:
-            return {}
-        import rosgraph
-
-        master = rosgraph.Master("/bmtree_ready")
-        _, subs, _ = master.getSystemState()
-        listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
-        found = {}
-        for name in names:
-            for node in listeners:
-                if node.rsplit("/", 1)[-1] == name:
-                    try:
-                        found[name] = (node, master.lookupNode(node))
-                    except rosgraph.masterapi.MasterError:
-                        continue
-        return found
+    def _connected(self) -> None:
+        """A module connected to its call topic: the preflight may ping it now."""
+        with self._cond:
+            self._cond.notify_all()
 
     def stream_sink(self, namespace: str = "/bmtree/run") -> Any:
         """A run-stream sink that publishes each channel on ``namespace/<channel>`` (README, "Run stream")."""

@@ -8,17 +8,25 @@ publisher (one writer per topic; a module's own call topic has one subscriber): 
 appends to a bounded queue and wakes the sender's thread, which writes. A subscriber that
 stops reading blocks only its own topic's thread; past ``limit`` waiting messages the oldest
 is dropped (and logged once), as rospy's queues do.
+
+:func:`topic_senders` makes many at once: rospy registers publishers with the master one
+after another (a lock around each XML-RPC), which with 50 modules was most of ``bmtree
+run``'s preflight; they are registered here concurrently instead.
 """
 from __future__ import annotations
 
 import collections
 import logging
 import threading
-from typing import Any, Deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Deque, List, Optional
 
 from comm import sync_publisher
+from comm.rpc import proxy
 
-__all__ = ["TopicSender"]
+__all__ = ["TopicSender", "topic_senders", "widen_accept_queue"]
+
+ACCEPT_QUEUE = 128  # pending TCP connections to this node's TCPROS port (rospy listens with 5)
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -26,8 +34,8 @@ log = logging.getLogger("bmtree.coordinator")
 class TopicSender:
     """A publisher of ``std_msgs/String`` whose ``publish`` never blocks (see the module docstring)."""
 
-    def __init__(self, topic: str, data_class: type, limit: int = 10000):
-        self.pub: Any = sync_publisher(topic, data_class, tcp_nodelay=True)
+    def __init__(self, topic: str, data_class: type, limit: int = 10000, pub: Any = None):
+        self.pub: Any = pub if pub is not None else sync_publisher(topic, data_class, tcp_nodelay=True)
         self.resolved_name: str = self.pub.resolved_name
         self.impl = self.pub.impl  # for has_connection()
         self.limit = limit
@@ -36,8 +44,7 @@ class TopicSender:
         self._cond = threading.Condition()
         self._closed = False
         self._stopped = False  # closed and given up on flushing: drop the rest silently
-        self._thread = threading.Thread(target=self._run, name="send %s" % topic, daemon=True)
-        self._thread.start()
+        self._thread: Optional[threading.Thread] = None  # started by the first publish (the preflight makes many)
 
     def publish(self, msg: Any) -> None:
         with self._cond:
@@ -48,6 +55,9 @@ class TopicSender:
                     log.warning("%s: its subscriber does not read; dropping the oldest waiting messages",
                                 self.resolved_name)
             self._queue.append(msg)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="send %s" % self.resolved_name, daemon=True)
+                self._thread.start()
             self._cond.notify()
 
     def get_num_connections(self) -> int:
@@ -75,6 +85,83 @@ class TopicSender:
         with self._cond:
             self._closed = True
             self._cond.notify()
-        self._thread.join(flush)
+            thread = self._thread
+        if thread is not None:
+            thread.join(flush)
         self._stopped = True
         self.pub.unregister()
+
+
+class _Connected:
+    """A rospy ``SubscribeListener``: calls ``fn`` when a subscriber connects."""
+
+    def __init__(self, fn: Callable[[], None]):
+        self.fn = fn
+
+    def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Any) -> None:
+        self.fn()
+
+    def peer_unsubscribe(self, topic_name: str, num_peers: int) -> None:
+        pass
+
+
+def topic_senders(topics: List[str], data_class: Any, limit: int = 10000,
+                  on_connect: Optional[Callable[[], None]] = None) -> List[TopicSender]:
+    """A :class:`TopicSender` per topic, registered with the master concurrently.
+
+    The publishers' topics are entered in rospy's topic manager first, so that creating
+    them does not register them one by one (rospy's ``acquire_impl`` finds them there);
+    then one ``registerPublisher`` per topic goes to the master from a thread pool, as
+    rospy's own registration would (the master then tells the subscribers). Unregistering
+    and re-registering after a master restart (``comm.masterwatch``) see them as any other.
+    ``on_connect`` is called (from rospy's thread) whenever a subscriber connects.
+    """
+    if not topics:
+        return []
+    import rosgraph
+    import rospy
+    from rospy.impl.registration import get_topic_manager
+    from rospy.topics import _PublisherImpl
+
+    names = [rospy.resolve_name(t) for t in topics]
+    tm = get_topic_manager()
+    fresh = []
+    with tm.lock:
+        for name in names:
+            if name not in tm.pubs:
+                tm.pubs[name] = _PublisherImpl(name, data_class)
+                tm.topics.add(name)
+                fresh.append(name)
+    extra = {"subscriber_listener": _Connected(on_connect)} if on_connect is not None else {}
+    out = [TopicSender(t, data_class, limit, pub=sync_publisher(t, data_class, tcp_nodelay=True, **extra))
+           for t in topics]
+    if fresh:
+        uri, caller_id, api = rosgraph.get_master_uri(), rospy.get_caller_id(), rospy.core.get_node_uri()
+
+        def register(name: str) -> None:
+            try:
+                code, msg, _ = proxy(uri, 10.0).registerPublisher(caller_id, name, data_class._type, api)
+                if code != 1:
+                    log.error("the master refused publisher %s: %s", name, msg)
+            except Exception as exc:  # no master: the preflight says what is not connected
+                log.warning("could not register publisher %s with the master: %s", name, exc)
+
+        with ThreadPoolExecutor(max_workers=min(16, len(fresh))) as pool:
+            list(pool.map(register, fresh))
+    return out
+
+
+def widen_accept_queue(backlog: int = ACCEPT_QUEUE) -> None:
+    """Let many nodes connect to this node's topics at once.
+
+    rospy's TCPROS server listens with a backlog of 5 and reads each handshake in its
+    accepting thread: when 50 modules connect to their call topics at once, the
+    connections past the queue are dropped and retried by TCP a second later.
+    """
+    from rospy.impl import tcpros_base
+
+    tcpros_base.start_tcpros_server()
+    tcp = getattr(tcpros_base._tcpros_server, "tcp_ros_server", None)
+    sock = getattr(tcp, "server_sock", None)
+    if sock is not None:
+        sock.listen(backlog)

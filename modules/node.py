@@ -50,9 +50,11 @@ class CallInbox:
     """
 
     def __init__(self, module: str, on_call: Callable[[str], None], on_cancel: Callable[[str], None],
-                 publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096):
+                 publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096,
+                 on_parsed: Optional[Callable[[Dict[str, Any]], None]] = None):
         self.module = module
         self.on_call = on_call
+        self.on_parsed = on_parsed  # takes the parsed payload instead of on_call: parsed once, not twice
         self.on_cancel = on_cancel
         self.publish_result = publish_result
         self.max_bytes = max_bytes
@@ -87,7 +89,10 @@ class CallInbox:
                 self.duplicates += 1
                 log.debug("call %s of %s came twice; ran once", call_id, self.module)
                 return
-            self.on_call(text)
+            if self.on_parsed is not None:
+                self.on_parsed(head)
+            else:
+                self.on_call(text)
         except Exception:
             log.exception("unexpected error while taking a call")
 
@@ -193,7 +198,8 @@ class ModuleNode:
                                    publish_event=lambda text: ev_pub.publish(String(text)),
                                    max_bytes=self.max_bytes)
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
-                               lambda text: res_pub.publish(String(text)), self.max_bytes)
+                               lambda text: res_pub.publish(String(text)), self.max_bytes,
+                               on_parsed=self.server.handle_parsed)
         self.inbox.subscribe()
         self.impl.setup(self)
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),

@@ -243,6 +243,14 @@ class ModuleServer:
         except Exception as exc:
             log.error("could not handle a call (%s: %s)", type(exc).__name__, exc)
 
+    def handle_parsed(self, head: Dict[str, Any]) -> None:
+        """Handle a call payload already parsed (and its size and depth checked) by
+        :func:`~comm.messages.load_payload`, as the node's inbox does; never raises."""
+        try:
+            self._take(head)
+        except Exception as exc:
+            log.error("could not handle a call (%s: %s)", type(exc).__name__, exc)
+
     def _handle_call(self, text: Any) -> None:
         try:
             head = load_payload(text, self.max_bytes)
@@ -253,6 +261,9 @@ class ModuleServer:
             else:
                 log.warning("ignored a malformed call: %s", exc)
             return
+        self._take(head)
+
+    def _take(self, head: Dict[str, Any]) -> None:
         if head.get("basic_mod") != self.definition.name:
             return
         call_id = head.get("call_id") if isinstance(head.get("call_id"), str) else None

@@ -1,0 +1,261 @@
+"""``bmtree run``'s preflight: wait (bounded) until a first call to every module would be taken.
+
+Its cost is about one concurrent round trip per module plus one master query: the
+announcements come in one ``getParam``; the publishers of every module's own call topic
+are registered with the master all at once (:func:`coordinator.sender.topic_senders`);
+each module is pinged as soon as its call topic and its results are connected (a
+connection to a call topic wakes the wait at once); a ping's answer on
+``/function/output`` proves both directions. Waiting for that answer, not merely for a
+connection, is what keeps a first call from being lost to a publisher whose subscriber
+is not connected yet (a ROS pitfall).
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Tuple
+
+from comm import TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_RESULT
+from comm.addressing import PING_FUNCTION
+from comm.errors import EnvironmentProblem
+from comm.messages import FunctionCall, new_id
+from modules.definition import ModuleDefinition
+from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_announcement, node_alive
+
+if TYPE_CHECKING:
+    from coordinator.ros_transport import RosTransport
+
+__all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
+
+PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
+ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
+PING_PATIENCE = 1.0  # seconds after which a module without its own topics may do with connections alone
+POLL = 0.005  # seconds between looks at the connections (connections to call topics wake it sooner)
+
+
+def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[str]:
+    """What differs between the definition a tree was checked against and the running module's."""
+    out = []
+    for name, fn in local.functions.items():
+        other = live.functions.get(name)
+        if other is None:
+            out.append("function %r is not served by the running module" % name)
+            continue
+        if fn.concurrent != other.concurrent:  # checks and mocks assumed the local one
+            out.append("function %r is %sconcurrent here, %sconcurrent in the running module" % (
+                name, "" if fn.concurrent else "not ", "" if other.concurrent else "not "))
+        for kind, a, b in (("input", fn.inputs, other.inputs), ("output", fn.outputs, other.outputs)):
+            if [(p.name, p.rostype) for p in a] != [(p.name, p.rostype) for p in b]:
+                out.append("%s %ss differ: here %s, running %s" % (name, kind, ", ".join(
+                    "%s:%s" % (p.name, p.rostype) for p in a), ", ".join("%s:%s" % (p.name, p.rostype) for p in b)))
+    for name, ev in local.events.items():
+        other_ev = live.events.get(name)
+        if other_ev is None or [(p.name, p.rostype) for p in ev.params] != [(p.name, p.rostype) for p in other_ev.params]:
+            out.append("event %r differs or is missing in the running module" % name)
+    return out
+
+
+class _Preflight:
+    """The state of one :func:`wait_ready`."""
+
+    def __init__(self, tr: RosTransport, definitions: Optional[Mapping[str, ModuleDefinition]]):
+        self.tr = tr
+        self.definitions = definitions or {}
+        self.pinged: Dict[str, float] = {}
+        self.first_ping: Dict[str, float] = {}
+        self._diffs: Dict[str, Tuple[ModuleDefinition, List[str]]] = {}  # module -> (live definition, problems)
+
+    def definition_problems(self, live: LiveModule) -> List[str]:
+        """Computed once per announced definition, not once per look."""
+        local = self.definitions.get(live.name)
+        if local is None:
+            return []
+        known = self._diffs.get(live.name)
+        if known is None or known[0] is not live.definition:
+            known = self._diffs[live.name] = (live.definition, diff_definitions(local, live.definition))
+        return known[1]
+
+    def announced_problems(self, live: LiveModule, answered: bool, now: float) -> List[str]:
+        """Why ``live`` cannot be called yet (nothing once it answered a ping).
+
+        A module announced without its own topics (a bmtree module older than pings
+        answers one ``rejected``) is also taken once connected both ways and
+        :data:`PING_PATIENCE` seconds without an answer, as an original module is.
+        """
+        tr, name = self.tr, live.name
+        diff = self.definition_problems(live)
+        if diff:
+            return ["module %r runs with another definition: %s" % (name, "; ".join(diff))]
+        if answered:
+            return []
+        call_pub = tr._route(name)
+        if not call_pub.impl.has_connection(live.node) or not tr._subs[0].impl.has_connection(live.uri):
+            return ["module %r (node %s) is not connected to %s and %s yet" % (
+                name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
+        if name not in tr._routes and now - self.first_ping.setdefault(name, now) >= PING_PATIENCE:
+            return []
+        if now - self.pinged.get(name, -1e9) >= PING_EVERY:
+            ping = FunctionCall(name, PING_FUNCTION, [], names=[], call_id=new_id())
+            with tr._cond:
+                tr._pings[ping.call_id or ""] = name
+            call_pub.publish(tr._String(ping.encode()))
+            self.pinged[name] = now
+        return ["module %r (node %s) has not answered a ping on %s" % (name, live.node, call_pub.resolved_name)]
+
+
+def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
+               definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
+               legacy: Optional[Mapping[str, str]] = None) -> None:
+    """:meth:`RosTransport.wait_ready <coordinator.ros_transport.RosTransport.wait_ready>` (documented there)."""
+    tr.open()
+    wanted = sorted(set(modules))
+    with tr._cond:  # a fresh proof each time: a module may have restarted since
+        tr._ponged.difference_update(wanted)
+    state = _Preflight(tr, definitions)
+    end = time.monotonic() + timeout
+    given = {m: n for m, n in (legacy or {}).items() if m in wanted}
+    announced: Dict[str, LiveModule] = {}
+    originals: Dict[str, Tuple[str, str]] = {}
+    blackboards: List[str] = []
+    next_look = 0.0
+    while True:
+        now = time.monotonic()
+        with tr._cond:
+            answered = set(tr._ponged)
+        if now >= next_look and set(wanted) - answered:
+            every = announced_modules()
+            announced = {n: m for n, m in every.items() if not m.legacy and n not in given}
+            originals = {n: (m.node, m.uri) for n, m in every.items() if m.legacy and n in wanted and n not in given}
+            originals.update(legacy_nodes([n for n in wanted if n not in announced and n not in originals
+                                           and n not in given]))
+            originals.update(_given_nodes(given))
+            blackboards = _blackboard_listeners()
+            tr._set_routes([announced[n] for n in wanted if n in announced])
+            next_look = now + ANNOUNCEMENTS_EVERY
+        problems: Dict[str, List[str]] = {}
+        for name in wanted:
+            if name in announced:
+                found = state.announced_problems(announced[name], name in answered, now)
+            elif name in originals:
+                found = _legacy_problems(tr, name, *originals[name])
+            elif name in given:
+                found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
+                         % (given[name], name, TOPIC_CALL)]
+            else:
+                found = ["module %r is not running (no bmtree module announced it and no node named /%s "
+                         "listens on %s; name its node with --legacy %s=/node)" % (name, name, TOPIC_CALL, name)]
+            if found:
+                problems[name] = found
+        if blackboard and (tr._pubs["request"].get_num_connections() < 1 or tr._subs[2].get_num_connections() < 1):
+            problems[""] = ["the Blackboard node is not running or not connected"]
+        # a Blackboard node learns the pending calls from /master/output (to store original
+        # modules' results under their call): it must hear the first call too
+        for bb in blackboards:
+            if not tr._shared("call").impl.has_connection(bb):
+                problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s" % (bb, TOPIC_CALL)]
+        if not problems:
+            tr.node_modules = {m.node: n for n, m in announced.items() if n in wanted}
+            tr.node_modules.update({node: n for n, (node, _uri) in originals.items()})
+            _announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
+            return
+        if time.monotonic() >= end:
+            from coordinator.ros_transport import address_problem
+
+            problems.update(_dead([announced[n] for n in problems if n in announced]))
+            hint = address_problem()
+            raise EnvironmentProblem("; ".join([p for name in sorted(problems) for p in problems[name]]
+                                               + ([hint] if hint else [])))
+        with tr._cond:
+            tr._cond.wait(POLL)
+
+
+def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
+    """Which announced modules are not running at all (a node killed hard leaves its
+    announcement behind), all asked at once."""
+    if not modules:
+        return {}
+    with ThreadPoolExecutor(max_workers=min(32, len(modules))) as pool:
+        alive = list(pool.map(lambda m: node_alive(m.uri, 1.0), modules))
+    return {m.name: ["module %r is not running (node %s announced it but does not answer)" % (m.name, m.node)]
+            for m, up in zip(modules, alive) if not up}
+
+
+def _legacy_problems(tr: RosTransport, name: str, node: str, uri: str) -> List[str]:
+    if tr._shared("call").impl.has_connection(node) and tr._subs[0].impl.has_connection(uri):
+        return []
+    return ["original module %r (node %s) is not connected to %s and %s yet" % (name, node, TOPIC_CALL,
+                                                                               TOPIC_RESULT)]
+
+
+def _system_state() -> Tuple[Any, Any]:
+    import rosgraph
+
+    master = rosgraph.Master("/bmtree_ready")
+    _, subs, _ = master.getSystemState()
+    return master, subs
+
+
+def _given_nodes(given: Mapping[str, str]) -> Dict[str, Tuple[str, str]]:
+    """Nodes named with ``--legacy MODULE=/node`` that run and listen on the call topic (node and URI)."""
+    if not given:
+        return {}
+    import rosgraph
+
+    master, subs = _system_state()
+    listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
+    found = {}
+    for module, node in given.items():
+        try:
+            if node in listeners:
+                found[module] = (node, master.lookupNode(node))
+        except rosgraph.masterapi.MasterError:
+            pass
+    return found
+
+
+def _blackboard_listeners() -> List[str]:
+    """Running Blackboard nodes that listen to the calls (a killed node stays registered)."""
+    import rosgraph
+
+    master, subs = _system_state()
+    subs_of = {t: set(n) for t, n in subs}
+    out = []
+    for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
+        try:
+            if node_alive(master.lookupNode(node), 0.5):
+                out.append(node)
+        except rosgraph.masterapi.MasterError:
+            continue
+    return out
+
+
+def _announce_legacy(found: Mapping[str, str], definitions: Mapping[str, ModuleDefinition]) -> None:
+    import rospy
+
+    for module, node in found.items():
+        if module in definitions:
+            rospy.set_param("%s/%s" % (PARAM_ROOT, module), legacy_announcement(node, definitions[module]))
+
+
+def legacy_nodes(names: List[str]) -> Dict[str, Tuple[str, str]]:
+    """Original modules do not announce themselves; they are found by node name.
+
+    A node called ``/<module>`` (in any namespace) that subscribes to
+    ``/master/output`` is taken as that module, the convention of the original
+    template modules. Gives the node and its URI.
+    """
+    if not names:
+        return {}
+    import rosgraph
+
+    master, subs = _system_state()
+    listeners = next((n for t, n in subs if t == TOPIC_CALL), [])
+    found = {}
+    for name in names:
+        for node in listeners:
+            if node.rsplit("/", 1)[-1] == name:
+                try:
+                    found[name] = (node, master.lookupNode(node))
+                except rosgraph.masterapi.MasterError:
+                    continue
+    return found
