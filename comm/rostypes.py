@@ -196,8 +196,28 @@ def check_message(msg: Any, rostype: str = "") -> None:
         raise ProtocolError("%s: %s" % (rostype or getattr(msg, "_type", "?"), exc))
 
 
+_PLAIN_TYPES = frozenset(message_converter.ros_primitive_types)
+_FLAT: Dict[type, Optional[tuple]] = {}  # message class -> its fields when all are scalars, else None
+
+
+def _flat_fields(cls: type) -> Optional[tuple]:
+    fields = _FLAT.get(cls, False)
+    if fields is False:
+        slots, types = getattr(cls, "__slots__", None), getattr(cls, "_slot_types", None)
+        flat = slots is not None and types is not None and all(t in _PLAIN_TYPES for t in types)
+        fields = _FLAT[cls] = tuple(slots) if flat else None
+    return fields  # type: ignore[return-value]
+
+
 def from_message(msg: Any) -> Dict[str, Any]:
-    """Plain dict of a message (the shape that travels in JSON)."""
+    """Plain dict of a message (the shape that travels in JSON).
+
+    A message of scalar fields only (``std_msgs/String``, most values of calls) is read
+    directly: the converter returns such fields unchanged, after a regex per field that
+    cost more than the rest of encoding a call."""
+    fields = _flat_fields(type(msg))
+    if fields is not None:
+        return {name: getattr(msg, name) for name in fields}
     return message_converter.convert_ros_message_to_dictionary(msg)
 
 

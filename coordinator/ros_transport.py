@@ -10,6 +10,7 @@ stops reading (a stopped process) fills only its own queue (then loses its oldes
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import socket
@@ -17,7 +18,7 @@ import threading
 import time
 import typing
 from collections import OrderedDict
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple
 
 from blackboard.node import TOPIC_STORED
 from comm import (
@@ -96,6 +97,8 @@ class RosTransport(Transport):
         #: a result without call_id belongs to the module whose node published it
         self.node_modules: Dict[str, str] = {}
         self._routes: Dict[str, TopicSender] = {}  # module -> its own call topic
+        self._holding = 0  # depth of hold()
+        self._held: Dict[str, TopicSender] = {}  # topics with messages kept by hold()
         self._pings: Dict[str, str] = {}  # ping call_id -> module
         self._ponged: Set[str] = set()  # modules that answered a ping
         self._cond = threading.Condition()
@@ -247,15 +250,39 @@ class RosTransport(Transport):
             return route.resolved_name, route.resolved_name
         return self._shared("call").resolved_name, self._shared("cancel").resolved_name
 
+    @contextlib.contextmanager
+    def hold(self) -> Iterator[None]:
+        """Calls and cancels to modules' own topics made inside leave at its end, one write per
+        module (from the ticking thread only, as every send)."""
+        self._holding += 1
+        try:
+            yield
+        finally:
+            self._holding -= 1
+            if not self._holding:
+                held, self._held = self._held, {}
+                for route in held.values():
+                    route.flush()
+
+    def _to_route(self, route: TopicSender, text: str) -> None:
+        if not self._holding:
+            route.publish(self._String(text))
+        elif route.publish(self._String(text), hold=True):
+            self._held[route.resolved_name] = route
+
     def send_call(self, call: FunctionCall) -> None:
         if call.call_id:
             self.watchdog.call_sent(call.call_id, call.basic_mod)
-        self._route(call.basic_mod).publish(self._String(call.encode()))
+        route = self._routes.get(call.basic_mod)
+        if route is not None:
+            self._to_route(route, call.encode())
+        else:
+            self._shared("call").publish(self._String(call.encode()))
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         route = self._routes.get(cancel.basic_mod)
         if route is not None:
-            route.publish(self._String(cancel_on_call_topic(cancel.call_id, cancel.basic_mod, cancel.function)))
+            self._to_route(route, cancel_on_call_topic(cancel.call_id, cancel.basic_mod, cancel.function))
         else:
             self._shared("cancel").publish(self._String(cancel.encode()))
 

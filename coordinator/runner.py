@@ -154,7 +154,8 @@ class TreeRunner:
 
     def tick(self) -> None:
         """One tick, its status changes told to the observers (a step of :meth:`run`; benchmarks)."""
-        self.tree.tick()
+        with self.ctx.transport.hold():
+            self.tree.tick()
         if self._visited is not None:
             self._tell(self._visited.visited)
 

@@ -1,13 +1,18 @@
-"""Publishing one topic from its own thread, so that the ticking thread never waits on a socket.
+"""Publishing a topic without ever making the ticking thread wait on a socket.
 
 rospy's queued publishers also never block, but each ``publish`` ends with
 ``time.sleep(0)``, which hands the GIL to another thread: with 100 calls sent in one tick
 that alone took half a millisecond per call on the CI machine, and a ``parallel`` of 100
-calls went out one after another. A :class:`TopicSender` wraps a synchronous rospy
-publisher (one writer per topic; a module's own call topic has one subscriber): ``publish``
-appends to a bounded queue and wakes the sender's thread, which writes. A subscriber that
-stops reading blocks only its own topic's thread; past ``limit`` waiting messages the oldest
-is dropped (and logged once), as rospy's queues do.
+calls went out one after another. A :class:`TopicSender` (one per module's own call topic,
+which has one subscriber) writes each message's TCPROS frame itself: at once, in the
+caller's thread, with a send that cannot block (``MSG_DONTWAIT``), when every
+subscriber's socket takes the whole frame; otherwise (a subscriber that stopped reading
+filled its socket) the rest of the frame and every later message go to the sender's own
+thread, which writes them in order with blocking sends, and the caller only queues. So a
+subscriber that stops reading blocks only its own topic's thread; past ``limit`` waiting
+messages the oldest is dropped (and logged once), as rospy's queues do. Writing in the
+caller's thread spares each call a wake-up of another thread, and the calls of a tick
+leave while the tick goes on.
 
 :func:`topic_senders` makes many at once: rospy registers publishers with the master one
 after another (a lock around each XML-RPC), which with 50 modules was most of ``bmtree
@@ -16,10 +21,12 @@ run``'s preflight; they are registered here concurrently instead.
 from __future__ import annotations
 
 import collections
+import io
 import logging
+import socket
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Deque, List, Optional
+from typing import Any, Callable, Deque, List, Optional, Tuple
 
 from comm import sync_publisher
 from comm.rpc import proxy
@@ -31,34 +38,93 @@ ACCEPT_QUEUE = 128  # pending TCP connections to this node's TCPROS port (rospy 
 log = logging.getLogger("bmtree.coordinator")
 
 
+def _frame(msg: Any) -> bytes:
+    """The message as rospy writes it on a TCPROS connection (length-prefixed)."""
+    from rospy.msg import serialize_message
+
+    buff = io.BytesIO()
+    serialize_message(buff, 0, msg)
+    return buff.getvalue()
+
+
 class TopicSender:
-    """A publisher of ``std_msgs/String`` whose ``publish`` never blocks (see the module docstring)."""
+    """A publisher whose ``publish`` never blocks (see the module docstring)."""
 
     def __init__(self, topic: str, data_class: type, limit: int = 10000, pub: Any = None):
         self.pub: Any = pub if pub is not None else sync_publisher(topic, data_class, tcp_nodelay=True)
         self.resolved_name: str = self.pub.resolved_name
-        self.impl = self.pub.impl  # for has_connection()
+        self.impl = self.pub.impl  # its connections; has_connection()
         self.limit = limit
         self.dropped = 0
-        self._queue: Deque[Any] = collections.deque()
+        self._queue: Deque[bytes] = collections.deque()  # whole frames for the thread
+        self._held: List[bytes] = []  # frames kept for flush()
+        self._rest: List[Tuple[Any, memoryview]] = []  # (connection, the unsent end of a frame): first
+        self._writing = False  # the thread holds frames it has not written yet
         self._cond = threading.Condition()
         self._closed = False
         self._stopped = False  # closed and given up on flushing: drop the rest silently
-        self._thread: Optional[threading.Thread] = None  # started by the first publish (the preflight makes many)
+        self._thread: Optional[threading.Thread] = None  # started when first needed
 
-    def publish(self, msg: Any) -> None:
+    def publish(self, msg: Any, hold: bool = False) -> bool:
+        """Send ``msg``; with ``hold``, keep it for :meth:`flush` instead (True if it was kept)."""
+        frame = _frame(msg)
         with self._cond:
-            if len(self._queue) >= self.limit:
-                self._queue.popleft()
-                self.dropped += 1
-                if self.dropped == 1:
-                    log.warning("%s: its subscriber does not read; dropping the oldest waiting messages",
-                                self.resolved_name)
-            self._queue.append(msg)
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name="send %s" % self.resolved_name, daemon=True)
-                self._thread.start()
-            self._cond.notify()
+            if hold:
+                self._held.append(frame)
+                return True
+        self._send([frame])
+        return False
+
+    def flush(self) -> None:
+        """Send the messages kept by ``publish(..., hold=True)``, in one write where the socket takes it."""
+        with self._cond:
+            frames, self._held = self._held, []
+        if frames:
+            self._send(frames)
+
+    def _send(self, frames: List[bytes]) -> None:
+        broken = []
+        with self._cond:
+            if self._queue or self._rest or self._writing:  # behind what waits: keep the order
+                for frame in frames:
+                    self._enqueue(frame)
+                return
+            data = frames[0] if len(frames) == 1 else b"".join(frames)
+            for conn in list(self.impl.connections):
+                sock = conn.socket
+                if sock is None or conn.done:
+                    continue
+                try:
+                    sent = sock.send(data, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    sent = 0
+                except OSError:
+                    broken.append(conn)
+                    continue
+                if sent < len(data):
+                    self._rest.append((conn, memoryview(data)[sent:]))
+                conn.stat_bytes += len(data)
+                conn.stat_num_msg += len(frames)
+            if self._rest:
+                self._wake()
+        for conn in broken:
+            conn.close()  # rospy removes it from the topic, as its own publish does
+
+    def _enqueue(self, frame: bytes) -> None:
+        if len(self._queue) >= self.limit:
+            self._queue.popleft()
+            self.dropped += 1
+            if self.dropped == 1:
+                log.warning("%s: its subscriber does not read; dropping the oldest waiting messages",
+                            self.resolved_name)
+        self._queue.append(frame)
+        self._wake()
+
+    def _wake(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="send %s" % self.resolved_name, daemon=True)
+            self._thread.start()
+        self._cond.notify()
 
     def get_num_connections(self) -> int:
         return self.pub.get_num_connections()
@@ -66,22 +132,36 @@ class TopicSender:
     def _run(self) -> None:
         while True:
             with self._cond:
-                while not self._queue and not self._closed:
+                self._writing = False
+                while not self._queue and not self._rest and not self._closed:
                     self._cond.wait()
-                if not self._queue:
+                if not self._queue and not self._rest:
                     return  # closed, and everything written
-                batch = list(self._queue)
+                rest, batch = self._rest, list(self._queue)
+                self._rest = []
                 self._queue.clear()
-            for msg in batch:
-                if self._stopped:
-                    return
-                try:
-                    self.pub.publish(msg)
-                except Exception as exc:  # a closed topic at shutdown, a broken connection
-                    log.warning("could not publish on %s: %s", self.resolved_name, exc)
+                self._writing = True
+            for conn, data in rest:
+                self._write(conn, data)
+            for frame in batch:
+                for conn in list(self.impl.connections):
+                    if self._stopped:
+                        return
+                    self._write(conn, frame)
+
+    def _write(self, conn: Any, data: Any) -> None:
+        sock = conn.socket
+        if sock is None or conn.done:
+            return
+        try:
+            sock.sendall(data)
+        except OSError as exc:  # a broken connection, a closed topic at shutdown
+            log.warning("could not publish on %s: %s", self.resolved_name, exc)
+            conn.close()
 
     def unregister(self, flush: float = 1.0) -> None:
         """Write what waits (cancels sent as a run ends), for at most ``flush`` seconds, then stop."""
+        self.flush()
         with self._cond:
             self._closed = True
             self._cond.notify()

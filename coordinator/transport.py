@@ -7,7 +7,8 @@ thread; the runner queues them and handles them in its ticking thread.
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable, Iterable
+import contextlib
+from typing import Any, Callable, ContextManager, Iterable
 
 from comm.messages import BlackboardRequest, CancelRequest, FunctionCall
 
@@ -30,6 +31,11 @@ class Transport(abc.ABC):
     @abc.abstractmethod
     def send_request(self, request: BlackboardRequest) -> None:
         """Ask the Blackboard node."""
+
+    def hold(self) -> ContextManager[Any]:
+        """Sends made inside may wait and leave together at its end (the runner holds each
+        tick: the calls a tick makes to one module then cost it one write and one wake-up)."""
+        return contextlib.nullcontext()
 
     def wait_ready(self, modules: Iterable[str], timeout: float) -> None:  # noqa: B027 - optional, no-op default
         """Block until the named modules can be called (raise EnvironmentProblem if not)."""
