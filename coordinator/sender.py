@@ -38,6 +38,14 @@ ACCEPT_QUEUE = 128  # pending TCP connections to this node's TCPROS port (rospy 
 log = logging.getLogger("bmtree.coordinator")
 
 
+def _close(conn: Any) -> None:
+    """Close a broken connection; rospy removes it from its topic, as its own publish does."""
+    try:
+        conn.close()
+    except Exception as exc:  # the topic was unregistered meanwhile (rospy then fails on its listeners)
+        log.debug("closing a connection: %s", exc)
+
+
 def _frame(msg: Any) -> bytes:
     """The message as rospy writes it on a TCPROS connection (length-prefixed)."""
     from rospy.msg import serialize_message
@@ -108,7 +116,7 @@ class TopicSender:
             if self._rest:
                 self._wake()
         for conn in broken:
-            conn.close()  # rospy removes it from the topic, as its own publish does
+            _close(conn)
 
     def _enqueue(self, frame: bytes) -> None:
         if len(self._queue) >= self.limit:
@@ -157,7 +165,7 @@ class TopicSender:
             sock.sendall(data)
         except OSError as exc:  # a broken connection, a closed topic at shutdown
             log.warning("could not publish on %s: %s", self.resolved_name, exc)
-            conn.close()
+            _close(conn)
 
     def unregister(self, flush: float = 1.0) -> None:
         """Write what waits (cancels sent as a run ends), for at most ``flush`` seconds, then stop."""
