@@ -225,16 +225,19 @@ def topic_senders(topics: List[str], data_class: Any, limit: int = 10000,
            for t in topics]
     if fresh:
         uri, caller_id, api = rosgraph.get_master_uri(), rospy.get_caller_id(), rospy.core.get_node_uri()
+        local = threading.local()  # a kept-alive connection per thread: the master starts a thread per connection
 
         def register(name: str) -> None:
             try:
-                code, msg, _ = proxy(uri, 10.0).registerPublisher(caller_id, name, data_class._type, api)
+                if getattr(local, "master", None) is None:
+                    local.master = proxy(uri, 10.0)
+                code, msg, _ = local.master.registerPublisher(caller_id, name, data_class._type, api)
                 if code != 1:
                     log.error("the master refused publisher %s: %s", name, msg)
             except Exception as exc:  # no master: the preflight says what is not connected
                 log.warning("could not register publisher %s with the master: %s", name, exc)
 
-        with ThreadPoolExecutor(max_workers=min(16, len(fresh))) as pool:
+        with ThreadPoolExecutor(max_workers=min(8, len(fresh))) as pool:
             list(pool.map(register, fresh))
     return out
 
