@@ -102,6 +102,9 @@ class TopicSender:
                 sock = conn.socket
                 if sock is None or conn.done:
                     continue
+                if sock.gettimeout() is not None:  # Python would wait for room first: the thread writes
+                    self._rest.append((conn, memoryview(data)))
+                    continue
                 try:
                     sent = sock.send(data, socket.MSG_DONTWAIT)
                 except BlockingIOError:

@@ -304,3 +304,36 @@ def test_a_call_answered_by_two_nodes_is_reported(probe):
         logging.getLogger("bmtree.coordinator").removeHandler(handler)
     assert len(delivered) == 3
     assert len(records) == 1 and "answered by two nodes, /bm_a and /bm_b" in records[0].getMessage()
+
+
+def test_watchdog_asks_only_about_calls_in_flight_for_a_period(monkeypatch):
+    from coordinator import liveness
+
+    clock = {"now": 100.0}
+
+    class _Time:
+        @staticmethod
+        def monotonic():
+            return clock["now"]
+
+    asked = []
+
+    def pid(uri, timeout):
+        asked.append(uri)
+        raise OSError("refused")  # its process is gone
+
+    monkeypatch.setattr(liveness, "time", _Time)
+    monkeypatch.setattr(liveness, "_pid", pid)
+    got = []
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_%s" % m, lambda n: "http://h%s/" % n, period=0.25)
+    dog.call_sent("quick", "a")
+    dog.check()
+    dog.call_done("quick")            # answered within its first period: its node was never asked
+    dog.call_sent("slow", "b")
+    clock["now"] += 0.1
+    dog.check()
+    assert asked == [] and got == []
+    clock["now"] += 0.2               # 'slow' has been in flight for a period: its node is asked
+    dog.check()
+    assert asked == ["http://h/bm_b/"]
+    assert len(got) == 1 and got[0].module == "b" and got[0].call_ids == ["slow"]
