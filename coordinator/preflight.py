@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
 from comm import TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_RESULT
 from comm.addressing import PING_FUNCTION
@@ -30,7 +30,7 @@ __all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNO
 PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
 ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
 PING_PATIENCE = 1.0  # seconds after which a module without its own topics may do with connections alone
-POLL = 0.005  # seconds between looks at the connections (connections to call topics wake it sooner)
+POLL = 0.01  # seconds between looks at the connections (connections to call topics and answers wake it sooner)
 
 
 def diff_definitions(local: ModuleDefinition, live: ModuleDefinition) -> List[str]:
@@ -75,12 +75,13 @@ class _Preflight:
             known = self._diffs[live.name] = (live.definition, diff_definitions(local, live.definition))
         return known[1]
 
-    def announced_problems(self, live: LiveModule, answered: bool, now: float) -> List[str]:
+    def announced_problems(self, live: LiveModule, answered: bool, now: float, results: Set[str]) -> List[str]:
         """Why ``live`` cannot be called yet (nothing once it answered a ping).
 
         A module announced without its own topics (a bmtree module older than pings
         answers one ``rejected``) is also taken once connected both ways and
-        :data:`PING_PATIENCE` seconds without an answer, as an original module is.
+        :data:`PING_PATIENCE` seconds without an answer, as an original module is. ``results``:
+        the URIs of the nodes whose results reach this process.
         """
         tr, name = self.tr, live.name
         diff = self.definition_problems(live)
@@ -89,7 +90,7 @@ class _Preflight:
         if answered:
             return []
         call_pub = tr._route(name)
-        if not call_pub.impl.has_connection(live.node) or not tr._subs[0].impl.has_connection(live.uri):
+        if live.uri not in results or not call_pub.impl.has_connection(live.node):
             return ["module %r (node %s) is not connected to %s and %s yet" % (
                 name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
         if name not in tr._routes and now - self.first_ping.setdefault(name, now) >= PING_PATIENCE:
@@ -133,9 +134,11 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             tr._set_routes([announced[n] for n in wanted if n in announced])
             next_look = now + ANNOUNCEMENTS_EVERY
         problems: Dict[str, List[str]] = {}
+        # once per look, not once per module (rospy's has_connection walks every connection)
+        results = {c.endpoint_id for c in list(tr._subs[0].impl.connections)}
         for name in wanted:
             if name in announced:
-                found = state.announced_problems(announced[name], name in answered, now)
+                found = state.announced_problems(announced[name], name in answered, now, results)
             elif name in originals:
                 found = _legacy_problems(tr, name, *originals[name])
             elif name in given:
