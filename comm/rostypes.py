@@ -154,6 +154,19 @@ def single_field(cls: type) -> Optional[str]:
     return slots[0] if len(slots) == 1 else None
 
 
+_PLAIN_TYPES = frozenset(message_converter.ros_primitive_types)
+_FLAT: Dict[type, Optional[tuple]] = {}  # message class -> its fields when all are scalars, else None
+
+
+def _flat_fields(cls: type) -> Optional[tuple]:
+    fields = _FLAT.get(cls, False)
+    if fields is False:
+        slots, types = getattr(cls, "__slots__", None), getattr(cls, "_slot_types", None)
+        flat = slots is not None and types is not None and all(t in _PLAIN_TYPES for t in types)
+        fields = _FLAT[cls] = tuple(slots) if flat else None
+    return fields  # type: ignore[return-value]
+
+
 def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
     """Build and type-check a message from a dict (or a scalar for one-field types).
 
@@ -172,8 +185,14 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
                 value = {field: value}
             else:
                 raise ProtocolError("expected a mapping of fields for %s, got %s" % (rostype, _kind(value)))
+        fields = _flat_fields(cls)
         try:
-            msg = message_converter.convert_dictionary_to_ros_message(rostype, value)
+            if fields is not None and all(k in fields for k in value):
+                msg = cls()  # what the converter does for scalar fields, without its regex per field
+                for k, v in value.items():
+                    setattr(msg, k, v)
+            else:
+                msg = message_converter.convert_dictionary_to_ros_message(rostype, value)
         except ValueError as exc:
             raise ProtocolError("%s: %s" % (rostype, exc))
         except (TypeError, AttributeError, KeyError, OverflowError, RecursionError) as exc:
@@ -194,19 +213,6 @@ def check_message(msg: Any, rostype: str = "") -> None:
     except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
             RecursionError) as exc:
         raise ProtocolError("%s: %s" % (rostype or getattr(msg, "_type", "?"), exc))
-
-
-_PLAIN_TYPES = frozenset(message_converter.ros_primitive_types)
-_FLAT: Dict[type, Optional[tuple]] = {}  # message class -> its fields when all are scalars, else None
-
-
-def _flat_fields(cls: type) -> Optional[tuple]:
-    fields = _FLAT.get(cls, False)
-    if fields is False:
-        slots, types = getattr(cls, "__slots__", None), getattr(cls, "_slot_types", None)
-        flat = slots is not None and types is not None and all(t in _PLAIN_TYPES for t in types)
-        fields = _FLAT[cls] = tuple(slots) if flat else None
-    return fields  # type: ignore[return-value]
 
 
 def from_message(msg: Any) -> Dict[str, Any]:
