@@ -30,6 +30,8 @@ _COMMON = ("name",)
 _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
 _ALLOWED = {k: _COMMON + tuple(o.name for o in nk.options) for k, nk in REGISTRY.items()}
 _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REGISTRY.items()}
+_KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
+_LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
 
 
 class Parser:
@@ -142,9 +144,7 @@ class Parser:
         if not isinstance(raw, LMap):
             self.err(at, "a node must be a mapping with one of: %s" % ", ".join(REGISTRY))
             return None
-        kinds = [k for k in raw if k in REGISTRY] if len(raw) > 1 else list(raw)
-        if len(kinds) == 1 and kinds[0] not in REGISTRY:
-            kinds = []
+        kinds = [k for k in raw if k in REGISTRY]
         if len(kinds) > 1:
             kinds = [k for k in kinds if not any(k in _OPTION_NAMES[o] for o in kinds if o != k)]
         if len(kinds) != 1:
@@ -161,11 +161,12 @@ class Parser:
         kind = kinds[0]
         nk = REGISTRY[kind]
         allowed = _ALLOWED[kind]
-        if nk.value[0] == "children" and isinstance(raw[kind], LMap):
+        if kind in _LISTS and isinstance(raw[kind], LMap):
             raw = self._inline(raw, kind, allowed)
-        for k in raw:
-            if k != kind and k not in allowed:
-                self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
+        if not _KEYS[kind].issuperset(raw):
+            for k in raw:
+                if k != kind and k not in allowed:
+                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
         for o in _REQUIRED[kind]:
             if o not in raw:
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, o))
@@ -173,8 +174,9 @@ class Parser:
         if name is not None and not isinstance(name, str):
             self.err(raw.val_pos["name"], "'name' must be a string")
             name = None
-        node = TreeNode(kind=kind, name=name or "", pos=raw.key_pos[kind], nodekind=nk, value_pos=raw.val_pos[kind])
-        node.spec = nk.parse(self, node, raw, raw[kind], raw.val_pos[kind])
+        value_at = raw.val_pos[kind]
+        node = TreeNode(kind, name or "", raw.key_pos[kind], None, None, nk, value_at)
+        node.spec = nk.parse(self, node, raw, raw[kind], value_at)
         if not node.name:
             node.name = nk.default_name(node)
         return node
@@ -215,8 +217,11 @@ class Parser:
         if not isinstance(value, LList) or not value:
             self.err(at, "%s takes a non-empty list of children" % node.kind)
             return
-        for i, item in enumerate(value):
-            self.child(node, item, value.item_pos[i])
+        append, parse = node.children.append, self.node
+        for item, at in zip(value, value.item_pos):
+            c = parse(item, at)
+            if c is not None:
+                append(c)
 
     def typed(self, node: TreeNode, label: str, value: Any, at: Pos, type_name: str) -> Any:
         """``value`` if it is of the type, else None after reporting ``label of kind must be …``."""

@@ -1,0 +1,191 @@
+"""A fast reader for the plain block YAML that tree files are written in, with positions.
+
+libyaml hands every key and value to Python as an event object (six per leaf of a tree), and
+building those events costs more than the rest of loading a tree. Tree files use a small part
+of YAML: block mappings and sequences, one scalar per line, plain or simply quoted. This reader
+takes exactly that part, line by line, and gives the same values and positions as
+``coordinator.yamlsrc``'s libyaml reader. On anything else (flow collections, anchors, tags,
+multi-line or escaped scalars, empty values, tabs, duplicate keys, errors of any kind) it
+answers None, and the caller reads the text with libyaml, which also gives the error messages.
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Dict, List, Optional, Tuple
+
+import yaml
+
+from coordinator.errors import Pos
+
+__all__ = ["read_block"]
+
+# One line of block YAML, or group 8 (a line this reader does not take): 1 all before the value,
+# 2 before the key, 3 the indent, 4 a simple key; the value 5 single-quoted, 6 double-quoted
+# without escapes, or 7 a plain scalar that cannot be anything else: no indicator first ('-' only
+# before a number), no ':' or '#' inside; then maybe a comment.
+_LINE = re.compile(
+    r"^(?:((( *)(?:-(?: +|$))?)(?:([A-Za-z0-9_][A-Za-z0-9_./-]*):(?: +|$))?)"
+    r"""(?:('[^'\n]*(?:''[^'\n]*)*')|("[^"\\\n]*")|((?:-(?=[0-9.])|[^-?:,\[\]{}#&*!|>'"%@` \n])[^:# \n]*(?: +[^:# \n]+)*))?"""
+    r" *(?:(?<![^ \n])#.*)?$|(.+))", re.M)
+# characters libyaml reads as printable and not as a line break; anything else goes to libyaml
+_ODD = re.compile("[^\n\x20-\x7e\u00a0-\u2027\u202a-\ud7ff\ue000-\ufefe\uff00-\ufffd\U00010000-\U0010ffff]")
+_STR = "tag:yaml.org,2002:str"
+_CONSTRUCTED = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:bool",
+                "tag:yaml.org,2002:null")
+_RESOLVER = yaml.resolver.Resolver()
+_CONSTRUCTOR = yaml.constructor.SafeConstructor()
+_VALUES: Dict[str, Tuple[Any]] = {}   # plain text -> (its value,), for the short texts that repeat
+_MAX_DEPTH = 100
+_MAX_LINES = 50000
+_new = tuple.__new__
+
+
+class _Other(Exception):
+    """Not the simple block YAML this reader takes: read with libyaml."""
+
+
+def _plain(text: str) -> Any:
+    """A plain scalar's value, resolved as PyYAML's safe loader resolves it (strings and numbers,
+    booleans and null; any other type is left to libyaml)."""
+    known = _VALUES.get(text)
+    if known is not None:
+        return known[0]
+    tag = _RESOLVER.resolve(yaml.ScalarNode, text, (True, False))
+    if tag == _STR:
+        value: Any = text
+    elif tag in _CONSTRUCTED:
+        try:
+            value = _CONSTRUCTOR.yaml_constructors[tag](_CONSTRUCTOR, yaml.ScalarNode(tag, text))
+        except (ValueError, TypeError, OverflowError):
+            raise _Other()
+    else:
+        raise _Other()
+    if len(text) <= 64 and len(_VALUES) < 4096:
+        _VALUES[text] = (value,)
+    return value
+
+
+def _read(text: str, file: str) -> Any:
+    """The document: one pass over the lines, the enclosing containers on a stack."""
+    from coordinator.yamlsrc import LList, LMap
+
+    rows = _LINE.findall(text)
+    if len(rows) != text.count("\n") + 1 or len(rows) > _MAX_LINES:
+        raise _Other()
+    new_pos, PosT, values, plain, empty = _new, Pos, _VALUES, _plain, _Other  # noqa: N806
+    stack: List[Any] = []
+    # the open container (a mapping with its key and value positions, or a sequence with its
+    # items'), the column of its keys or of its '-', and a key whose value is the block below
+    obj: Any = None
+    is_map = False
+    col = -1
+    kpos: Any = None
+    vpos: Any = None
+    items: Any = None
+    pending: Any = empty
+    pending_at: Any = None
+    root: Any = None
+    line_no = 0
+    for before_value, before_key, indent_s, key_text, single, double, bare, bad in rows:
+        line_no += 1
+        if bad:
+            raise _Other()
+        indent = len(indent_s)
+        dash = len(before_key) != indent
+        if single:
+            value: Any = single[1:-1].replace("''", "'")
+            value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 2))
+        elif double:
+            value = double[1:-1]
+            value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
+        elif bare:
+            known = values.get(bare)
+            value = known[0] if known is not None else plain(bare)
+            value_at = new_pos(PosT, (file, line_no, len(before_value) + 1))
+        elif key_text:
+            value = empty                # the value is the block below
+        elif dash:
+            raise _Other()               # a lone '-'
+        else:
+            continue                     # blank, or a comment
+        if key_text:
+            if len(key_text) > 1000:     # libyaml's limit of a simple key
+                raise _Other()
+            known = values.get(key_text)
+            key = known[0] if known is not None else plain(key_text)
+            key_at = new_pos(PosT, (file, line_no, len(before_key) + 1))
+        elif not dash:
+            raise _Other()               # a bare scalar: text continued from the line above?
+        # the container of this line: a new one (the root, or the block below a 'key:'), or an open one
+        if pending is not empty or obj is None:
+            if obj is not None and not (indent > col or (indent == col and dash)):
+                raise _Other()           # an empty value (null): libyaml says where
+            if obj is None and root is not None:
+                raise _Other()
+            if dash:
+                new: Any = LList()
+                new.pos = new_pos(PosT, (file, line_no, indent + 1))
+                new.item_pos = []
+            else:
+                new = LMap()
+                new.pos = key_at
+                new.key_pos, new.val_pos = {}, {}
+            if obj is None:
+                root = new
+            else:
+                obj[pending] = new
+                kpos[pending] = pending_at
+                vpos[pending] = new.pos
+                pending = empty
+                stack.append((obj, is_map, col, kpos, vpos, items))
+                if len(stack) > _MAX_DEPTH:
+                    raise _Other()
+            obj, is_map, col = new, not dash, indent
+            if dash:
+                items = new.item_pos
+            else:
+                kpos, vpos = new.key_pos, new.val_pos
+        else:
+            while indent != col or dash == is_map:   # not a '-' of this sequence nor a key of this mapping
+                if indent > col or (indent == col and is_map):
+                    raise _Other()       # indented too far, or a '-' beside keys
+                if not stack:
+                    raise _Other()       # more after the document
+                obj, is_map, col, kpos, vpos, items = stack.pop()
+        if not is_map:
+            if not key_text:             # '- value'
+                obj.append(value)
+                items.append(value_at)
+                continue
+            new = LMap()                 # '- key: …' starts a mapping
+            new.pos = key_at
+            new.key_pos, new.val_pos = {}, {}
+            obj.append(new)
+            items.append(key_at)
+            stack.append((obj, is_map, col, kpos, vpos, items))
+            if len(stack) > _MAX_DEPTH:
+                raise _Other()
+            obj, is_map, col, kpos, vpos = new, True, len(before_key), new.key_pos, new.val_pos
+        elif key in obj:
+            raise _Other()               # a duplicate key: libyaml's reader reports it
+        if value is empty:
+            pending, pending_at = key, key_at
+        else:
+            obj[key] = value
+            kpos[key] = key_at
+            vpos[key] = value_at
+    if pending is not empty or root is None:
+        raise _Other()
+    return root
+
+
+def read_block(text: str, file: str) -> Optional[Any]:
+    """The document if ``text`` is plain block YAML (see the module's doc), else None."""
+    if "\t" in text or "\r" in text or _ODD.search(text) is not None:
+        return None
+    if text.startswith(("---", "...", "%")) or "\n---" in text or "\n..." in text or "\n%" in text:
+        return None
+    try:
+        return _read(text, file)
+    except _Other:
+        return None
