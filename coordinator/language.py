@@ -15,7 +15,7 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
 from coordinator.refs import RefError
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, used_modules, walk
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, used_modules, walk
 from coordinator.values import literal, loose_dollars
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition
@@ -333,7 +333,7 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         tree = parser.load_file(path, None)
         errors = list(parser.errors)
         if tree is not None:
-            nodes = list(walk(tree.root))
+            nodes = nodes_of(tree.root)
             errors.extend(check_flow(tree, frozenset(given)))
             errors.extend(check_types(tree, nodes))
             if not errors:
@@ -350,7 +350,8 @@ def warnings(nodes: List[TreeNode]) -> List[TreeError]:
     seen: Set[Any] = set()
     out: List[TreeError] = []
     for n in nodes:
-        for w in n.nodekind.warnings(n):
+        found = n.nodekind.warnings(n)
+        for w in found if found else ():
             if w not in seen:
                 seen.add(w)
                 out.append(w)

@@ -11,7 +11,7 @@ answers None, and the caller reads the text with libyaml, which also gives the e
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional
 
 import yaml
 
@@ -24,7 +24,7 @@ __all__ = ["read_block"]
 # without escapes, or 7 a plain scalar that cannot be anything else: no indicator first ('-' only
 # before a number), no ':' or '#' inside; then maybe a comment.
 _LINE = re.compile(
-    r"^(?:((( *)(?:-(?: +|$))?)(?:([A-Za-z0-9_][A-Za-z0-9_./-]*):(?: +|$))?)"
+    r"^(?:((( *)(?:-(?: +|$))?)(?:([A-Za-z0-9_][A-Za-z0-9_./-]{0,999}):(?: +|$))?)"
     r"""(?:('[^'\n]*(?:''[^'\n]*)*')|("[^"\\\n]*")|((?:-(?=[0-9.])|[^-?:,\[\]{}#&*!|>'"%@` \n])[^:# \n]*(?: +[^:# \n]+)*))?"""
     r" *(?:(?<![^ \n])#.*)?$|(.+))", re.M)
 # characters libyaml reads as printable and not as a line break; anything else goes to libyaml
@@ -34,7 +34,7 @@ _CONSTRUCTED = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.or
                 "tag:yaml.org,2002:null")
 _RESOLVER = yaml.resolver.Resolver()
 _CONSTRUCTOR = yaml.constructor.SafeConstructor()
-_VALUES: Dict[str, Tuple[Any]] = {}   # plain text -> (its value,), for the short texts that repeat
+_VALUES: Dict[str, Any] = {}   # plain text -> its value, for the short texts that repeat
 _MAX_DEPTH = 100
 _MAX_LINES = 50000
 _new = tuple.__new__
@@ -47,9 +47,6 @@ class _Other(Exception):
 def _plain(text: str) -> Any:
     """A plain scalar's value, resolved as PyYAML's safe loader resolves it (strings and numbers,
     booleans and null; any other type is left to libyaml)."""
-    known = _VALUES.get(text)
-    if known is not None:
-        return known[0]
     tag = _RESOLVER.resolve(yaml.ScalarNode, text, (True, False))
     if tag == _STR:
         value: Any = text
@@ -61,7 +58,7 @@ def _plain(text: str) -> Any:
     else:
         raise _Other()
     if len(text) <= 64 and len(_VALUES) < 4096:
-        _VALUES[text] = (value,)
+        _VALUES[text] = value
     return value
 
 
@@ -76,52 +73,50 @@ def _read(text: str, file: str) -> Any:
     stack: List[Any] = []
     # the open container (a mapping with its key and value positions, or a sequence with its
     # items'), the column of its keys or of its '-', and a key whose value is the block below
+    # (at first the root: ``obj`` is None)
     obj: Any = None
     is_map = False
     col = -1
     kpos: Any = None
     vpos: Any = None
     items: Any = None
-    pending: Any = empty
+    pending: Any = None
     pending_at: Any = None
     root: Any = None
     line_no = 0
     for before_value, before_key, indent_s, key_text, single, double, bare, bad in rows:
         line_no += 1
-        if bad:
-            raise _Other()
-        indent = len(indent_s)
-        dash = len(before_key) != indent
-        if single:
-            value: Any = single[1:-1].replace("''", "'")
-            value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 2))
+        if bare:
+            value: Any = values.get(bare, empty)
+            if value is empty:
+                value = plain(bare)
+            value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 1))
+        elif single:
+            value = single[1:-1].replace("''", "'")
+            value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
         elif double:
             value = double[1:-1]
             value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
-        elif bare:
-            known = values.get(bare)
-            value = known[0] if known is not None else plain(bare)
-            value_at = new_pos(PosT, (file, line_no, len(before_value) + 1))
         elif key_text:
             value = empty                # the value is the block below
-        elif dash:
-            raise _Other()               # a lone '-'
+        elif bad or before_key != indent_s:
+            raise _Other()               # not this reader's YAML, or a lone '-'
         else:
             continue                     # blank, or a comment
+        indent = len(indent_s)
+        key_col = len(before_key)
+        dash = key_col != indent
         if key_text:
-            if len(key_text) > 1000:     # libyaml's limit of a simple key
-                raise _Other()
-            known = values.get(key_text)
-            key = known[0] if known is not None else plain(key_text)
-            key_at = new_pos(PosT, (file, line_no, len(before_key) + 1))
+            key = values.get(key_text, empty)
+            if key is empty:
+                key = plain(key_text)
+            key_at = new_pos(PosT, (file, line_no, key_col + 1))
         elif not dash:
             raise _Other()               # a bare scalar: text continued from the line above?
         # the container of this line: a new one (the root, or the block below a 'key:'), or an open one
-        if pending is not empty or obj is None:
+        if pending is not empty:
             if obj is not None and not (indent > col or (indent == col and dash)):
                 raise _Other()           # an empty value (null): libyaml says where
-            if obj is None and root is not None:
-                raise _Other()
             if dash:
                 new: Any = LList()
                 new.pos = new_pos(PosT, (file, line_no, indent + 1))
@@ -136,38 +131,41 @@ def _read(text: str, file: str) -> Any:
                 obj[pending] = new
                 kpos[pending] = pending_at
                 vpos[pending] = new.pos
-                pending = empty
                 stack.append((obj, is_map, col, kpos, vpos, items))
                 if len(stack) > _MAX_DEPTH:
                     raise _Other()
+            pending = empty
             obj, is_map, col = new, not dash, indent
             if dash:
                 items = new.item_pos
             else:
                 kpos, vpos = new.key_pos, new.val_pos
-        else:
-            while indent != col or dash == is_map:   # not a '-' of this sequence nor a key of this mapping
+        elif indent != col or dash == is_map:   # not a '-' of this sequence nor a key of this mapping
+            while True:
                 if indent > col or (indent == col and is_map):
                     raise _Other()       # indented too far, or a '-' beside keys
                 if not stack:
                     raise _Other()       # more after the document
                 obj, is_map, col, kpos, vpos, items = stack.pop()
-        if not is_map:
-            if not key_text:             # '- value'
-                obj.append(value)
-                items.append(value_at)
-                continue
-            new = LMap()                 # '- key: …' starts a mapping
+                if indent == col and dash != is_map:
+                    break
+        if is_map:
+            if key in obj:
+                raise _Other()           # a duplicate key: libyaml's reader reports it
+        elif key_text:                   # '- key: …' starts a mapping
+            new = LMap()
             new.pos = key_at
-            new.key_pos, new.val_pos = {}, {}
             obj.append(new)
             items.append(key_at)
             stack.append((obj, is_map, col, kpos, vpos, items))
             if len(stack) > _MAX_DEPTH:
                 raise _Other()
-            obj, is_map, col, kpos, vpos = new, True, len(before_key), new.key_pos, new.val_pos
-        elif key in obj:
-            raise _Other()               # a duplicate key: libyaml's reader reports it
+            new.key_pos, new.val_pos = kpos, vpos = {}, {}
+            obj, is_map, col = new, True, key_col
+        else:                            # '- value'
+            obj.append(value)
+            items.append(value_at)
+            continue
         if value is empty:
             pending, pending_at = key, key_at
         else:

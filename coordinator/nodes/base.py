@@ -132,7 +132,7 @@ class Flow:
 
     def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
         missing = [k for k in keys if k not in avail]
-        for k in sorted(set(missing)):
+        for k in sorted(set(missing)) if missing else ():
             self.errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
                                                    "node (%s)" % (k, did_you_mean(k, avail)[2:-1]
                                                                   or "write it earlier or declare it under "
@@ -175,7 +175,9 @@ class NodeKind(abc.ABC):
         return {}
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        f.need(node, self.reads(node), avail)
+        read = self.reads(node)
+        if read:
+            f.need(node, read, avail)
         written = self.writes(node)
         return frozenset(written) if written else _NOTHING
 
