@@ -16,6 +16,7 @@ from typing import Any, Dict, List, Optional
 import yaml
 
 from coordinator.errors import Pos
+from coordinator.yamlsrc import LList, LMap
 
 __all__ = ["read_block"]
 
@@ -32,8 +33,9 @@ _ODD = re.compile("[^\n\x20-\x7e\u00a0-\u2027\u202a-\ud7ff\ue000-\ufefe\uff00-\u
 _STR = "tag:yaml.org,2002:str"
 _CONSTRUCTED = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:bool",
                 "tag:yaml.org,2002:null")
-_RESOLVER = yaml.resolver.Resolver()
-_CONSTRUCTOR = yaml.constructor.SafeConstructor()
+# resolved and constructed as by the loader of coordinator.yamlsrc (its implicit types, its constructors);
+# scalar resolution and construction keep no state, so one instance serves every thread
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)("")
 _VALUES: Dict[str, Any] = {}   # plain text -> its value, for the short texts that repeat
 _MAX_DEPTH = 100
 _MAX_LINES = 50000
@@ -47,13 +49,13 @@ class _Other(Exception):
 def _plain(text: str) -> Any:
     """A plain scalar's value, resolved as PyYAML's safe loader resolves it (strings and numbers,
     booleans and null; any other type is left to libyaml)."""
-    tag = _RESOLVER.resolve(yaml.ScalarNode, text, (True, False))
+    tag = _LOADER.resolve(yaml.ScalarNode, text, (True, False))
     if tag == _STR:
         value: Any = text
     elif tag in _CONSTRUCTED:
         try:
-            value = _CONSTRUCTOR.yaml_constructors[tag](_CONSTRUCTOR, yaml.ScalarNode(tag, text))
-        except (ValueError, TypeError, OverflowError):
+            value = _LOADER.yaml_constructors[tag](_LOADER, yaml.ScalarNode(tag, text))
+        except Exception:   # e.g. an int of more digits than Python converts: libyaml's reader reports it
             raise _Other()
     else:
         raise _Other()
@@ -64,8 +66,6 @@ def _plain(text: str) -> Any:
 
 def _read(text: str, file: str) -> Any:
     """The document: one pass over the lines, the enclosing containers on a stack."""
-    from coordinator.yamlsrc import LList, LMap
-
     rows = _LINE.findall(text)
     if len(rows) != text.count("\n") + 1 or len(rows) > _MAX_LINES:
         raise _Other()
