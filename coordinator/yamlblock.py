@@ -11,7 +11,7 @@ answers None, and the caller reads the text with libyaml, which also gives the e
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Iterator, List, Optional, Tuple
 
 import yaml
 
@@ -39,6 +39,7 @@ _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)("")
 _VALUES: Dict[str, Any] = {}   # plain text -> its value, for the short texts that repeat
 _MAX_DEPTH = 100
 _MAX_LINES = 50000
+_CHUNK = 8192   # characters of text read by the line pattern at once
 _new = tuple.__new__
 
 
@@ -64,11 +65,26 @@ def _plain(text: str) -> Any:
     return value
 
 
+def _chunks(text: str) -> Iterator[List[Tuple[str, ...]]]:
+    """The rows of ``_LINE`` for every line, a few hundred lines at a time (one list for all the
+    lines of a big tree would be the largest allocation of a load, in fresh memory)."""
+    start, size, lines = 0, len(text), 0
+    while True:
+        end = text.find("\n", start + _CHUNK) if start + _CHUNK < size else -1
+        if end < 0:
+            end = size
+        rows = _LINE.findall(text, start, end)
+        lines += len(rows)
+        if len(rows) != text.count("\n", start, end) + 1 or lines > _MAX_LINES:
+            raise _Other()
+        yield rows
+        if end == size:
+            return
+        start = end + 1
+
+
 def _read(text: str, file: str) -> Any:
     """The document: one pass over the lines, the enclosing containers on a stack."""
-    rows = _LINE.findall(text)
-    if len(rows) != text.count("\n") + 1 or len(rows) > _MAX_LINES:
-        raise _Other()
     new_pos, PosT, values, plain, empty = _new, Pos, _VALUES, _plain, _Other  # noqa: N806
     stack: List[Any] = []
     # the open container (a mapping with its key and value positions, or a sequence with its
@@ -84,94 +100,95 @@ def _read(text: str, file: str) -> Any:
     pending_at: Any = None
     root: Any = None
     line_no = 0
-    for before_value, before_key, indent_s, key_text, single, double, bare, bad in rows:
-        line_no += 1
-        if bare:
-            value: Any = values.get(bare, empty)
-            if value is empty:
-                value = plain(bare)
-            value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 1))
-        elif single:
-            value = single[1:-1].replace("''", "'")
-            value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
-        elif double:
-            value = double[1:-1]
-            value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
-        elif key_text:
-            value = empty                # the value is the block below
-        elif bad or before_key != indent_s:
-            raise _Other()               # not this reader's YAML, or a lone '-'
-        else:
-            continue                     # blank, or a comment
-        indent = len(indent_s)
-        key_col = len(before_key)
-        dash = key_col != indent
-        if key_text:
-            key = values.get(key_text, empty)
-            if key is empty:
-                key = plain(key_text)
-            key_at = new_pos(PosT, (file, line_no, key_col + 1))
-        elif not dash:
-            raise _Other()               # a bare scalar: text continued from the line above?
-        # the container of this line: a new one (the root, or the block below a 'key:'), or an open one
-        if pending is not empty:
-            if obj is not None and not (indent > col or (indent == col and dash)):
-                raise _Other()           # an empty value (null): libyaml says where
-            if dash:
-                new: Any = LList()
-                new.pos = new_pos(PosT, (file, line_no, indent + 1))
-                new.item_pos = []
+    for rows in _chunks(text):
+        for before_value, before_key, indent_s, key_text, single, double, bare, bad in rows:
+            line_no += 1
+            if bare:
+                value: Any = values.get(bare, empty)
+                if value is empty:
+                    value = plain(bare)
+                value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 1))
+            elif single:
+                value = single[1:-1].replace("''", "'")
+                value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
+            elif double:
+                value = double[1:-1]
+                value_at = new_pos(PosT, (file, line_no, len(before_value) + 2))
+            elif key_text:
+                value = empty                # the value is the block below
+            elif bad or before_key != indent_s:
+                raise _Other()               # not this reader's YAML, or a lone '-'
             else:
+                continue                     # blank, or a comment
+            indent = len(indent_s)
+            key_col = len(before_key)
+            dash = key_col != indent
+            if key_text:
+                key = values.get(key_text, empty)
+                if key is empty:
+                    key = plain(key_text)
+                key_at = new_pos(PosT, (file, line_no, key_col + 1))
+            elif not dash:
+                raise _Other()               # a bare scalar: text continued from the line above?
+            # the container of this line: a new one (the root, or the block below a 'key:'), or an open one
+            if pending is not empty:
+                if obj is not None and not (indent > col or (indent == col and dash)):
+                    raise _Other()           # an empty value (null): libyaml says where
+                if dash:
+                    new: Any = LList()
+                    new.pos = new_pos(PosT, (file, line_no, indent + 1))
+                    new.item_pos = []
+                else:
+                    new = LMap()
+                    new.pos = key_at
+                    new.key_pos, new.val_pos = {}, {}
+                if obj is None:
+                    root = new
+                else:
+                    obj[pending] = new
+                    kpos[pending] = pending_at
+                    vpos[pending] = new.pos
+                    stack.append((obj, is_map, col, kpos, vpos, items))
+                    if len(stack) > _MAX_DEPTH:
+                        raise _Other()
+                pending = empty
+                obj, is_map, col = new, not dash, indent
+                if dash:
+                    items = new.item_pos
+                else:
+                    kpos, vpos = new.key_pos, new.val_pos
+            elif indent != col or dash == is_map:   # not a '-' of this sequence nor a key of this mapping
+                while True:
+                    if indent > col or (indent == col and is_map):
+                        raise _Other()       # indented too far, or a '-' beside keys
+                    if not stack:
+                        raise _Other()       # more after the document
+                    obj, is_map, col, kpos, vpos, items = stack.pop()
+                    if indent == col and dash != is_map:
+                        break
+            if is_map:
+                if key in obj:
+                    raise _Other()           # a duplicate key: libyaml's reader reports it
+            elif key_text:                   # '- key: …' starts a mapping
                 new = LMap()
                 new.pos = key_at
-                new.key_pos, new.val_pos = {}, {}
-            if obj is None:
-                root = new
-            else:
-                obj[pending] = new
-                kpos[pending] = pending_at
-                vpos[pending] = new.pos
+                obj.append(new)
+                items.append(key_at)
                 stack.append((obj, is_map, col, kpos, vpos, items))
                 if len(stack) > _MAX_DEPTH:
                     raise _Other()
-            pending = empty
-            obj, is_map, col = new, not dash, indent
-            if dash:
-                items = new.item_pos
+                new.key_pos, new.val_pos = kpos, vpos = {}, {}
+                obj, is_map, col = new, True, key_col
+            else:                            # '- value'
+                obj.append(value)
+                items.append(value_at)
+                continue
+            if value is empty:
+                pending, pending_at = key, key_at
             else:
-                kpos, vpos = new.key_pos, new.val_pos
-        elif indent != col or dash == is_map:   # not a '-' of this sequence nor a key of this mapping
-            while True:
-                if indent > col or (indent == col and is_map):
-                    raise _Other()       # indented too far, or a '-' beside keys
-                if not stack:
-                    raise _Other()       # more after the document
-                obj, is_map, col, kpos, vpos, items = stack.pop()
-                if indent == col and dash != is_map:
-                    break
-        if is_map:
-            if key in obj:
-                raise _Other()           # a duplicate key: libyaml's reader reports it
-        elif key_text:                   # '- key: …' starts a mapping
-            new = LMap()
-            new.pos = key_at
-            obj.append(new)
-            items.append(key_at)
-            stack.append((obj, is_map, col, kpos, vpos, items))
-            if len(stack) > _MAX_DEPTH:
-                raise _Other()
-            new.key_pos, new.val_pos = kpos, vpos = {}, {}
-            obj, is_map, col = new, True, key_col
-        else:                            # '- value'
-            obj.append(value)
-            items.append(value_at)
-            continue
-        if value is empty:
-            pending, pending_at = key, key_at
-        else:
-            obj[key] = value
-            kpos[key] = key_at
-            vpos[key] = value_at
+                obj[key] = value
+                kpos[key] = key_at
+                vpos[key] = value_at
     if pending is not empty or root is None:
         raise _Other()
     return root

@@ -138,3 +138,12 @@ def test_random_documents_and_mutations():
             lines[i] = rng.choice([" " + lines[i], lines[i][1:], lines[i] + ": x", lines[i] + " #"])
         taken += _agrees("\n".join(lines) + rng.choice(["", "\n"]))
     assert taken > 300
+
+
+def test_a_big_tree_read_in_chunks():
+    leaves = "".join("      - check: 'n > %d'  # leaf\n        name: leaf %d\n\n" % (i, i) for i in range(1500))
+    text = "format: 1\nroot:\n  sequence:\n    memory: false\n    children:\n" + leaves + "name: big\n"
+    assert len(text) > 10 * 8192   # many chunks
+    assert _agrees(text)
+    assert _agrees(text.replace("leaf 700\n", "leaf 700\n# the middle\n"))
+    assert read_block(text.replace("leaf 900\n", "leaf 900\n   odd: indent\n"), "t.yaml") is None
