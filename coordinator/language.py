@@ -31,6 +31,7 @@ _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.
 _ALLOWED = {k: _COMMON + tuple(o.name for o in nk.options) for k, nk in REGISTRY.items()}
 _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REGISTRY.items()}
 _KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
+_KINDS = frozenset(REGISTRY)
 _LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
 
 
@@ -144,8 +145,9 @@ class Parser:
         if not isinstance(raw, LMap):
             self.err(at, "a node must be a mapping with one of: %s" % ", ".join(REGISTRY))
             return None
-        kinds = [k for k in raw if k in REGISTRY]
+        kinds = _KINDS.intersection(raw)
         if len(kinds) > 1:
+            kinds = [k for k in raw if k in REGISTRY]   # in the order written, for the messages
             kinds = [k for k in kinds if not any(k in _OPTION_NAMES[o] for o in kinds if o != k)]
         if len(kinds) != 1:
             if not kinds:
@@ -158,7 +160,7 @@ class Parser:
             else:
                 self.err(raw.key_pos[kinds[1]], "node has two kinds, %r and %r: split it or nest it" % tuple(kinds[:2]))
             return None
-        kind = kinds[0]
+        kind, = kinds
         nk = REGISTRY[kind]
         allowed = _ALLOWED[kind]
         if kind in _LISTS and isinstance(raw[kind], LMap):
