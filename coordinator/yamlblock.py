@@ -36,7 +36,10 @@ _CONSTRUCTED = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.or
 # resolved and constructed as by the loader of coordinator.yamlsrc (its implicit types, its constructors);
 # scalar resolution and construction keep no state, so one instance serves every thread
 _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)("")
-_VALUES: Dict[str, Any] = {}   # plain text -> its value, for the short texts that repeat
+# a plain scalar starting otherwise is a string: no resolver is asked (with a resolver for any
+# first character, every scalar is resolved)
+_TYPED = frozenset(_LOADER.yaml_implicit_resolvers) if None not in _LOADER.yaml_implicit_resolvers else None
+_VALUES: Dict[str, Any] = {}   # plain text that may have a type -> its value (keys and words repeat)
 _MAX_DEPTH = 100
 _MAX_LINES = 50000
 _CHUNK = 8192   # characters of text read by the line pattern at once
@@ -85,7 +88,7 @@ def _chunks(text: str) -> Iterator[List[Tuple[str, ...]]]:
 
 def _read(text: str, file: str) -> Any:
     """The document: one pass over the lines, the enclosing containers on a stack."""
-    new_pos, PosT, values, plain, empty = _new, Pos, _VALUES, _plain, _Other  # noqa: N806
+    new_pos, PosT, values, plain, empty, typed = _new, Pos, _VALUES, _plain, _Other, _TYPED  # noqa: N806
     stack: List[Any] = []
     # the open container (a mapping with its key and value positions, or a sequence with its
     # items'), the column of its keys or of its '-', and a key whose value is the block below
@@ -104,9 +107,11 @@ def _read(text: str, file: str) -> Any:
         for before_value, before_key, indent_s, key_text, single, double, bare, bad in rows:
             line_no += 1
             if bare:
-                value: Any = values.get(bare, empty)
-                if value is empty:
-                    value = plain(bare)
+                value: Any = bare
+                if bare[0] in typed:
+                    value = values.get(bare, empty)
+                    if value is empty:
+                        value = plain(bare)
                 value_at: Any = new_pos(PosT, (file, line_no, len(before_value) + 1))
             elif single:
                 value = single[1:-1].replace("''", "'")
@@ -124,9 +129,11 @@ def _read(text: str, file: str) -> Any:
             key_col = len(before_key)
             dash = key_col != indent
             if key_text:
-                key = values.get(key_text, empty)
-                if key is empty:
-                    key = plain(key_text)
+                key = key_text
+                if key_text[0] in typed:
+                    key = values.get(key_text, empty)
+                    if key is empty:
+                        key = plain(key_text)
                 key_at = new_pos(PosT, (file, line_no, key_col + 1))
             elif not dash:
                 raise _Other()               # a bare scalar: text continued from the line above?
@@ -196,7 +203,7 @@ def _read(text: str, file: str) -> Any:
 
 def read_block(text: str, file: str) -> Optional[Any]:
     """The document if ``text`` is plain block YAML (see the module's doc), else None."""
-    if "\t" in text or "\r" in text or _ODD.search(text) is not None:
+    if _TYPED is None or "\t" in text or "\r" in text or _ODD.search(text) is not None:
         return None
     if text.startswith(("---", "...", "%")) or "\n---" in text or "\n..." in text or "\n%" in text:
         return None
