@@ -7,7 +7,7 @@ import yaml
 
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "load_yaml", "load_yaml_libyaml", "pos_of"]
+__all__ = ["LMap", "LList", "load_yaml", "pos_of"]
 
 
 class LMap(dict):
@@ -228,21 +228,7 @@ def _build(loader: Any, file: str) -> Any:
 
 
 def load_yaml(text: str, file: str) -> Any:
-    """Parse one YAML document (safe loader only); syntax errors become TreeErrors.
-
-    Plain block YAML, as tree files are written, is read by ``coordinator.yamlblock`` (the same
-    values and positions, several times faster); anything else by libyaml.
-    """
-    from coordinator.yamlblock import read_block
-
-    value = read_block(text, file)
-    if value is not None:
-        return value
-    return load_yaml_libyaml(text, file)
-
-
-def load_yaml_libyaml(text: str, file: str) -> Any:
-    """:func:`load_yaml` by libyaml's events, for any YAML."""
+    """Parse one YAML document (safe loader only); syntax errors become TreeErrors."""
     loader = _Builder(text)
     loader.bmtree_file = file  # for errors raised while constructing scalars
     try:
