@@ -19,6 +19,7 @@ from blackboard.store import DEFAULT_KEEP, Store, default_db_path
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TOPIC_RESULT, sync_publisher
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES
+from comm.nodelife import StopSignals
 from comm.nodeopts import parse_node_args
 from comm.roslog import log_to_rosout
 
@@ -54,7 +55,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     from std_msgs.msg import String
 
     args = parse_node_args(make_parser(), (argv if argv is not None else sys.argv)[1:], "blackboard")
-    rospy.init_node("blackboard")
+    stop = StopSignals()  # a stop during start-up ends it cleanly too
+    if not stop.init_node("blackboard"):
+        return 0
     log_to_rosout()
     path = args.db or rospy.get_param("~db", "") or default_db_path()
     try:
@@ -80,7 +83,7 @@ def main(argv: Optional[List[str]] = None) -> int:
                      tcp_nodelay=True)
     watch_master()
     rospy.loginfo("blackboard storing in %s (%d values, keeping %d per name)", path, service.total, keep)
-    rospy.spin()
+    stop.spin()
     service.stop()
     store.close()
     return 0

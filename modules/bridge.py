@@ -24,6 +24,7 @@ from urllib.parse import urlsplit
 from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload
+from comm.nodelife import stop_requested
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -201,7 +202,7 @@ class CppBridge(BasicModule):
             if not missing:
                 self._ready = True
                 return []
-            if time.monotonic() >= end:
+            if time.monotonic() >= end or stop_requested():
                 return missing
             time.sleep(0.05)
 
@@ -388,7 +389,7 @@ def make_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[List[str]] = None) -> int:
     import rospy
 
-    from modules.node import DuplicateModule, ModuleNode
+    from modules.node import run_module
 
     args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
     for flag, value in (("--call-timeout", args.call_timeout), ("--output-wait", args.output_wait),
@@ -407,22 +408,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    rospy.init_node(args.node_name or "%s_bridge" % definition.name, anonymous=False)
-    node = ModuleNode(definition, impl)
-    try:
-        node.start()
-    except BindingError as exc:  # a bad private parameter
-        sys.stderr.write("error: %s\n" % exc)
-        return 2
-    except (BridgeError, DuplicateModule) as exc:
-        sys.stderr.write("error: %s\n" % exc)
-        return 3
-    try:
-        rospy.spin()
-    finally:
-        node.stop()
-    return 3 if node.kicked_out else 0
-
+    return run_module(definition, impl, args.node_name or "%s_bridge" % definition.name, {BridgeError: 3})
 
 if __name__ == "__main__":
     sys.exit(main())

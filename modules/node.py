@@ -24,6 +24,7 @@ from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, 
 from comm.errors import ProtocolError
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, FunctionResult, load_payload, new_id
+from comm.nodelife import StopSignals
 from comm.nodeopts import parse_node_args
 from comm.roslog import log_to_rosout
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
@@ -251,23 +252,28 @@ def _where(exc: BaseException, spec: str) -> str:
     return "%s:%s" % (frames[-1].filename, frames[-1].lineno) if frames else spec
 
 
-def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optional[str] = None) -> int:
-    """Init a ROS node, serve until SIGINT/SIGTERM or ROS shutdown, clean up. Exit code."""
-    import rospy
+def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optional[str] = None,
+               failures: Optional[Dict[type, int]] = None) -> int:
+    """Init a ROS node, serve until SIGINT/SIGTERM or ROS shutdown, clean up. Exit code.
 
-    rospy.init_node(node_name or "bm_%s" % definition.name, anonymous=False)
+    ``failures`` maps more start-up exceptions to exit codes (the bridge's C++ side missing is 3).
+    A stop signal at any moment, start-up included, ends it with 0."""
+    codes: Dict[type, int] = {BindingError: 2, DuplicateModule: 3}
+    codes.update(failures or {})
+    stop = StopSignals()
+    if not stop.init_node(node_name or "bm_%s" % definition.name, anonymous=False):
+        return 0
     log_to_rosout()
     node = ModuleNode(definition, impl)
     try:
-        node.start()
-    except BindingError as exc:
-        sys.stderr.write("error: %s\n" % exc)
-        return 2
-    except DuplicateModule as exc:
-        sys.stderr.write("error: %s\n" % exc)
-        return 3
-    try:
-        rospy.spin()
+        try:
+            node.start()
+        except tuple(codes) as exc:
+            if stop.requested:  # a start-up wait given up because of the stop
+                return 0
+            sys.stderr.write("error: %s\n" % exc)
+            return next(code for kind, code in codes.items() if isinstance(exc, kind))
+        stop.spin()
     finally:
         node.stop()
     return 3 if node.kicked_out else 0

@@ -63,14 +63,24 @@ class Caller:
         self.subscribers = subscribers
         self._pub = probe.publisher("/master/output", subscribers)
 
-    def wait_connected(self, publishers):
+    def wait_connected(self, publishers, nodes=()):
+        """``publishers`` connected to the results topic and, by name, each of ``nodes`` connected
+        both ways: a count alone may be made up by other tests' nodes still running."""
+        import rosgraph
         from rospy.impl.registration import get_topic_manager
 
         # a publisher of /function/output in this process (other tests' probes) connects too
         publishers += 1 if get_topic_manager().has_publication("/function/output") else 0
+        master = rosgraph.Master("/bmtree_test_caller")
+        uris = {node: master.lookupNode(node) for node in nodes}
         end = time.monotonic() + 10
-        while self.results.sub.get_num_connections() < publishers:
-            assert time.monotonic() < end, "result publishers did not connect"
+        while True:
+            calls_to = {c.endpoint_id for c in self._pub.impl.connections}       # subscribers' names
+            results_from = {c.endpoint_id for c in self.results.sub.impl.connections}  # publishers' URIs
+            if self.results.sub.get_num_connections() >= publishers and all(
+                    node in calls_to and uris[node] in results_from for node in nodes):
+                return
+            assert time.monotonic() < end, "result publishers did not connect (%s)" % ", ".join(nodes)
             time.sleep(0.02)
 
     def send(self, call):
@@ -97,9 +107,9 @@ class Caller:
 def caller_factory(ros_probe):
     made = []
 
-    def make(subscribers=1, publishers=1):
+    def make(subscribers=1, publishers=1, nodes=()):
         c = Caller(ros_probe, subscribers)
-        c.wait_connected(publishers)
+        c.wait_connected(publishers, nodes)
         made.append(c)
         return c
 

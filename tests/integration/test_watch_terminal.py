@@ -86,11 +86,14 @@ def test_watch_in_a_real_terminal(tmp_path, width, height):
 def test_run_shows_the_same_view_on_a_terminal(tmp_path):
     env = dict(os.environ, ROS_HOME=str(tmp_path / "home"))
     world = slow_world(tmp_path, speed=2.0)
-    term = Tmux(tmp_path, "run", 80, 24, _cmd("run", "--sim", "--world", world, LONG), env)
+    # the pane's shell prints the exit status: tmux shows "Pane is dead" only once it has reaped
+    # the child, which it sometimes does long after the pane's output has ended
+    command = "sh -c %s" % shlex.quote('%s; echo "[bmtree exited $?]"' % _cmd("run", "--sim", "--world", world, LONG))
+    term = Tmux(tmp_path, "run", 80, 24, command, env)
     try:
         shown = term.wait_screen("bmtree watch long_errand", "navigation.go_to", "/ 30s", "pending calls")
         assert all(len(line) <= 80 for line in shown.split("\n"))
-        term.wait_screen("Pane is dead (status 0", timeout=150)
+        term.wait_screen("[bmtree exited 0]", timeout=150)
         history = term.tmux("capture-pane", "-p", "-S", "-1000", "-t", term.name).stdout
         assert "long_errand: SUCCESS in" in history and "result: SUCCESS" in history
         assert "Traceback" not in history

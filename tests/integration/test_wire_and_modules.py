@@ -43,7 +43,7 @@ def sim_nodes(ros_graph, slow_world):
 
 
 def test_sim_modules_answer_reject_fail_busy_cancel_and_emit(sim_nodes, sim_defs, caller_factory, ros_probe):
-    c = caller_factory(subscribers=3, publishers=3)
+    c = caller_factory(subscribers=3, publishers=3, nodes=["/bm_navigation", "/bm_vision", "/bm_speech_faulty"])
     events = ros_probe.collect("/event/output", publishers=2)
     said = ros_probe.collect("/sim/speech/said", publishers=1)
     # every function answers correctly
@@ -129,7 +129,7 @@ def _garbage(rng, i):
 
 def test_a_thousand_malformed_calls_do_not_hurt_a_module(ros_graph, sim_defs, caller_factory):
     proc = start_sim_module(ros_graph, "speech")
-    c = caller_factory(subscribers=1, publishers=1)
+    c = caller_factory(subscribers=1, publishers=1, nodes=["/bm_speech"])
     rng = random.Random(7)
     good = []
     for i in range(1000):
@@ -168,7 +168,40 @@ def test_sigterm_stops_a_module_cleanly(ros_graph):
 
     proc = start_sim_module(ros_graph, "vision")
     proc.send_signal(signal.SIGTERM)
-    assert proc.wait(10) == 0
+    try:
+        code = proc.wait(20)
+    except subprocess.TimeoutExpired:  # say where it is stuck: SIGUSR1 prints every thread's stack
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1)
+        with open(os.path.join(ros_graph.ros_home, "bm_vision.out"), errors="replace") as fh:
+            raise AssertionError("the module did not stop on SIGTERM:\n" + fh.read()[-8000:])
+    assert code == 0
+
+
+def test_sigterm_during_start_up_stops_a_module_cleanly(ros_graph):
+    """rospy installs its handlers part-way through init_node; the node's own catch SIGTERM from
+    before that, so a stop right after it registers (before it announced the module) is clean too."""
+    import signal
+
+    import rosgraph
+
+    from modules.sim import DEFAULT_WORLD
+
+    master = rosgraph.Master("/t")
+    for n in range(3):
+        name = "bm_early%d" % n
+        proc = ros_graph.start_node(["-m", "modules.sim", "vision", "--world", DEFAULT_WORLD, "_basic_mod:=" + name,
+                                     "__name:=" + name], "/" + name, wait=False)
+        while True:  # registered: init_node is under way or done, the announcement not yet made
+            try:
+                master.lookupNode("/" + name)
+                break
+            except rosgraph.MasterError:
+                assert proc.poll() is None, "the module ended before registering"
+                time.sleep(0.01)
+        time.sleep(0.05 * n)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(20) == 0
 
 
 def test_module_name_overridable_by_ros_parameter(ros_graph, sim_defs, caller_factory):
@@ -177,7 +210,7 @@ def test_module_name_overridable_by_ros_parameter(ros_graph, sim_defs, caller_fa
     ros_graph.start_node(["-m", "modules.sim", "speech", "--world", DEFAULT_WORLD, "_basic_mod:=voice",
                           "__name:=bm_voice"], "/bm_voice")
     wait_announced("voice")
-    c = caller_factory()
+    c = caller_factory(nodes=["/bm_voice"])
     call = sim_defs["speech"].function("say").build_call({"text": "hi"})
     call.basic_mod = "voice"
     c.send(call)
@@ -199,7 +232,7 @@ def test_module_node_cli_binds_and_reports_errors(tmp_path, ros_master):
 def test_original_python_bm_module_called_by_typed_and_legacy_api(ros_graph, caller_factory, ros_probe):
     ros_graph.start_node([sys.executable, os.path.join(NODES, "legacy_python_bm.py")], "/PYTHON_BM")
     defs = load_definitions([REFERENCE])
-    c = caller_factory(subscribers=1, publishers=1)
+    c = caller_factory(subscribers=1, publishers=1, nodes=["/PYTHON_BM"])
     call = defs["PYTHON_BM"].function("graspObject").build_call({"target_pos": {"x": 0.3, "y": 0.1, "z": 0.9},
                                                                  "obj_radius": 0.0})
     c.send(call)

@@ -1,0 +1,75 @@
+"""A node that a SIGINT or SIGTERM ends cleanly at any moment of its life, start-up included.
+
+rospy's own handlers are installed part-way through ``rospy.init_node`` (a SIGTERM before kills
+the process with status -15, one during it raises ``ROSInitException``), and they shut rospy
+down *inside the signal handler*: when the signal lands while the main thread is in a master
+call (``get_param``, even ``rospy.loginfo``), the handler's own master calls wait for the lock
+that call holds, and the node hangs for ever. Launchers and supervisors stop nodes whenever
+they like, so :class:`StopSignals` only notes the signal (from before ``init_node`` on, rospy's
+handlers disabled) and :meth:`StopSignals.spin` shuts rospy down from the main thread.
+
+A node that does not stop is diagnosed with ``kill -USR1 PID``: it prints every thread's stack
+to its stderr (the node's log under roslaunch) and goes on.
+"""
+from __future__ import annotations
+
+import faulthandler
+import signal
+import sys
+import threading
+from typing import Any, Optional
+
+__all__ = ["StopSignals", "stop_requested"]
+
+_installed: Optional[StopSignals] = None
+
+
+class StopSignals:
+    """Remembers a SIGINT/SIGTERM; install it before ``rospy.init_node`` (main thread only)."""
+
+    def __init__(self) -> None:
+        global _installed
+        _installed = self
+        self._event = threading.Event()
+        self.signal: Optional[int] = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+        try:
+            faulthandler.register(signal.SIGUSR1, file=sys.stderr, all_threads=True)
+        except (AttributeError, ValueError, OSError):  # no usable stderr (closed, or not a file)
+            pass
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.signal = signum
+        self._event.set()
+
+    @property
+    def requested(self) -> bool:
+        """A stop signal came, or rospy shut down."""
+        return self._event.is_set()
+
+    def init_node(self, name: str, **kwargs: Any) -> bool:
+        """``rospy.init_node`` without rospy's signal handlers; False when a stop signal came first."""
+        import rospy
+
+        if self.requested:
+            return False
+        rospy.init_node(name, disable_signals=True, **kwargs)
+        rospy.on_shutdown(self._wake)
+        return not self.requested
+
+    def _wake(self) -> None:
+        self._event.set()
+
+    def spin(self) -> None:
+        """Block until a stop signal or rospy's shutdown (master kicked us out), then shut rospy down."""
+        import rospy
+
+        self._event.wait()
+        if not rospy.is_shutdown():
+            rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
+
+
+def stop_requested() -> bool:
+    """True once the process's :class:`StopSignals` saw a stop: long start-up waits end early."""
+    return _installed is not None and _installed.requested
