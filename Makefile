@@ -1,6 +1,10 @@
 # Each target installs what is missing first (scripts/setup.sh is idempotent and quick).
 VENV := .venv
 PY := $(VENV)/bin/python
+# Integration tests mostly wait (on processes, the simulated robot, a browser): three workers,
+# one test file each at a time (pytest-xdist), keep two cores busy. TEST_WORKERS=0 runs serially.
+TEST_WORKERS ?= 3
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 
 .PHONY: setup demo test lint unit integration py38 bench reliability clean
 
@@ -18,13 +22,13 @@ unit: setup
 	$(PY) -m pytest -q tests/unit
 
 integration: setup
-	$(PY) -m pytest -q tests/integration
+	$(PY) -m pytest -q $(XDIST) tests/integration
 
 py38: setup
 	@bash scripts/test-py38.sh
 
 test: lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q $(XDIST)
 	@bash scripts/test-py38.sh
 
 bench: setup

@@ -29,7 +29,7 @@ setup(
         "rich>=10",
     ],
     extras_require={
-        "test": ["pytest>=6", "ruff", "vermin", "selenium>=4.6"],
+        "test": ["pytest>=6", "pytest-xdist>=2.5", "ruff", "vermin", "selenium>=4.6"],
     },
     entry_points={
         "console_scripts": [

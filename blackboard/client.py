@@ -48,11 +48,22 @@ class BlackboardClient:
         slot: List[Any] = [threading.Event(), None]
         with self._lock:
             self._pending[req.request_id or ""] = slot
+        text = self._String(req.encode())
+        end = time.monotonic() + timeout
+        wait = 0.2
         try:
-            self._pub.publish(self._String(req.encode()))
-            if not slot[0].wait(timeout):
-                raise BlackboardError("no answer from the Blackboard node within %.1f s (is it running?)" % timeout)
-            return slot[1]
+            # a request can be lost (a connection to a Blackboard node that has just been replaced
+            # counts as connected until a write to it fails): reads are idempotent, so it is sent
+            # again, same request_id, at growing intervals; the first answer is taken
+            while True:
+                self._pub.publish(text)
+                left = end - time.monotonic()
+                if slot[0].wait(max(0.0, min(wait, left))):
+                    return slot[1]
+                if left <= wait:
+                    raise BlackboardError("no answer from the Blackboard node within %.1f s (is it running?)"
+                                          % timeout)
+                wait *= 2
         finally:
             with self._lock:
                 self._pending.pop(req.request_id or "", None)

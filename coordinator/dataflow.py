@@ -10,7 +10,7 @@ from typing import Dict, FrozenSet, List, Optional, Sequence, Set
 
 from coordinator.errors import TreeError
 from coordinator.nodes.base import Flow
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, walk
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, nodes_of, walk
 
 __all__ = ["check_flow", "check_types", "key_types"]
 
@@ -27,7 +27,8 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dic
     """For each tree key, the ROS types written to it (None: not known statically)."""
     types: Dict[str, Set[Optional[str]]] = {k: {None} for k in tree.inputs}
     for n in nodes if nodes is not None else walk(tree.root):
-        for key, rostype in n.nodekind.writes(n).items():
+        written = n.nodekind.writes(n)
+        for key, rostype in written.items() if written else ():
             types.setdefault(key, set()).add(rostype)
     return types
 
@@ -35,7 +36,7 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dic
 def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> List[TreeError]:
     """References that cannot fit the input they are passed to."""
     errors: List[TreeError] = []
-    nodes = list(walk(tree.root)) if nodes is None else nodes
+    nodes = nodes_of(tree.root) if nodes is None else nodes
     types = key_types(tree, nodes)
     for n in nodes:
         n.nodekind.check_types(n, types, errors)

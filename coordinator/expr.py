@@ -126,6 +126,7 @@ class Expr:
         if len(text) > 2000:
             raise ExprError("expression longer than 2000 characters", 0)
         self.text = text
+        self._fixed_errors: Optional[List[Tuple[int, str]]] = None   # type errors when there are no refs
         self.keys: Set[str] = set()
         self.refs: List[Ref] = []
         self._toks = _tokens(text)
@@ -291,9 +292,14 @@ class Expr:
         """(offset, message) for each operand whose kind, known before running, cannot fit.
 
         ``key_kind(ref)`` is the kind a reference will hold (see :func:`kind_of`), None if unknown.
+        Without references the answer never changes (and trees repeat their checks): kept.
         """
+        if not self.refs and self._fixed_errors is not None:
+            return list(self._fixed_errors)
         errors: List[Tuple[int, str]] = []
         _static(self.tree, key_kind, errors)
+        if not self.refs:
+            self._fixed_errors = list(errors)
         return errors
 
 

@@ -15,7 +15,7 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
 from coordinator.refs import RefError
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, used_modules, walk
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, used_modules, walk
 from coordinator.values import literal, loose_dollars
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition
@@ -30,6 +30,9 @@ _COMMON = ("name",)
 _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
 _ALLOWED = {k: _COMMON + tuple(o.name for o in nk.options) for k, nk in REGISTRY.items()}
 _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REGISTRY.items()}
+_KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
+_KINDS = frozenset(REGISTRY)
+_LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
 
 
 class Parser:
@@ -142,10 +145,9 @@ class Parser:
         if not isinstance(raw, LMap):
             self.err(at, "a node must be a mapping with one of: %s" % ", ".join(REGISTRY))
             return None
-        kinds = [k for k in raw if k in REGISTRY] if len(raw) > 1 else list(raw)
-        if len(kinds) == 1 and kinds[0] not in REGISTRY:
-            kinds = []
+        kinds = _KINDS.intersection(raw)
         if len(kinds) > 1:
+            kinds = [k for k in raw if k in REGISTRY]   # in the order written, for the messages
             kinds = [k for k in kinds if not any(k in _OPTION_NAMES[o] for o in kinds if o != k)]
         if len(kinds) != 1:
             if not kinds:
@@ -158,14 +160,15 @@ class Parser:
             else:
                 self.err(raw.key_pos[kinds[1]], "node has two kinds, %r and %r: split it or nest it" % tuple(kinds[:2]))
             return None
-        kind = kinds[0]
+        kind, = kinds
         nk = REGISTRY[kind]
         allowed = _ALLOWED[kind]
-        if nk.value[0] == "children" and isinstance(raw[kind], LMap):
+        if kind in _LISTS and isinstance(raw[kind], LMap):
             raw = self._inline(raw, kind, allowed)
-        for k in raw:
-            if k != kind and k not in allowed:
-                self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
+        if not _KEYS[kind].issuperset(raw):
+            for k in raw:
+                if k != kind and k not in allowed:
+                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
         for o in _REQUIRED[kind]:
             if o not in raw:
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, o))
@@ -173,8 +176,9 @@ class Parser:
         if name is not None and not isinstance(name, str):
             self.err(raw.val_pos["name"], "'name' must be a string")
             name = None
-        node = TreeNode(kind=kind, name=name or "", pos=raw.key_pos[kind], nodekind=nk, value_pos=raw.val_pos[kind])
-        node.spec = nk.parse(self, node, raw, raw[kind], raw.val_pos[kind])
+        value_at = raw.val_pos[kind]
+        node = TreeNode(kind, name or "", raw.key_pos[kind], None, None, nk, value_at)
+        node.spec = nk.parse(self, node, raw, raw[kind], value_at)
         if not node.name:
             node.name = nk.default_name(node)
         return node
@@ -215,8 +219,11 @@ class Parser:
         if not isinstance(value, LList) or not value:
             self.err(at, "%s takes a non-empty list of children" % node.kind)
             return
-        for i, item in enumerate(value):
-            self.child(node, item, value.item_pos[i])
+        append, parse = node.children.append, self.node
+        for item, at in zip(value, value.item_pos):
+            c = parse(item, at)
+            if c is not None:
+                append(c)
 
     def typed(self, node: TreeNode, label: str, value: Any, at: Pos, type_name: str) -> Any:
         """``value`` if it is of the type, else None after reporting ``label of kind must be …``."""
@@ -328,7 +335,7 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         tree = parser.load_file(path, None)
         errors = list(parser.errors)
         if tree is not None:
-            nodes = list(walk(tree.root))
+            nodes = nodes_of(tree.root)
             errors.extend(check_flow(tree, frozenset(given)))
             errors.extend(check_types(tree, nodes))
             if not errors:
@@ -345,7 +352,8 @@ def warnings(nodes: List[TreeNode]) -> List[TreeError]:
     seen: Set[Any] = set()
     out: List[TreeError] = []
     for n in nodes:
-        for w in n.nodekind.warnings(n):
+        found = n.nodekind.warnings(n)
+        for w in found if found else ():
             if w not in seen:
                 seen.add(w)
                 out.append(w)

@@ -8,7 +8,7 @@ from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
 
-__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "used_modules", "walk"]
+__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "nodes_of", "used_modules", "walk"]
 
 
 class TreeNode:
@@ -79,6 +79,19 @@ def walk(node: TreeNode) -> Iterator[TreeNode]:
         below = n.nodekind.expand(n)
         if below:
             stack.extend(reversed(below))
+
+
+def nodes_of(node: TreeNode) -> List[TreeNode]:
+    """The list of :func:`walk` (in its order), made without a generator."""
+    out: List[TreeNode] = []
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        out.append(n)
+        below = n.nodekind.expand(n)
+        if below:
+            stack.extend(reversed(below))
+    return out
 
 
 def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:

@@ -193,25 +193,54 @@ class StateSink(Sink):
 
 class SnapshotSink(StateSink):
     """Keeps the run's state and publishes it as a ``snapshot`` record through ``publish``
-    (a latched topic) at most every ``interval`` seconds, at the end of a tick, and at the end."""
+    (a latched topic) at the end of a tick, at most every ``interval`` seconds, and at the end.
+
+    A tick that comes too soon after the last snapshot is published ``interval`` later by a
+    timer: the engine is event-driven, so while a long call runs there may be no next tick, and
+    the latched snapshot must not stay behind the run (a watcher attaching then would load it)."""
 
     def __init__(self, publish: Callable[[str], None], interval: float = 0.5):
         super().__init__(WatchState())
         self.publish = publish
         self.interval = interval
         self._last = 0.0
+        self._lock = threading.Lock()
+        self._timer: Optional[threading.Timer] = None
+        self._closed = False
 
     def write(self, channel: str, text: str) -> None:
         super().write(channel, text)
         if channel == "control":  # while paused there are no ticks: publish now
-            self._last = 0.0
+            with self._lock:
+                self._last = 0.0
             self.flush()
 
+    def _publish_now(self) -> None:  # with self._lock held
+        self._last = time.monotonic()
+        self.publish(to_json(self.state.snapshot()))
+
     def flush(self) -> None:
-        now = time.monotonic()
-        if now - self._last >= self.interval:
-            self._last = now
-            self.publish(to_json(self.state.snapshot()))
+        with self._lock:
+            if self._closed:
+                return
+            wait = self._last + self.interval - time.monotonic()
+            if wait <= 0:
+                self._publish_now()
+            elif self._timer is None:
+                self._timer = threading.Timer(wait, self._trailing)
+                self._timer.daemon = True
+                self._timer.start()
+
+    def _trailing(self) -> None:
+        with self._lock:
+            self._timer = None
+            if not self._closed:
+                self._publish_now()
 
     def close(self) -> None:
-        self.publish(to_json(self.state.snapshot()))
+        with self._lock:
+            self._closed = True
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            self._publish_now()

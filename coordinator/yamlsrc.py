@@ -77,7 +77,7 @@ def _scalar(loader: Any, event: Any) -> Any:
         return loader.construct_object(node, deep=True)
     except yaml.YAMLError:
         raise
-    except (ValueError, TypeError, AttributeError, OverflowError) as exc:  # PyYAML's own bugs, e.g. '!!timestamp x'
+    except (ValueError, TypeError, AttributeError, OverflowError, LookupError) as exc:  # PyYAML's own bugs, e.g. '!!bool x'
         raise TreeErrors([TreeError(_pos(file_of(loader), event.start_mark), "cannot read %.80r as %s (%s)" % (
             value, tag, type(exc).__name__))])
 
@@ -135,20 +135,17 @@ def _build(loader: Any, file: str) -> Any:
         cls = event.__class__
         if cls is ScalarEvent:
             value = event.value
-            tag = event.tag
-            if tag is None:
-                if event.implicit[0]:
-                    known = plain.get(value)
-                    if known is None:
-                        if value[:1] in first_chars:   # some implicit type may match: resolve (and remember)
-                            value = _scalar(loader, event)
-                    elif known != str_tag:
-                        value = _scalar(loader, event)
-            elif tag != "!" and tag != str_tag:
-                value = _scalar(loader, event)
-            count += 1
             mark = event.start_mark
-            at = new_pos(PosT, (file, mark.line + 1, mark.column + (2 if event.style in quotes else 1)))
+            tag = event.tag
+            if tag is None and event.implicit[0]:   # plain: a string unless some implicit type matches
+                if value[:1] in first_chars and plain.get(value) != str_tag:
+                    value = _scalar(loader, event)
+                at = new_pos(PosT, (file, mark.line + 1, mark.column + 1))
+            else:   # quoted or block text, or tagged
+                if tag is not None and tag != "!" and tag != str_tag:
+                    value = _scalar(loader, event)
+                at = new_pos(PosT, (file, mark.line + 1, mark.column + (2 if event.style in quotes else 1)))
+            count += 1
             if event.anchor is not None:
                 anchors[event.anchor] = (value, 1)
                 if count > MAX_NODES:
@@ -175,11 +172,11 @@ def _build(loader: Any, file: str) -> Any:
                 container.val_pos = val_pos = {}
                 item_pos = None
                 key = no_key
-                merges = None
             else:
                 container = LList()
                 container.pos = at
                 container.item_pos = item_pos = []
+            merges = None   # the enclosing mapping's merges wait on the stack
             anchor, start = event.anchor, count
             continue
         elif cls is MappingEnd or cls is SequenceEnd:

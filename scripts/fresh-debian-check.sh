@@ -32,6 +32,10 @@ root=$(mktemp -d /var/tmp/bmtree-fresh.XXXXXX)
 log=$root.log
 mounted=()
 cleanup() {
+  # processes left running inside the chroot (a test's daemon, an interrupted run)
+  for p in /proc/[0-9]*; do
+    [ "$(readlink "$p/root" 2>/dev/null)" = "$root" ] && kill -9 "${p#/proc/}" 2>/dev/null || true
+  done
   for ((i=${#mounted[@]}-1; i>=0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done
   if [ "$keep" = 1 ]; then echo "fresh-debian-check: chroot kept at $root"; else rm -rf "$root"; fi
 }
@@ -59,6 +63,9 @@ cp -aL /etc/ssl/certs/ca-certificates.crt "$root/etc/ssl/certs/" 2>/dev/null || 
 cp -L /etc/resolv.conf "$root/etc/resolv.conf"
 printf '127.0.0.1\tlocalhost\n::1\tlocalhost ip6-localhost ip6-loopback\n' >"$root/etc/hosts"
 
+# the chroot's / is a mount point of its own, as on a real machine: `ip netns exec` remounts /
+# as a slave in its new mount namespace, which fails with EINVAL on a plain directory
+mnt --bind "$root" "$root"
 mnt -t proc proc "$root/proc"
 mnt -t sysfs sys "$root/sys"
 mnt --bind /dev "$root/dev"

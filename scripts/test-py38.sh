@@ -22,11 +22,11 @@ if [ ! -x "$V/bin/python" ]; then
   "$py38" -m venv "$V"
 fi
 stamp=$V/.bmtree-installed
-if [ ! -f "$stamp" ] || [ setup.py -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ setup.py -nt "$stamp" ] || [ scripts/test-py38.sh -nt "$stamp" ]; then
   echo "py38: installing py_trees 2.2.x and the test dependencies"
-  "$V/bin/python" -m pip install -q --disable-pip-version-check "py_trees>=2.2,<2.3" \
-    "rospy_message_converter>=0.5,<0.6" pyyaml "jsonschema>=3.2" pydot pytest rospkg catkin_pkg 2>&1 | grep -v "^WARNING: Location" || true
-  "$V/bin/python" -m pip install -q --disable-pip-version-check --no-deps -e .
+  # the package's own requirements (setup.py), py_trees held at the oldest supported 2.2.x
+  "$V/bin/python" -m pip install -q --disable-pip-version-check "py_trees>=2.2,<2.3" -e . \
+    pytest rospkg catkin_pkg 2>&1 | grep -v "^WARNING: Location" || true
   touch "$stamp"
 fi
 site=$("$V/bin/python" -c 'import site; print(site.getsitepackages()[0])')

@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["Flow", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "param_keys", "run_param"]
 
 NO_DEFAULT = object()
+_NOTHING: FrozenSet[str] = frozenset()
 
 BuildChild = Callable[[TreeNode], py_trees.behaviour.Behaviour]
 
@@ -130,12 +131,12 @@ class Flow:
         self.errors = errors
 
     def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
-        for k in sorted(set(keys)):
-            if k not in avail:
-                self.errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
-                                                       "node (%s)" % (k, did_you_mean(k, avail)[2:-1]
-                                                                      or "write it earlier or declare it under "
-                                                                         "'inputs:'")))
+        missing = [k for k in keys if k not in avail]
+        for k in sorted(set(missing)) if missing else ():
+            self.errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
+                                                   "node (%s)" % (k, did_you_mean(k, avail)[2:-1]
+                                                                  or "write it earlier or declare it under "
+                                                                     "'inputs:'")))
 
     def of(self, node: TreeNode, avail: FrozenSet[str]) -> FrozenSet[str]:
         """Keys surely written when ``node`` succeeds."""
@@ -174,8 +175,11 @@ class NodeKind(abc.ABC):
         return {}
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        f.need(node, self.reads(node), avail)
-        return frozenset(self.writes(node))
+        read = self.reads(node)
+        if read:
+            f.need(node, read, avail)
+        written = self.writes(node)
+        return frozenset(written) if written else _NOTHING
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:  # noqa: B027
         """Report references whose known type cannot fit where they are used (most kinds pass none)."""

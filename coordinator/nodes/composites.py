@@ -54,7 +54,9 @@ class Sequence(_Composite):
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
         cur = avail
         for c in node.children:
-            cur = cur | f.of(c, cur)
+            written = c.nodekind.flow(c, cur, f)   # f.of(c, cur), without a call per child
+            if written:
+                cur = cur | written
         return cur - avail
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:

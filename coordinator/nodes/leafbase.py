@@ -18,11 +18,12 @@ class Leaf(py_trees.behaviour.Behaviour):
     dispatched into the run context on later ticks.
     """
 
+    reason = ""   # why it failed (set on failure)
+
     def __init__(self, node: TreeNode, ctx: Any):
         super().__init__(node.name)
         self.node = node
         self.ctx = ctx
-        self.reason = ""
 
     def _fail(self, reason: str) -> Status:
         self.reason = reason

@@ -245,13 +245,26 @@ class InProcessTransport(Transport):
         self.mocks = mocks
         self.clock = clock
         self._deliver: Callable[[Any], None] = lambda item: None
-        self.blackboard = BlackboardService(Store(":memory:"), self._on_answer, threaded=False)
+        self._blackboard: Optional[BlackboardService] = None
+        self._blackboard_lock = threading.Lock()   # results (timer thread) and requests (tick thread) may race
         self.sent: List[Any] = []
         executor = ClockExecutor(clock)
         self.servers: Dict[str, ModuleServer] = {
             name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
                                executor=executor, scheduler=clock)
             for name, definition in mocks.definitions.items()}
+
+    @property
+    def blackboard(self) -> BlackboardService:
+        """The in-memory Blackboard, made at the first result or request (a sqlite database costs
+        a fifth of a millisecond, and loading or checking a tree needs none)."""
+        service = self._blackboard
+        if service is None:
+            with self._blackboard_lock:
+                if self._blackboard is None:
+                    self._blackboard = BlackboardService(Store(":memory:"), self._on_answer, threaded=False)
+                service = self._blackboard
+        return service
 
     def connect(self, deliver: Callable[[Any], None]) -> None:
         self._deliver = deliver

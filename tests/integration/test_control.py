@@ -115,7 +115,7 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
         web, _out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
         driver.get(url)
         wait_until(driver, lambda d: d.find_element("id", "controls").is_displayed())
-        assert driver.find_element("id", "paused").is_displayed()
+        wait_until(driver, lambda d: d.find_element("id", "paused").is_displayed())
         driver.find_element("id", "resume").click()
         wait_until(driver, lambda d: text(d, "answer") == "ok: resumed")
         wait_until(driver, lambda d: not d.find_element("id", "paused").is_displayed())

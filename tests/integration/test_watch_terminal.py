@@ -23,7 +23,8 @@ class Tmux:
     def __init__(self, tmp_path, name, width, height, command, env):
         self.sock = "bmtree-test-%d-%s" % (os.getpid(), name)
         self.env = dict(env, TERM="xterm-256color")
-        self.env.pop("TMUX", None)
+        for name in ("TMUX", "COLUMNS", "LINES"):  # pytest-xdist's workers set COLUMNS=80, LINES=24
+            self.env.pop(name, None)
         self.tmux("new-session", "-d", "-s", name, "-x", str(width), "-y", str(height), command)
         self.tmux("set-option", "-t", name, "remain-on-exit", "on")
         self.name = name

@@ -99,3 +99,29 @@ def test_records_before_the_tree_are_kept_until_it_comes():
     assert not late.nodes
     late.apply(tree_record())
     assert late.caught_up and late.label(2) == "RUNNING"
+
+
+def test_a_snapshot_held_back_by_the_interval_is_published_when_it_ends():
+    """The engine may not tick again for a long time (a long call runs): the latched snapshot
+    must catch up with the last tick anyway, not stay at the one before."""
+    import threading
+
+    published = []
+    got = threading.Event()
+
+    def publish(text):
+        published.append(json.loads(text))
+        got.set()
+
+    sink = SnapshotSink(publish=publish, interval=0.2)
+    sink.write("tree", json.dumps(tree_record()))
+    sink.flush()                                    # published at once: nothing before it
+    assert [p["n"] for p in published] == [0]
+    got.clear()
+    sink.write("tick", json.dumps({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[2, "RUNNING"]]}))
+    sink.flush()                                    # too soon: held back...
+    assert [p["n"] for p in published] == [0]
+    assert got.wait(10)                             # ...and published when the interval ends
+    assert [p["n"] for p in published] == [0, 1] and published[-1]["status"]["2"] == "RUNNING"
+    sink.close()
+    assert published[-1]["n"] == 1 and len(published) == 3

@@ -30,6 +30,12 @@ def test_values_match_the_safe_loader_and_aliases_share():
     assert data["tagged"] == "5" and data["empty"] is None
 
 
+def test_a_merge_then_a_list_in_the_same_mapping():
+    data = load_yaml("a: &x {k: 1}\nb:\n  <<: *x\n  list: [1, {m: 2}]\n", "t.yaml")
+    assert data["b"] == {"k": 1, "list": [1, {"m": 2}]}
+    assert data["b"].val_pos["list"] == ("t.yaml", 4, 9)
+
+
 def test_positions_of_keys_values_items_and_quoted_scalars():
     data = load_yaml(TEXT, "t.yaml")
     assert data.key_pos["list"] == ("t.yaml", 3, 1)
@@ -47,6 +53,8 @@ def test_positions_of_keys_values_items_and_quoted_scalars():
     ("a: [1\n", "YAML syntax error"),
     ("a: !!python/object:os.system x\n", "YAML syntax error"),
     ("[" * 500 + "]" * 500, "nested too deeply"),
+    ("a: !!bool x\n", "1:4: cannot read 'x' as tag:yaml.org,2002:bool"),      # KeyError inside PyYAML
+    ("a: !!int ''\n", "1:4: cannot read '' as tag:yaml.org,2002:int"),        # IndexError inside PyYAML
 ])
 def test_bad_yaml_is_a_positioned_error(text, message):
     with pytest.raises(TreeErrors, match=message.replace("[", r"\[")):
