@@ -3,10 +3,12 @@
 Calls and cancels go to a module's own call topic when its announcement names one (a
 cancel there, marked ``"cancel": true``, can never overtake its call), else to the shared
 ``/master/output`` and ``/master/cancel`` (README, "Addressed calls").
-Sending never blocks the ticking thread: a module's own topics are written by a thread
-each (:class:`coordinator.sender.TopicSender`), the shared topics by rospy's queued
-publishers (a queue and writer thread per subscriber connection), so a subscriber that
-stops reading (a stopped process) fills only its own queue (then loses its oldest messages).
+Sending never blocks the ticking thread: a module's own topic is written by a
+:class:`coordinator.sender.TopicSender` (a tick's messages to one module in one write that
+cannot block; what a socket does not take, to that topic's own thread), the shared topics by
+rospy's queued publishers (a queue and writer thread per subscriber connection), so a
+subscriber that stops reading (a stopped process) fills only its own queue (then loses its
+oldest messages). The preflight is :mod:`coordinator.preflight`.
 """
 from __future__ import annotations
 
