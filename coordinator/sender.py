@@ -10,9 +10,11 @@ subscriber's socket takes the whole frame; otherwise (a subscriber that stopped 
 filled its socket) the rest of the frame and every later message go to the sender's own
 thread, which writes them in order with blocking sends, and the caller only queues. So a
 subscriber that stops reading blocks only its own topic's thread; past ``limit`` waiting
-messages the oldest is dropped (and logged once), as rospy's queues do. Writing in the
-caller's thread spares each call a wake-up of another thread, and the calls of a tick
-leave while the tick goes on.
+messages the oldest is dropped (and logged once), as rospy's queues do. ``publish(msg,
+hold=True)`` keeps a message for :meth:`TopicSender.flush`: the transport keeps a tick's
+calls so that each module gets them in one write, and wakes once (sent one by one, 50
+modules woke twice as often and spent more CPU than the coordinator saved). Writing in the
+caller's thread spares each call a wake-up of another thread.
 
 :func:`topic_senders` makes many at once: rospy registers publishers with the master one
 after another (a lock around each XML-RPC), which with 50 modules was most of ``bmtree
