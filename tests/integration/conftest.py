@@ -83,6 +83,23 @@ class Caller:
             assert time.monotonic() < end, "result publishers did not connect (%s)" % ", ".join(nodes)
             time.sleep(0.02)
 
+    def wait_answering(self, module, timeout=30.0):
+        """Ping ``module`` (the preflight's reserved function) until it answers, as ``bmtree run``
+        does before its first call: a first message can be lost to a connection still being set
+        up, or held by an earlier test's node of the same name."""
+        from comm.addressing import PING_FUNCTION
+        from comm.messages import new_id
+
+        end = time.monotonic() + timeout
+        while True:
+            ping = FunctionCall(module, PING_FUNCTION, [], names=[], call_id=new_id())
+            self.send(ping)
+            try:
+                self.result(ping.call_id, timeout=1.0)
+                return self
+            except AssertionError:
+                assert time.monotonic() < end, "module %s never answered a ping" % module
+
     def send(self, call):
         from std_msgs.msg import String
 

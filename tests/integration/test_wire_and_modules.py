@@ -210,7 +210,7 @@ def test_module_name_overridable_by_ros_parameter(ros_graph, sim_defs, caller_fa
     ros_graph.start_node(["-m", "modules.sim", "speech", "--world", DEFAULT_WORLD, "_basic_mod:=voice",
                           "__name:=bm_voice"], "/bm_voice")
     wait_announced("voice")
-    c = caller_factory(nodes=["/bm_voice"])
+    c = caller_factory(nodes=["/bm_voice"]).wait_answering("voice")
     call = sim_defs["speech"].function("say").build_call({"text": "hi"})
     call.basic_mod = "voice"
     c.send(call)
