@@ -106,17 +106,17 @@ class TopicSender:
                     continue
                 if sock.gettimeout() is not None:  # Python would wait for room first: the thread writes
                     self._rest.append((conn, memoryview(data)))
-                    continue
-                try:
-                    sent = sock.send(data, socket.MSG_DONTWAIT)
-                except BlockingIOError:
-                    sent = 0
-                except OSError:
-                    broken.append(conn)
-                    continue
-                if sent < len(data):
-                    self._rest.append((conn, memoryview(data)[sent:]))
-                conn.stat_bytes += len(data)
+                else:
+                    try:
+                        sent = sock.send(data, socket.MSG_DONTWAIT)
+                    except BlockingIOError:
+                        sent = 0
+                    except OSError:
+                        broken.append(conn)
+                        continue
+                    if sent < len(data):
+                        self._rest.append((conn, memoryview(data)[sent:]))
+                conn.stat_bytes += len(data)  # counted when handed over, as rospy's queue does
                 conn.stat_num_msg += len(frames)
             if self._rest:
                 self._wake()
@@ -160,17 +160,21 @@ class TopicSender:
                 for conn in list(self.impl.connections):
                     if self._stopped:
                         return
-                    self._write(conn, frame)
+                    if self._write(conn, frame):
+                        conn.stat_bytes += len(frame)
+                        conn.stat_num_msg += 1
 
-    def _write(self, conn: Any, data: Any) -> None:
+    def _write(self, conn: Any, data: Any) -> bool:
         sock = conn.socket
         if sock is None or conn.done:
-            return
+            return False
         try:
             sock.sendall(data)
+            return True
         except OSError as exc:  # a broken connection, a closed topic at shutdown
             log.warning("could not publish on %s: %s", self.resolved_name, exc)
             _close(conn)
+            return False
 
     def unregister(self, flush: float = 1.0) -> None:
         """Write what waits (cancels sent as a run ends), for at most ``flush`` seconds, then stop."""
