@@ -8,9 +8,9 @@ from __future__ import annotations
 import socket
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set
 
-__all__ = ["RosProbe", "Collector"]
+__all__ = ["RosProbe", "Collector", "wait_subscribed"]
 
 
 class Collector:
@@ -99,7 +99,8 @@ class RosProbe:
                 c.close()
         master = rosgraph.Master(rospy.get_name())
         _, subs, _ = master.getSystemState()
-        nodes = [n for n in next((n for t, n in subs if t == pub.resolved_name), []) if pub.impl.has_connection(n)]
+        nodes = [n for n in next((n for t, n in subs if t == pub.resolved_name), [])
+                 if n != rospy.get_name() and pub.impl.has_connection(n)]  # not this process itself
         live = 0
         for node in nodes:
             try:
@@ -113,21 +114,45 @@ class RosProbe:
 
         self.publisher(topic, subscribers).publish(String(text))
 
-    def collect(self, topic: str, publishers: int = 0, timeout: float = 10.0) -> Collector:
-        """Start collecting ``topic``; with ``publishers``, wait until that many are connected."""
+    def collect(self, topic: str, publishers: int = 0, timeout: float = 10.0, nodes: Sequence[str] = ()) -> Collector:
+        """Start collecting ``topic``; with ``publishers``, wait until that many are connected, and
+        until each of ``nodes`` is (by name: a count can be made up by other nodes, or by a
+        publisher of this very process)."""
         import rospy
         from std_msgs.msg import String
 
         c = Collector(topic)
         c.sub = rospy.Subscriber(topic, String, c._add, queue_size=100000)
+        uris = _uris(nodes)
+        mine = rospy.get_node_uri()  # this process's own publisher of the topic is no peer
         end = time.monotonic() + timeout
-        while c.sub.get_num_connections() < publishers:
+        while True:
+            peers = {x.endpoint_id for x in c.sub.impl.connections} - {mine}
+            if len(peers) >= publishers and uris <= peers:
+                return c
             if time.monotonic() > end:
-                raise AssertionError("only %d of %d publishers connected to %s" % (
-                    c.sub.get_num_connections(), publishers, topic))
+                raise AssertionError("only %d of %d publishers connected to %s (waiting for %s)" % (
+                    len(peers), publishers, topic, ", ".join(nodes) or "any"))
             time.sleep(0.02)
-        return c
 
     def close_collector(self, c: Optional[Collector]) -> None:
         if c is not None and c.sub is not None:
             c.sub.unregister()
+
+
+def _uris(nodes: Sequence[str]) -> Set[str]:
+    """The XML-RPC URIs of ``nodes``: a subscriber's connection names its publisher by URI."""
+    import rosgraph
+    import rospy
+
+    master = rosgraph.Master(rospy.get_name())
+    return {master.lookupNode(n) for n in nodes}
+
+
+def wait_subscribed(pub: Any, nodes: Sequence[str], timeout: float = 20.0) -> None:
+    """Until each of ``nodes`` (by name) is connected to publisher ``pub``."""
+    end = time.monotonic() + timeout
+    while not set(nodes) <= {c.endpoint_id for c in pub.impl.connections}:
+        if time.monotonic() > end:
+            raise AssertionError("%s: not all of %s subscribed" % (pub.resolved_name, ", ".join(nodes)))
+        time.sleep(0.02)

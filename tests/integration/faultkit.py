@@ -6,7 +6,7 @@ import os
 import queue
 import statistics
 import time
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, List, Optional, Sequence
 
 from modules.definition import load_definition
 from tests.integration.conftest import NODES, wait_announced
@@ -78,9 +78,12 @@ class Publishers:
     def __init__(self) -> None:
         self._pubs: dict = {}
 
-    def get(self, topic: str, subscribers: int = 1, timeout: float = 20.0) -> Any:
+    def get(self, topic: str, subscribers: int = 1, timeout: float = 20.0, nodes: Sequence[str] = ()) -> Any:
+        """A publisher with ``subscribers`` connected, ``nodes`` among them by name."""
         import rospy
         from std_msgs.msg import String
+
+        from coordinator.testing.ros import wait_subscribed
 
         pub = self._pubs.get(topic)
         if pub is None:
@@ -90,6 +93,7 @@ class Publishers:
             assert time.monotonic() < end, "only %d of %d subscribers on %s" % (
                 pub.get_num_connections(), subscribers, topic)
             time.sleep(0.02)
+        wait_subscribed(pub, nodes, max(0.0, end - time.monotonic()))
         return pub
 
     def close(self) -> None:

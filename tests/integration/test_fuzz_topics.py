@@ -56,16 +56,16 @@ def test_fuzzed_topics_stop_no_node_and_lose_no_good_message(ros_graph, ros_prob
                               "/bb_fuzz")
     mod = ros_graph.start_node(["-m", "modules.node", "--definition", PROBE_JSON, "--class", PROBE_CLASS,
                                 "__name:=bm_fuzz"], "/bm_fuzz")
-    results = ros_probe.collect("/function/output", publishers=1)
-    acks = ros_probe.collect("/blackboard/stored", publishers=1)
-    answers = ros_probe.collect("/blackboard/output", publishers=1)
+    results = ros_probe.collect("/function/output", publishers=1, nodes=["/bm_fuzz"])
+    acks = ros_probe.collect("/blackboard/stored", publishers=1, nodes=["/bb_fuzz"])
+    answers = ros_probe.collect("/blackboard/output", publishers=1, nodes=["/bb_fuzz"])
     sent = {}
     pubs = Publishers()
     try:
         # module: /master/output and its own addressed topics ---------------------------------
         for call_topic, cancel_topic, tag in (("/master/output", "/master/cancel", ""),
                                               ("/bmtree/call/probe", "/bmtree/cancel/probe", "addr")):
-            calls = pubs.get(call_topic, 1)
+            calls = pubs.get(call_topic, 1, nodes=["/bm_fuzz"])
             shape = json.loads(echo.build_call({"tag": "x"}, "shape").encode())
             good = 0
             for ok, text in interleave(rng, count, EVERY, lambda shape=shape: hostile(rng, shape),
@@ -85,7 +85,7 @@ def test_fuzzed_topics_stop_no_node_and_lose_no_good_message(ros_graph, ros_prob
                 assert got.status == "rejected" and "nested deeper" in got.error, got
             sent[call_topic] = (count, good)
 
-            cancels = pubs.get(cancel_topic, 1)
+            cancels = pubs.get(cancel_topic, 1, nodes=["/bm_fuzz"])
             shape = {"call_id": "c", "basic_mod": "probe", "function": "work"}
             good = 0
             for ok, text in interleave(rng, count, EVERY, lambda shape=shape: hostile(rng, shape),
@@ -107,7 +107,7 @@ def test_fuzzed_topics_stop_no_node_and_lose_no_good_message(ros_graph, ros_prob
             sent[cancel_topic] = (count, good)
 
         # Blackboard: /function/output -------------------------------------------------------
-        res_pub = pubs.get("/function/output", 1)
+        res_pub = pubs.get("/function/output", 1, nodes=["/bb_fuzz"])
         shape = json.loads(echo.build_result({"tag": "x"}, "shape").encode())
         good = 0
         for ok, text in interleave(rng, count, EVERY, lambda: hostile(rng, shape),
@@ -119,7 +119,7 @@ def test_fuzzed_topics_stop_no_node_and_lose_no_good_message(ros_graph, ros_prob
         sent["/function/output (Blackboard)"] = (count, good)
 
         # Blackboard: /blackboard/input ------------------------------------------------------
-        req_pub = pubs.get("/blackboard/input", 1)
+        req_pub = pubs.get("/blackboard/input", 1, nodes=["/bb_fuzz"])
         shape = json.loads(BlackboardRequest(var_names=["tag"], request_id="r", history=2).encode())
         good = 0
         for ok, text in interleave(rng, count, EVERY, lambda: hostile(rng, shape),
