@@ -1,6 +1,6 @@
 """``bmtree watch``: attach to the tree running on $ROS_MASTER_URI through its run stream.
 
-The watcher subscribes to ``/bmtree/run/*``: the latched ``tree`` and ``snapshot``
+The watcher subscribes to ``/bmtree/run/*``: the latched ``tree`` and the ``snapshot``
 records catch it up mid-run, the other channels keep it current. On a terminal it
 shows :func:`coordinator.watchview.render` redrawn in place (``rich.live``); otherwise
 one line per change. ``--web`` serves the same state as a page (:mod:`coordinator.webview`).
@@ -14,6 +14,7 @@ import sys
 import threading
 from typing import Any, Callable, List, Optional, Tuple
 
+from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
 from coordinator.watchview import LinePrinter, now_since, render
 
@@ -111,8 +112,18 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
     import rospy
 
     transport.open()
-    pub = rospy.Publisher("%s/snapshot" % namespace.rstrip("/"), transport._String, queue_size=1, latch=True)
-    sink = SnapshotSink(lambda text: pub.publish(transport._String(text)))
+    string = transport._String
+    sink = SnapshotSink(lambda text: pub.publish(string(text)))
+
+    class CatchUp(rospy.SubscribeListener):
+        """A new watcher gets the state of *now*, to itself alone, on connecting. Not a latched
+        topic: the latch would hold the last periodic snapshot, up to an interval old, and a
+        watcher attaching in between would load a past state."""
+
+        def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Any) -> None:
+            peer_publish(string(to_json(sink.state.snapshot())))
+
+    pub = rospy.Publisher("%s/snapshot" % namespace.rstrip("/"), string, queue_size=10, subscriber_listener=CatchUp())
     view = None
     if not quiet and sys.stdout.isatty():
         view = LiveView(sink.state, footer="bmtree run (Ctrl-C stops the run)").start()

@@ -1,5 +1,5 @@
 """``bmtree watch`` against a real ``bmtree run --sim`` on a slow world: attached mid-run it
-catches up from the latched tree and snapshot records, then follows the run to its end."""
+catches up from the latched tree and the snapshot sent to it on connecting, then follows the run to its end."""
 from __future__ import annotations
 
 import subprocess
