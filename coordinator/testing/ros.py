@@ -10,7 +10,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Set
 
-__all__ = ["RosProbe", "Collector", "wait_subscribed"]
+__all__ = ["RosProbe", "Collector", "drop_closed", "wait_subscribed"]
 
 
 class Collector:
@@ -87,16 +87,7 @@ class RosProbe:
 
         from modules.discovery import node_alive
 
-        for c in list(pub.impl.connections):  # a subscriber that went away: its socket is at EOF
-            sock = getattr(c, "socket", None)
-            try:
-                closed = sock is not None and sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
-            except (BlockingIOError, InterruptedError):
-                closed = False
-            except OSError:
-                closed = True
-            if closed:
-                c.close()
+        drop_closed(pub)
         master = rosgraph.Master(rospy.get_name())
         _, subs, _ = master.getSystemState()
         nodes = [n for n in next((n for t, n in subs if t == pub.resolved_name), [])
@@ -149,10 +140,29 @@ def _uris(nodes: Sequence[str]) -> Set[str]:
     return {master.lookupNode(n) for n in nodes}
 
 
+def drop_closed(pub: Any) -> None:
+    """Close ``pub``'s connections to subscribers that went away (their socket is at EOF): rospy
+    keeps them until a write fails, and one to an earlier node of the same name would pass for
+    the new node's and swallow the first message."""
+    for c in list(pub.impl.connections):
+        sock = getattr(c, "socket", None)
+        try:
+            closed = sock is not None and sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+        except (BlockingIOError, InterruptedError):
+            closed = False
+        except OSError:
+            closed = True
+        if closed:
+            c.close()
+
+
 def wait_subscribed(pub: Any, nodes: Sequence[str], timeout: float = 20.0) -> None:
-    """Until each of ``nodes`` (by name) is connected to publisher ``pub``."""
+    """Until each of ``nodes`` (by name) is connected to publisher ``pub`` (live connections only)."""
     end = time.monotonic() + timeout
-    while not set(nodes) <= {c.endpoint_id for c in pub.impl.connections}:
+    while True:
+        drop_closed(pub)
+        if set(nodes) <= {c.endpoint_id for c in pub.impl.connections}:
+            return
         if time.monotonic() > end:
             raise AssertionError("%s: not all of %s subscribed" % (pub.resolved_name, ", ".join(nodes)))
         time.sleep(0.02)

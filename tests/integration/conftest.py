@@ -73,8 +73,11 @@ class Caller:
         publishers += 1 if get_topic_manager().has_publication("/function/output") else 0
         master = rosgraph.Master("/bmtree_test_caller")
         uris = {node: master.lookupNode(node) for node in nodes}
+        from coordinator.testing.ros import drop_closed
+
         end = time.monotonic() + 10
         while True:
+            drop_closed(self._pub)  # an earlier node of the same name must not pass for this one
             calls_to = {c.endpoint_id for c in self._pub.impl.connections}       # subscribers' names
             results_from = {c.endpoint_id for c in self.results.sub.impl.connections}  # publishers' URIs
             if self.results.sub.get_num_connections() >= publishers and all(
