@@ -68,7 +68,8 @@ def test_module_killed_mid_call_fails_as_module_lost_and_falls_back(ros_graph, s
         seen = ""  # the run's own line-per-change display says when the call is under way
         while not any("RUNNING" in line and line.endswith(" drive") for line in seen.splitlines()):
             line = proc.stdout.readline()
-            assert line, "bmtree run ended before the call started: " + seen
+            assert line, "bmtree run ended before the call started (exit %s): %s%s" % (
+                proc.wait(30), seen, proc.stderr.read())
             seen += line
         t0 = time.monotonic()
         ros_graph.kill_node(nav)
