@@ -15,18 +15,11 @@ from coordinator.runner import TreeRunner
 from coordinator.testing import Mocks, TreeTest, fail, hang, reject, succeed
 from coordinator.testing.mocknode import start_mock_node
 from modules.definition import default_module_paths, load_definitions
-from tests.conftest import TREES
+from tests.conftest import DATA, TREES
 
-PARALLEL = """format: 1
-root:
-  parallel:
-    policy: all
-    children:
-      - call: navigation.go_to
-        inputs: {place: kitchen}
-      - call: navigation.approach
-        inputs: {target: {x: 1.0}}
-"""
+# two non-concurrent functions of one module at once: the issue's case
+with open(os.path.join(DATA, "parallel_go_to_approach.yaml")) as _fh:
+    PARALLEL = _fh.read()
 
 MIXED = """format: 1
 root:

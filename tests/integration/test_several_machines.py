@@ -57,7 +57,7 @@ def _delete_all():
 def network():
     reason = _can_create_namespaces()
     if reason:
-        pytest.skip(reason)
+        pytest.skip("three machines are simulated with network namespaces, which this machine cannot create: %s" % reason)
     _delete_all()
     try:
         for ns in NS.values():

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 import queue
 import threading
 import time
@@ -17,17 +18,11 @@ from modules.execution import ClockExecutor, TimerThread, WorkerThreads
 from modules.outcome import Outcome, OutcomeKind, outcome_from_dict, outcome_to_dict
 from modules.runtime import ModuleServer
 from modules.sim.world import World, WorldError
+from tests.conftest import DATA
 
-PARALLEL = """format: 1
-root:
-  parallel:
-    policy: all
-    children:
-      - call: navigation.go_to
-        inputs: {place: kitchen}
-      - call: navigation.approach
-        inputs: {target: {x: 1.0}}
-"""
+# two non-concurrent functions of one module at once: the issue's case
+with open(os.path.join(DATA, "parallel_go_to_approach.yaml")) as _fh:
+    PARALLEL = _fh.read()
 
 
 def tree(tmp_path, body):
