@@ -120,6 +120,10 @@ class RosProbe:
         while True:
             peers = {x.endpoint_id for x in c.sub.impl.connections} - {mine}
             if len(peers) >= publishers and uris <= peers:
+                if publishers or uris:
+                    # rospy's publisher adds a connection only after writing its header, which is
+                    # when this side sees it: give the publisher's thread that moment
+                    time.sleep(0.05)
                 return c
             if time.monotonic() > end:
                 raise AssertionError("only %d of %d publishers connected to %s (waiting for %s)" % (

@@ -127,10 +127,13 @@ class Caller:
 def caller_factory(ros_probe):
     made = []
 
-    def make(subscribers=1, publishers=1, nodes=()):
+    def make(subscribers=1, publishers=1, nodes=(), answering=()):
+        """A Caller connected to ``nodes`` whose ``answering`` modules have answered a ping."""
         c = Caller(ros_probe, subscribers)
-        c.wait_connected(publishers, nodes)
         made.append(c)
+        c.wait_connected(publishers, nodes)
+        for module in answering:
+            c.wait_answering(module)
         return c
 
     yield make

@@ -43,7 +43,8 @@ def sim_nodes(ros_graph, slow_world):
 
 
 def test_sim_modules_answer_reject_fail_busy_cancel_and_emit(sim_nodes, sim_defs, caller_factory, ros_probe):
-    c = caller_factory(subscribers=3, publishers=3, nodes=["/bm_navigation", "/bm_vision", "/bm_speech_faulty"])
+    c = caller_factory(subscribers=3, publishers=3, nodes=["/bm_navigation", "/bm_vision", "/bm_speech_faulty"],
+                       answering=["navigation", "vision", "speech"])
     events = ros_probe.collect("/event/output", publishers=2)
     said = ros_probe.collect("/sim/speech/said", publishers=1)
     # every function answers correctly
@@ -129,7 +130,7 @@ def _garbage(rng, i):
 
 def test_a_thousand_malformed_calls_do_not_hurt_a_module(ros_graph, sim_defs, caller_factory):
     proc = start_sim_module(ros_graph, "speech")
-    c = caller_factory(subscribers=1, publishers=1, nodes=["/bm_speech"])
+    c = caller_factory(subscribers=1, publishers=1, nodes=["/bm_speech"], answering=["speech"])
     rng = random.Random(7)
     good = []
     for i in range(1000):
@@ -217,7 +218,7 @@ def test_module_name_overridable_by_ros_parameter(ros_graph, sim_defs, caller_fa
     ros_graph.start_node(["-m", "modules.sim", "speech", "--world", DEFAULT_WORLD, "_basic_mod:=voice",
                           "__name:=bm_voice"], "/bm_voice")
     wait_announced("voice")
-    c = caller_factory(nodes=["/bm_voice"]).wait_answering("voice")
+    c = caller_factory(nodes=["/bm_voice"], answering=["voice"])
     call = sim_defs["speech"].function("say").build_call({"text": "hi"})
     call.basic_mod = "voice"
     c.send(call)
