@@ -542,6 +542,9 @@ def make_parser() -> argparse.ArgumentParser:
     return p
 
 
+_RUNS_A_TREE = ("run", "demo", "test")  # a closed output interrupted these: exit 3
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     # progress lines ("running …", the line-per-change view) must reach a pipe as they happen
     reconfigure = getattr(sys.stdout, "reconfigure", None)
@@ -570,6 +573,13 @@ def main(argv: Optional[List[str]] = None) -> int:
     except InvalidInput as exc:
         _err("error: %s" % exc)
         return EXIT_INVALID
+    except BrokenPipeError:  # the reader went away (`bmtree replay last | head`): not bmtree's error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # nothing more to flush at exit
+        if args.command in _RUNS_A_TREE:
+            _err("stopped: the output was closed")
+            return EXIT_ENV
+        return EXIT_OK
     except (EnvironmentProblem, OSError) as exc:
         _err("error: %s" % exc)
         return EXIT_ENV

@@ -20,7 +20,7 @@ from coordinator.scenariogen import write_scenario
 from coordinator.testing.kit import TreeTest
 from coordinator.testing.mocks import fail, succeed
 from coordinator.testing.scenario import run_scenario_file
-from tests.conftest import DATA, TREES
+from tests.conftest import DATA, ROOT, TREES
 
 GO = os.path.join(DATA, "record", "go_kitchen.yaml")
 GO_RETRY = os.path.join(DATA, "record", "go_kitchen_retry.yaml")
@@ -307,6 +307,20 @@ def test_cli_replay_of_a_bad_file_exits_2(tmp_path, capsys):
     assert "x.jsonl:1: not a JSON record" in capsys.readouterr().err
     assert cli.main(["runs", "--dir", str(tmp_path / "none")]) == 0
     assert "no recorded runs" in capsys.readouterr().out
+
+
+def test_replay_into_a_pipe_its_reader_closed_ends_quietly(sim_defs, tmp_path):
+    """`bmtree replay last | head -1`: a closed output is not bmtree's error (exit 0, no message)."""
+    import subprocess
+    import sys
+
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    p = subprocess.Popen([sys.executable, "-m", "coordinator", "replay", log_path, "--speed", "4"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    p.stdout.readline()
+    p.stdout.close()  # as `head -1` does, long before the replay's last line
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 0 and err == "", err
 
 
 # scenarios from runs -----------------------------------------------------------------------------------
