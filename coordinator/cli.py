@@ -3,80 +3,45 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 from typing import Any, Dict, List, Optional
-
-import yaml
 
 from comm.errors import did_you_mean
 from comm.nodeopts import fill_from_params, myargv, node_params, private_namespace
 from coordinator import __version__
+from coordinator.cliutil import (
+    EXIT_ENV,
+    EXIT_FAILED,
+    EXIT_INVALID,
+    EXIT_OK,
+    PlainError,
+    definitions_from,
+    err,
+    master_up,
+)
 from coordinator.errors import EnvironmentProblem, InvalidInput, TreeErrors, UsageError
+from coordinator.runcmd import cmd_demo, cmd_run
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions
-from modules.search import default_definitions
 
 __all__ = ["main", "make_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV"]
 
-EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_ENV = 0, 1, 2, 3
-PROJECT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DEMO_TREE = os.path.join(PROJECT, "trees", "find_apple.yaml")
-
-
-class _Plain(UsageError):
-    """An exit-2 error already written as ``file:line:column: message``."""
-
-
-def _err(text: str) -> None:
-    sys.stderr.write(text.rstrip("\n") + "\n")
-
-
-def _definitions(paths: Optional[List[str]]) -> Dict[str, ModuleDefinition]:
-    """The default definitions plus ``paths`` (``--modules`` adds; a later one replaces a module by name)."""
-    return default_definitions(paths or ())
-
-
-def _given(pairs: Optional[List[str]]) -> Dict[str, Any]:
-    out = {}
-    for pair in pairs or []:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.isidentifier():
-            raise UsageError("--set takes KEY=VALUE, got %r" % pair)
-        try:
-            out[key] = yaml.safe_load(value) if value else ""
-        except (yaml.YAMLError, RecursionError) as exc:
-            raise UsageError("--set %s: not a plain YAML value: %s" % (key, str(exc).splitlines()[0]))
-    return out
-
-
-def _legacy(pairs: Optional[List[str]], defs: Dict[str, ModuleDefinition]) -> Dict[str, str]:
-    """``--legacy MODULE=/node``: the node of an original module not named ``/<module>``."""
-    out = {}
-    for pair in pairs or []:
-        module, sep, node = pair.partition("=")
-        if not sep or not module or not node:
-            raise UsageError("--legacy takes MODULE=/node, got %r" % pair)
-        if module not in defs:
-            raise UsageError("--legacy names module %r, which has no definition (give it with --modules)" % module)
-        out[module] = node if node.startswith("/") else "/" + node
-    return out
 
 
 # check / render --------------------------------------------------------------------------
 def cmd_check(args: argparse.Namespace) -> int:
     from coordinator.language import load_tree
 
-    defs = _definitions(args.modules)
+    defs = definitions_from(args.modules)
     problems = warned = 0
     for path in args.trees:
         try:
             tree = load_tree(path, defs)
         except TreeErrors as exc:
             problems += len(exc.errors)
-            _err(str(exc))
+            err(str(exc))
             continue
         for w in tree.warnings:
-            _err(str(w))
+            err(str(w))
         warned += len(tree.warnings)
         print("%s: ok%s" % (path, " (%d warning%s)" % (len(tree.warnings), "s" if len(tree.warnings) > 1 else "")
                                   if tree.warnings else ""))
@@ -124,7 +89,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     fmt = os.path.splitext(out)[1].lstrip(".").lower()
     if fmt not in ("dot", "svg", "png"):
         raise UsageError("-o must end in .dot, .svg or .png, got %r" % out)
-    tree, root = offline_tree(args.tree, _definitions(args.modules))
+    tree, root = offline_tree(args.tree, definitions_from(args.modules))
     graph = py_trees.display.dot_tree(root, collapse_decorators=False)
     graph.set_name(tree.name)
     if fmt == "dot":
@@ -133,7 +98,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         try:
             graph.write(out, format=fmt)
         except (OSError, FileNotFoundError) as exc:
-            _err("cannot render %s: %s (is graphviz installed? 'make setup' installs it)" % (fmt, exc))
+            err("cannot render %s: %s (is graphviz installed? 'make setup' installs it)" % (fmt, exc))
             return EXIT_ENV
     print("wrote %s" % out)
     return EXIT_OK
@@ -156,8 +121,8 @@ def cmd_modules(args: argparse.Namespace) -> int:
     if args.live:
         from modules.discovery import live_modules
 
-        if not _master_up(args.wait):
-            _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+        if not master_up(args.wait):
+            err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
             return EXIT_ENV
         live = live_modules()
         if not live:
@@ -165,213 +130,10 @@ def cmd_modules(args: argparse.Namespace) -> int:
         for m in live.values():
             _print_module(m.definition, "node %s%s" % (m.node, ", original module" if m.legacy else ""))
         return EXIT_OK
-    defs = load_definitions(args.paths) if args.paths else _definitions(None)
+    defs = load_definitions(args.paths) if args.paths else definitions_from(None)
     for d in defs.values():
         _print_module(d, os.path.relpath(d.source) if d.source else "?")
     return EXIT_OK
-
-
-# run / demo ------------------------------------------------------------------------------
-def _master_up(timeout: float) -> bool:
-    import time
-
-    import rosgraph
-
-    end = time.monotonic() + timeout
-    while True:
-        if rosgraph.is_master_online():
-            return True
-        if time.monotonic() >= end:
-            return False
-        time.sleep(0.2)
-
-
-def _report(result: Any, tree_name: str) -> None:
-    print()
-    print("%s: %s in %.2f s (%d ticks)" % (tree_name, result.status.value, result.duration, result.ticks))
-    if result.reason and not result.succeeded:
-        print("reason: %s" % result.reason)
-    print("calls:")
-    start = result.calls[0].started if result.calls else 0.0
-    for c in result.calls:
-        dur = "%.3fs" % c.duration if c.duration is not None else "-"
-        print("  +%7.3fs  %-26s %-10s %8s  %s" % (c.started - start, c.target, c.status, dur, c.error))
-
-
-def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
-    """Print the tree's warnings; ``--set`` keys must be inputs the tree declares (a typo would
-    silently use the default) and every required input must be given."""
-    for w in tree.warnings:
-        _err(str(w))
-    for key in sorted(given):
-        if key not in tree.inputs:
-            raise UsageError("%s declares no input %r%s (its inputs: %s)" % (
-                path, key, did_you_mean(key, tree.inputs), ", ".join(sorted(tree.inputs)) or "none"))
-    missing = sorted(tree.required_inputs - set(given))
-    if missing:
-        raise UsageError("%s needs the input%s %s: give them with --set KEY=VALUE" % (
-            path, "s" if len(missing) > 1 else "", ", ".join(missing)))
-
-
-def _needs_live_definitions(exc: TreeErrors) -> bool:
-    """True if the tree may still be valid once the live modules' definitions are known."""
-    return any(e.message.startswith("unknown module") for e in exc.errors)
-
-
-def _wait_master(timeout: float) -> bool:
-    """Wait for the master, saying at once that it is not there yet and for how long bmtree waits."""
-    if _master_up(0.0):
-        return True
-    _err("no ROS master at %s yet; waiting up to %g s (--wait) ..." % (
-        os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"), timeout))
-    return _master_up(timeout)
-
-
-def cmd_run(args: argparse.Namespace) -> int:
-    from coordinator.builder import build_tree
-    from coordinator.clock import RealClock
-    from coordinator.context import RunContext
-    from coordinator.language import load_tree, used_modules
-    from coordinator.runlog import plan_run_files
-    from coordinator.runner import Display, TreeRunner
-
-    given = _given(args.set)
-    defs = _definitions(args.modules)
-    user_modules = [_user_module(spec) for spec in (getattr(args, "module", None) or [])]
-    if user_modules and not args.sim:
-        raise UsageError("--module starts your module beside the simulated robot: it needs --sim "
-                         "(without --sim, start it with bmtree-module and run against the live graph)")
-    for um in user_modules:
-        defs[um.definition.name] = um.definition
-    tree = None
-    try:  # validate before anything waits: a typo is exit 2 at once, not after --wait seconds
-        tree = load_tree(args.tree, defs, given=set(given))
-    except TreeErrors as exc:
-        if args.sim or not _needs_live_definitions(exc):
-            raise
-    if tree is not None:
-        _check_given(tree, given, args.tree)
-    files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
-    graph = None
-    transport = None
-    previous = signal.getsignal(signal.SIGTERM)
-
-    def on_term(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_term)
-    try:
-        if not args.sim:
-            if not _wait_master(args.wait):
-                _err("error: no ROS master at %s after %g s (start one, or use --sim)" % (os.environ.get(
-                    "ROS_MASTER_URI", "http://localhost:11311/"), args.wait))
-                return EXIT_ENV
-            if tree is None:  # modules known only to the live graph
-                from modules.discovery import announced_modules
-
-                for name, live in announced_modules().items():  # liveness: the preflight pings them
-                    defs.setdefault(name, live.definition)
-                tree = load_tree(args.tree, defs, given=set(given))
-                _check_given(tree, given, args.tree)
-        assert tree is not None
-        legacy = _legacy(getattr(args, "legacy", None), defs)
-        mods, recall = used_modules(tree)
-        if args.sim:
-            from coordinator.simgraph import SIM_MODULES, ModuleStartError, start_sim
-
-            mine = {um.definition.name for um in user_modules}
-            sim = [m for m in SIM_MODULES if m not in mine]
-            absent = sorted(set(mods) - set(sim) - mine)
-            if absent:
-                raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS"
-                                 % (args.tree, ", ".join(absent), ", ".join(SIM_MODULES), absent[0]))
-            print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
-                sim + ["%s (yours)" % m for m in sorted(mine)]))
-            sys.stdout.flush()
-            print("its Blackboard store and module logs go to %s" % files.sim_dir)
-            try:
-                graph = start_sim(world=args.world, ros_home=files.sim_dir, modules=sim, user_modules=user_modules,
-                                  address=args.ros_ip)
-            except ModuleStartError as exc:
-                _err("error: %s" % exc)
-                return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
-            graph.adopt()  # loopback: the private graph works whatever the hostname
-            print("simulated robot up, master at %s" % graph.uri)
-        from coordinator.ros_transport import RosTransport, address_problem
-
-        hint = address_problem()
-        if hint:
-            _err("warning: %s" % hint)
-        transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
-        stream_sink = transport.stream_sink()
-        try:
-            transport.wait_ready(mods, args.wait, defs, blackboard=recall, legacy=legacy)
-        except OSError as exc:
-            _err("error: %s" % exc)
-            return EXIT_ENV
-        stream_sink.settle()
-        ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
-        root = build_tree(tree, ctx, given)
-        from coordinator.watch import run_view
-
-        view, sinks = run_view(transport, args.quiet)
-        display = None if args.quiet or view is not None else Display()
-        print("running %s" % tree.name)
-        recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None)
-        from coordinator.control import ros_controller
-
-        steer = ros_controller(getattr(args, "control", False))
-        try:
-            result = TreeRunner(root, ctx, period=args.period, display=display, observers=[recorder, steer],
-                                tree=tree, gate=steer).run(args.max_duration)
-        finally:
-            if view is not None:
-                view.stop()
-        _report(result, tree.name)
-        files.report(print)
-        return EXIT_OK if result.succeeded else EXIT_FAILED
-    except KeyboardInterrupt:
-        _err("interrupted: running calls were cancelled")
-        return EXIT_ENV
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        if transport is not None:
-            transport.close()
-            try:
-                import rospy
-
-                rospy.signal_shutdown("bmtree run finished")
-            except Exception:
-                pass
-        if graph is not None:
-            graph.close()
-
-
-def _user_module(spec: str) -> Any:
-    """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``) for ``run --sim --module``."""
-    from coordinator.simgraph import UserModule
-    from modules.definition import load_definition
-
-    definition, sep, cls = spec.partition("=")
-    if not sep or not definition or ":" not in cls:
-        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS, got %r" % spec)
-    where = cls.rsplit(":", 1)[0]
-    if where.endswith(".py"):
-        if not os.path.isfile(where):
-            raise UsageError("--module %s: no such file %s" % (spec, where))
-        with open(where, "rb") as fh:
-            source = fh.read()
-        try:  # compiled, never run here: a syntax error is one line before the graph starts
-            compile(source, where, "exec", dont_inherit=True)
-        except SyntaxError as exc:
-            raise _Plain("%s:%s:%s: syntax error: %s" % (where, exc.lineno, exc.offset or 0, exc.msg))
-        cls = os.path.abspath(where) + ":" + cls.rsplit(":", 1)[1]
-    return UserModule(os.path.abspath(definition), cls, load_definition(definition))
-
-
-def cmd_demo(args: argparse.Namespace) -> int:
-    args.tree, args.sim = DEMO_TREE, True
-    return cmd_run(args)
 
 
 # blackboard ------------------------------------------------------------------------------
@@ -383,7 +145,7 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
 
     path = args.db or default_db_path()
     if path != ":memory:" and not os.path.exists(path):
-        _err("error: no Blackboard store at %s" % path)
+        err("error: no Blackboard store at %s" % path)
         return EXIT_ENV
     try:
         store = Store(path)
@@ -397,7 +159,7 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
                 raise UsageError(str(exc))
             if not values:
                 known = [n for n, _count, _stamp in store.names()]
-                _err("error: the Blackboard store %s has no value named %r%s" % (path, args.name,
+                err("error: the Blackboard store %s has no value named %r%s" % (path, args.name,
                                                                                 did_you_mean(args.name, known)))
                 return EXIT_FAILED
             print("%-26s %-10s %-20s %-22s %s" % ("time", "call_id", "module.function", "type", "value"))
@@ -565,24 +327,24 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         return args.func(args)
     except (TreeErrors, DefinitionError) as exc:  # each line already starts with where the problem is
-        _err(str(exc))
+        err(str(exc))
         return EXIT_INVALID
-    except _Plain as exc:
-        _err(str(exc))
+    except PlainError as exc:
+        err(str(exc))
         return EXIT_INVALID
     except InvalidInput as exc:
-        _err("error: %s" % exc)
+        err("error: %s" % exc)
         return EXIT_INVALID
     except BrokenPipeError:  # the reader went away (`bmtree replay last | head`): not bmtree's error
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # nothing more to flush at exit
         if args.command in _RUNS_A_TREE:
-            _err("stopped: the output was closed")
+            err("stopped: the output was closed")
             return EXIT_ENV
         return EXIT_OK
     except (EnvironmentProblem, OSError) as exc:
-        _err("error: %s" % exc)
+        err("error: %s" % exc)
         return EXIT_ENV
     except KeyboardInterrupt:
-        _err("interrupted")
+        err("interrupted")
         return EXIT_ENV

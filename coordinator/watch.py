@@ -207,10 +207,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
 
-    from coordinator.cli import EXIT_ENV, EXIT_OK, _err, _master_up
+    from coordinator.cliutil import EXIT_ENV, EXIT_OK, err, master_up
 
-    if not _master_up(args.wait):
-        _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+    if not master_up(args.wait):
+        err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
         return EXIT_ENV
     state = WatchState()
     tty = sys.stdout.isatty() and not args.plain
@@ -240,7 +240,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             if view is not None:
                 view.stop(final=False)
                 view = None
-            _err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
+            err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
                 args.namespace, args.wait))
             return EXIT_ENV
         while not stop.is_set():
@@ -277,16 +277,16 @@ def cmd_control(args: argparse.Namespace) -> int:
     """``bmtree control COMMAND ...``: one command to the run on $ROS_MASTER_URI, its answer printed."""
     import rospy
 
-    from coordinator.cli import EXIT_ENV, EXIT_INVALID, EXIT_OK, _err, _master_up
+    from coordinator.cliutil import EXIT_ENV, EXIT_INVALID, EXIT_OK, err, master_up
     from coordinator.control import ControlClient, parse_command
 
     try:
         cmd = parse_command(args.words)
     except ValueError as exc:
-        _err("error: %s" % exc)
+        err("error: %s" % exc)
         return EXIT_INVALID
-    if not _master_up(args.wait):
-        _err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
+    if not master_up(args.wait):
+        err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
         return EXIT_ENV
     rospy.init_node("bmtree_control", anonymous=True, disable_signals=True)
     client = ControlClient()
@@ -298,7 +298,7 @@ def cmd_control(args: argparse.Namespace) -> int:
     if reply.get("ok"):
         print(reply.get("answer"))
         return EXIT_OK
-    _err("refused: %s" % reply.get("answer"))
+    err("refused: %s" % reply.get("answer"))
     return EXIT_ENV if str(reply.get("answer", "")).startswith("no run answered") else EXIT_INVALID
 
 

@@ -1,0 +1,79 @@
+"""What the ``bmtree`` verbs share: exit codes, error output, common arguments, the master."""
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any, Dict, List, Optional
+
+import yaml
+
+from coordinator.errors import UsageError
+from modules.definition import ModuleDefinition
+from modules.search import default_definitions
+
+__all__ = ["EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV", "PlainError", "err", "definitions_from", "set_values",
+           "legacy_option", "master_up", "wait_master"]
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_ENV = 0, 1, 2, 3
+
+
+class PlainError(UsageError):
+    """An exit-2 error already written as ``file:line:column: message``."""
+
+
+def err(text: str) -> None:
+    sys.stderr.write(text.rstrip("\n") + "\n")
+
+
+def definitions_from(paths: Optional[List[str]]) -> Dict[str, ModuleDefinition]:
+    """The default definitions plus ``paths`` (``--modules`` adds; a later one replaces a module by name)."""
+    return default_definitions(paths or ())
+
+
+def set_values(pairs: Optional[List[str]]) -> Dict[str, Any]:
+    out = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.isidentifier():
+            raise UsageError("--set takes KEY=VALUE, got %r" % pair)
+        try:
+            out[key] = yaml.safe_load(value) if value else ""
+        except (yaml.YAMLError, RecursionError) as exc:
+            raise UsageError("--set %s: not a plain YAML value: %s" % (key, str(exc).splitlines()[0]))
+    return out
+
+
+def legacy_option(pairs: Optional[List[str]], defs: Dict[str, ModuleDefinition]) -> Dict[str, str]:
+    """``--legacy MODULE=/node``: the node of an original module not named ``/<module>``."""
+    out = {}
+    for pair in pairs or []:
+        module, sep, node = pair.partition("=")
+        if not sep or not module or not node:
+            raise UsageError("--legacy takes MODULE=/node, got %r" % pair)
+        if module not in defs:
+            raise UsageError("--legacy names module %r, which has no definition (give it with --modules)" % module)
+        out[module] = node if node.startswith("/") else "/" + node
+    return out
+
+
+def master_up(timeout: float) -> bool:
+    import time
+
+    import rosgraph
+
+    end = time.monotonic() + timeout
+    while True:
+        if rosgraph.is_master_online():
+            return True
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.2)
+
+
+def wait_master(timeout: float) -> bool:
+    """Wait for the master, saying at once that it is not there yet and for how long bmtree waits."""
+    if master_up(0.0):
+        return True
+    err("no ROS master at %s yet; waiting up to %g s (--wait) ..." % (
+        os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"), timeout))
+    return master_up(timeout)

@@ -1,0 +1,207 @@
+"""``bmtree run`` and ``bmtree demo``: a tree against the live graph or the simulated robot."""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from typing import Any, Dict
+
+from comm.errors import did_you_mean
+from coordinator.cliutil import (
+    EXIT_ENV,
+    EXIT_FAILED,
+    EXIT_INVALID,
+    EXIT_OK,
+    PlainError,
+    definitions_from,
+    err,
+    legacy_option,
+    set_values,
+    wait_master,
+)
+from coordinator.errors import TreeErrors, UsageError
+
+__all__ = ["DEMO_TREE", "cmd_demo", "cmd_run"]
+
+PROJECT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEMO_TREE = os.path.join(PROJECT, "trees", "find_apple.yaml")
+
+
+def _report(result: Any, tree_name: str) -> None:
+    print()
+    print("%s: %s in %.2f s (%d ticks)" % (tree_name, result.status.value, result.duration, result.ticks))
+    if result.reason and not result.succeeded:
+        print("reason: %s" % result.reason)
+    print("calls:")
+    start = result.calls[0].started if result.calls else 0.0
+    for c in result.calls:
+        dur = "%.3fs" % c.duration if c.duration is not None else "-"
+        print("  +%7.3fs  %-26s %-10s %8s  %s" % (c.started - start, c.target, c.status, dur, c.error))
+
+
+def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
+    """Print the tree's warnings; ``--set`` keys must be inputs the tree declares (a typo would
+    silently use the default) and every required input must be given."""
+    for w in tree.warnings:
+        err(str(w))
+    for key in sorted(given):
+        if key not in tree.inputs:
+            raise UsageError("%s declares no input %r%s (its inputs: %s)" % (
+                path, key, did_you_mean(key, tree.inputs), ", ".join(sorted(tree.inputs)) or "none"))
+    missing = sorted(tree.required_inputs - set(given))
+    if missing:
+        raise UsageError("%s needs the input%s %s: give them with --set KEY=VALUE" % (
+            path, "s" if len(missing) > 1 else "", ", ".join(missing)))
+
+
+def _needs_live_definitions(exc: TreeErrors) -> bool:
+    """True if the tree may still be valid once the live modules' definitions are known."""
+    return any(e.message.startswith("unknown module") for e in exc.errors)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from coordinator.builder import build_tree
+    from coordinator.clock import RealClock
+    from coordinator.context import RunContext
+    from coordinator.language import load_tree, used_modules
+    from coordinator.runlog import plan_run_files
+    from coordinator.runner import Display, TreeRunner
+
+    given = set_values(args.set)
+    defs = definitions_from(args.modules)
+    user_modules = [_user_module(spec) for spec in (getattr(args, "module", None) or [])]
+    if user_modules and not args.sim:
+        raise UsageError("--module starts your module beside the simulated robot: it needs --sim "
+                         "(without --sim, start it with bmtree-module and run against the live graph)")
+    for um in user_modules:
+        defs[um.definition.name] = um.definition
+    tree = None
+    try:  # validate before anything waits: a typo is exit 2 at once, not after --wait seconds
+        tree = load_tree(args.tree, defs, given=set(given))
+    except TreeErrors as exc:
+        if args.sim or not _needs_live_definitions(exc):
+            raise
+    if tree is not None:
+        _check_given(tree, given, args.tree)
+    files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
+    graph = None
+    transport = None
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_term)
+    try:
+        if not args.sim:
+            if not wait_master(args.wait):
+                err("error: no ROS master at %s after %g s (start one, or use --sim)" % (os.environ.get(
+                    "ROS_MASTER_URI", "http://localhost:11311/"), args.wait))
+                return EXIT_ENV
+            if tree is None:  # modules known only to the live graph
+                from modules.discovery import announced_modules
+
+                for name, live in announced_modules().items():  # liveness: the preflight pings them
+                    defs.setdefault(name, live.definition)
+                tree = load_tree(args.tree, defs, given=set(given))
+                _check_given(tree, given, args.tree)
+        assert tree is not None
+        legacy = legacy_option(getattr(args, "legacy", None), defs)
+        mods, recall = used_modules(tree)
+        if args.sim:
+            from coordinator.simgraph import SIM_MODULES, ModuleStartError, start_sim
+
+            mine = {um.definition.name for um in user_modules}
+            sim = [m for m in SIM_MODULES if m not in mine]
+            absent = sorted(set(mods) - set(sim) - mine)
+            if absent:
+                raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS"
+                                 % (args.tree, ", ".join(absent), ", ".join(SIM_MODULES), absent[0]))
+            print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
+                sim + ["%s (yours)" % m for m in sorted(mine)]))
+            sys.stdout.flush()
+            print("its Blackboard store and module logs go to %s" % files.sim_dir)
+            try:
+                graph = start_sim(world=args.world, ros_home=files.sim_dir, modules=sim, user_modules=user_modules,
+                                  address=args.ros_ip)
+            except ModuleStartError as exc:
+                err("error: %s" % exc)
+                return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
+            graph.adopt()  # loopback: the private graph works whatever the hostname
+            print("simulated robot up, master at %s" % graph.uri)
+        from coordinator.ros_transport import RosTransport, address_problem
+
+        hint = address_problem()
+        if hint:
+            err("warning: %s" % hint)
+        transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
+        stream_sink = transport.stream_sink()
+        try:
+            transport.wait_ready(mods, args.wait, defs, blackboard=recall, legacy=legacy)
+        except OSError as exc:
+            err("error: %s" % exc)
+            return EXIT_ENV
+        stream_sink.settle()
+        ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
+        root = build_tree(tree, ctx, given)
+        from coordinator.watch import run_view
+
+        view, sinks = run_view(transport, args.quiet)
+        display = None if args.quiet or view is not None else Display()
+        print("running %s" % tree.name)
+        recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None)
+        from coordinator.control import ros_controller
+
+        steer = ros_controller(getattr(args, "control", False))
+        try:
+            result = TreeRunner(root, ctx, period=args.period, display=display, observers=[recorder, steer],
+                                tree=tree, gate=steer).run(args.max_duration)
+        finally:
+            if view is not None:
+                view.stop()
+        _report(result, tree.name)
+        files.report(print)
+        return EXIT_OK if result.succeeded else EXIT_FAILED
+    except KeyboardInterrupt:
+        err("interrupted: running calls were cancelled")
+        return EXIT_ENV
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if transport is not None:
+            transport.close()
+            try:
+                import rospy
+
+                rospy.signal_shutdown("bmtree run finished")
+            except Exception:
+                pass
+        if graph is not None:
+            graph.close()
+
+
+def _user_module(spec: str) -> Any:
+    """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``) for ``run --sim --module``."""
+    from coordinator.simgraph import UserModule
+    from modules.definition import load_definition
+
+    definition, sep, cls = spec.partition("=")
+    if not sep or not definition or ":" not in cls:
+        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS, got %r" % spec)
+    where = cls.rsplit(":", 1)[0]
+    if where.endswith(".py"):
+        if not os.path.isfile(where):
+            raise UsageError("--module %s: no such file %s" % (spec, where))
+        with open(where, "rb") as fh:
+            source = fh.read()
+        try:  # compiled, never run here: a syntax error is one line before the graph starts
+            compile(source, where, "exec", dont_inherit=True)
+        except SyntaxError as exc:
+            raise PlainError("%s:%s:%s: syntax error: %s" % (where, exc.lineno, exc.offset or 0, exc.msg))
+        cls = os.path.abspath(where) + ":" + cls.rsplit(":", 1)[1]
+    return UserModule(os.path.abspath(definition), cls, load_definition(definition))
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    args.tree, args.sim = DEMO_TREE, True
+    return cmd_run(args)
