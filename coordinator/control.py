@@ -248,9 +248,15 @@ class ControlClient:
     def send(self, command: Dict[str, Any], timeout: float = 10.0) -> Dict[str, Any]:
         """The run's reply, or ``{"ok": False, "answer": ...}`` if no run answers within ``timeout``."""
         end = time.monotonic() + timeout
+        waited = False
         while (self._pub.get_num_connections() < 1 or self._sub.get_num_connections() < 1) and \
                 time.monotonic() < end:
+            waited = True
             time.sleep(0.05)  # a message sent before the connection is up is lost
+        if waited:
+            # rospy's publisher (the run's reply) adds a connection only after writing its
+            # header, which is when this side counts it: a reply sent in between would be lost
+            time.sleep(0.05)
         cid = "%s-%d" % (self._prefix, next(self._ids))
         self._pub.publish(self._String(json.dumps(dict(command, id=cid))))
         with self._cond:
