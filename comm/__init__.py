@@ -1,6 +1,8 @@
 """The bmtree wire protocol: typed messages, ROS value conversion, legacy commBM."""
 from __future__ import annotations
 
+import time
+
 from comm.errors import ProtocolError
 from comm.messages import (
     DEFAULT_MAX_BYTES,
@@ -30,6 +32,7 @@ __all__ = [
     "from_message",
     "new_id",
     "resolve_type",
+    "settle_new_connection",
     "suggest_type",
     "to_message",
 ]
@@ -57,3 +60,12 @@ def sync_publisher(topic: str, data_class: type, **kwargs: object) -> object:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return rospy.Publisher(topic, data_class, queue_size=None, **kwargs)
+
+
+def settle_new_connection() -> None:
+    """Wait the moment a publisher needs after a subscriber first counts their connection.
+
+    rospy's publisher adds a connection to its topic only after writing its header, which is
+    when the subscriber's side counts it: a message published in between goes to nobody.
+    """
+    time.sleep(0.05)

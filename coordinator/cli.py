@@ -26,7 +26,6 @@ from modules.definition import DefinitionError, ModuleDefinition, load_definitio
 __all__ = ["main", "make_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV"]
 
 
-
 # check / render --------------------------------------------------------------------------
 def cmd_check(args: argparse.Namespace) -> int:
     from coordinator.language import load_tree

@@ -23,6 +23,7 @@ from typing import Any, Callable, Dict, List, Tuple
 import yaml
 from py_trees.common import Status
 
+from comm import settle_new_connection
 from coordinator.context import WAKE
 from coordinator.runevents import RunObserver, notify
 
@@ -254,9 +255,7 @@ class ControlClient:
             waited = True
             time.sleep(0.05)  # a message sent before the connection is up is lost
         if waited:
-            # rospy's publisher (the run's reply) adds a connection only after writing its
-            # header, which is when this side counts it: a reply sent in between would be lost
-            time.sleep(0.05)
+            settle_new_connection()  # the run's reply publisher, which this side counted first
         cid = "%s-%d" % (self._prefix, next(self._ids))
         self._pub.publish(self._String(json.dumps(dict(command, id=cid))))
         with self._cond:

@@ -410,5 +410,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 2
     return run_module(definition, impl, args.node_name or "%s_bridge" % definition.name, {BridgeError: 3})
 
+
 if __name__ == "__main__":
     sys.exit(main())

@@ -10,7 +10,9 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Set
 
-__all__ = ["RosProbe", "Collector", "drop_closed", "wait_subscribed"]
+from comm import settle_new_connection
+
+__all__ = ["RosProbe", "Collector", "drop_closed", "node_uris", "wait_subscribed"]
 
 
 class Collector:
@@ -114,16 +116,14 @@ class RosProbe:
 
         c = Collector(topic)
         c.sub = rospy.Subscriber(topic, String, c._add, queue_size=100000)
-        uris = _uris(nodes)
+        uris = node_uris(nodes)
         mine = rospy.get_node_uri()  # this process's own publisher of the topic is no peer
         end = time.monotonic() + timeout
         while True:
             peers = {x.endpoint_id for x in c.sub.impl.connections} - {mine}
             if len(peers) >= publishers and uris <= peers:
                 if publishers or uris:
-                    # rospy's publisher adds a connection only after writing its header, which is
-                    # when this side sees it: give the publisher's thread that moment
-                    time.sleep(0.05)
+                    settle_new_connection()
                 return c
             if time.monotonic() > end:
                 raise AssertionError("only %d of %d publishers connected to %s (waiting for %s)" % (
@@ -135,7 +135,7 @@ class RosProbe:
             c.sub.unregister()
 
 
-def _uris(nodes: Sequence[str]) -> Set[str]:
+def node_uris(nodes: Sequence[str]) -> Set[str]:
     """The XML-RPC URIs of ``nodes``: a subscriber's connection names its publisher by URI."""
     import rosgraph
     import rospy

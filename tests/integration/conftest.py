@@ -66,22 +66,18 @@ class Caller:
     def wait_connected(self, publishers, nodes=()):
         """``publishers`` connected to the results topic and, by name, each of ``nodes`` connected
         both ways: a count alone may be made up by other tests' nodes still running."""
-        import rosgraph
         from rospy.impl.registration import get_topic_manager
+
+        from coordinator.testing.ros import node_uris, wait_subscribed
 
         # a publisher of /function/output in this process (other tests' probes) connects too
         publishers += 1 if get_topic_manager().has_publication("/function/output") else 0
-        master = rosgraph.Master("/bmtree_test_caller")
-        uris = {node: master.lookupNode(node) for node in nodes}
-        from coordinator.testing.ros import drop_closed
-
+        wait_subscribed(self._pub, nodes, 10)  # an earlier node of the same name does not pass for one
+        uris = node_uris(nodes)
         end = time.monotonic() + 10
         while True:
-            drop_closed(self._pub)  # an earlier node of the same name must not pass for this one
-            calls_to = {c.endpoint_id for c in self._pub.impl.connections}       # subscribers' names
             results_from = {c.endpoint_id for c in self.results.sub.impl.connections}  # publishers' URIs
-            if self.results.sub.get_num_connections() >= publishers and all(
-                    node in calls_to and uris[node] in results_from for node in nodes):
+            if self.results.sub.get_num_connections() >= publishers and uris <= results_from:
                 return
             assert time.monotonic() < end, "result publishers did not connect (%s)" % ", ".join(nodes)
             time.sleep(0.02)

@@ -105,7 +105,8 @@ def _public_address():
 def test_ros_ip_opens_the_private_graph_on_purpose(tmp_path):
     address = _public_address()
     if not address:
-        pytest.skip("this machine has no global IPv4 address to open the graph on")
+        pytest.skip("--ros-ip needs an address other nodes can reach, and `ip -4 addr show scope global` "
+                    "lists none on this machine (only loopback): connect it to a network to run this test")
     proc, lines = _run_long(tmp_path, "--ros-ip", address)
     try:
         sockets = _listening(_descendants(proc.pid))
