@@ -145,6 +145,9 @@ class Parser:
         if not isinstance(raw, LMap):
             self.err(at, "a node must be a mapping with one of: %s" % ", ".join(REGISTRY))
             return None
+        return self._node(raw)
+
+    def _node(self, raw: LMap) -> Optional[TreeNode]:
         kinds = _KINDS.intersection(raw)
         if len(kinds) > 1:
             kinds = [k for k in raw if k in REGISTRY]   # in the order written, for the messages
@@ -176,9 +179,10 @@ class Parser:
         if name is not None and not isinstance(name, str):
             self.err(raw.val_pos["name"], "'name' must be a string")
             name = None
-        value_at = raw.val_pos[kind]
-        node = TreeNode(kind, name or "", raw.key_pos[kind], None, None, nk, value_at)
-        node.spec = nk.parse(self, node, raw, raw[kind], value_at)
+        # positions as the loader stores them: each becomes a Pos only if it is read (see yamlsrc.settle)
+        file, value_at = raw._file, raw._vp[kind]
+        node = TreeNode(kind, name or "", raw._kp[kind], None, None, nk, value_at, file)
+        node.spec = nk.parse(self, node, raw, raw[kind], None if nk.parse_without_pos else node.value_pos)
         if not node.name:
             node.name = nk.default_name(node)
         return node
@@ -219,9 +223,9 @@ class Parser:
         if not isinstance(value, LList) or not value:
             self.err(at, "%s takes a non-empty list of children" % node.kind)
             return
-        append, parse = node.children.append, self.node
-        for item, at in zip(value, value.item_pos):
-            c = parse(item, at)
+        append, parse, parse_map = node.children.append, self.node, self._node
+        for i, item in enumerate(value):   # a mapping's item position is read only for errors
+            c = parse_map(item) if item.__class__ is LMap else parse(item, value.item_pos[i])
             if c is not None:
                 append(c)
 

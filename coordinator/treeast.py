@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
+from coordinator.yamlsrc import settle
 
 __all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "nodes_of", "used_modules", "walk"]
 
@@ -16,20 +17,47 @@ class TreeNode:
 
     ``nodekind`` is the registry's object for ``kind``: every generic walk (data flow, build,
     used modules) asks it, so no walk knows the kinds. (A plain class with slots: a tree has
-    thousands of these.)
+    thousands of these.) ``pos`` and ``value_pos`` may be given as the YAML loader stores them,
+    with ``file``: they become ``Pos`` when first read (most never are).
     """
 
-    __slots__ = ("kind", "name", "pos", "children", "spec", "nodekind", "value_pos")
+    __slots__ = ("kind", "name", "_pos", "children", "spec", "nodekind", "_value_pos", "_file")
 
     def __init__(self, kind: str, name: str, pos: Pos, children: Optional[List[TreeNode]] = None,
-                 spec: Any = None, nodekind: Any = None, value_pos: Optional[Pos] = None):
+                 spec: Any = None, nodekind: Any = None, value_pos: Optional[Pos] = None,
+                 file: Optional[str] = None):
         self.kind = kind
         self.name = name
-        self.pos = pos
+        self._pos = pos
         self.children: List[TreeNode] = [] if children is None else children
         self.spec = spec
         self.nodekind = nodekind
-        self.value_pos = value_pos   # where the kind's value is written
+        self._value_pos = value_pos   # where the kind's value is written
+        self._file = file
+
+    @property
+    def pos(self) -> Pos:
+        p = self._pos
+        if self._file is not None and p.__class__ is not Pos:
+            p = self._pos = settle(p, self._file)
+        return p
+
+    @pos.setter
+    def pos(self, value: Pos) -> None:
+        self.value_pos  # noqa: B018 - settled before the file is forgotten
+        self._pos, self._file = value, None
+
+    @property
+    def value_pos(self) -> Optional[Pos]:
+        p = self._value_pos
+        if self._file is not None and p is not None and p.__class__ is not Pos:
+            p = self._value_pos = settle(p, self._file)
+        return p
+
+    @value_pos.setter
+    def value_pos(self, value: Optional[Pos]) -> None:
+        self.pos  # noqa: B018
+        self._value_pos, self._file = value, None
 
     def __repr__(self) -> str:
         return "TreeNode(%s %r at %s)" % (self.kind, self.name, self.pos)

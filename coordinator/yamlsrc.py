@@ -11,18 +11,104 @@ __all__ = ["LMap", "LList", "load_yaml", "pos_of"]
 
 
 class LMap(dict):
-    """A mapping that knows the position of itself, of each key and of each value."""
+    """A mapping that knows the position of itself, of each key and of each value.
 
-    __slots__ = ("pos", "key_pos", "val_pos")
-    pos: Pos
-    key_pos: Dict[Any, Pos]
-    val_pos: Dict[Any, Pos]
+    The loader keeps libyaml's own objects as positions (a mark, a scalar's event, a nested
+    container: see :func:`settle`) and makes each ``Pos`` only when asked: a tree reads few of
+    them. ``pos``, ``key_pos`` and ``val_pos`` always give ``Pos`` values; ``_kp``/``_vp`` are the
+    stored ones, still raw while ``_file`` (their file) is set.
+    """
+
+    __slots__ = ("_pos", "_kp", "_vp", "_file")
+
+    @property
+    def pos(self) -> Pos:
+        p = self._pos
+        if self._file is not None and p.__class__ is not Pos:
+            p = self._pos = settle(p, self._file)
+        return p
+
+    @pos.setter
+    def pos(self, value: Pos) -> None:
+        self._settled()
+        self._pos = value
+
+    @property
+    def key_pos(self) -> Dict[Any, Pos]:
+        if self._file is not None:
+            self._settle()
+        return self._kp
+
+    @key_pos.setter
+    def key_pos(self, value: Dict[Any, Pos]) -> None:
+        self._settled()
+        self._kp = value
+
+    @property
+    def val_pos(self) -> Dict[Any, Pos]:
+        if self._file is not None:
+            self._settle()
+        return self._vp
+
+    @val_pos.setter
+    def val_pos(self, value: Dict[Any, Pos]) -> None:
+        self._settled()
+        self._vp = value
+
+    def _settle(self) -> None:
+        file = self._file
+        self.pos  # noqa: B018 - settles it
+        for d in (self._kp, self._vp):
+            for k, p in d.items():
+                if p.__class__ is not Pos:
+                    d[k] = settle(p, file)
+        self._file = None
+
+    def _settled(self) -> None:
+        """Before a position is set: the stored ones made ``Pos``, or marked as given."""
+        if getattr(self, "_file", None) is not None:
+            self._settle()
+        self._file = None
 
 
 class LList(list):
-    __slots__ = ("pos", "item_pos")
-    pos: Pos
-    item_pos: List[Pos]
+    """A sequence that knows the position of itself and of each item (made on demand, as for LMap)."""
+
+    __slots__ = ("_pos", "_ip", "_file")
+
+    @property
+    def pos(self) -> Pos:
+        p = self._pos
+        if self._file is not None and p.__class__ is not Pos:
+            p = self._pos = settle(p, self._file)
+        return p
+
+    @pos.setter
+    def pos(self, value: Pos) -> None:
+        self._settled()
+        self._pos = value
+
+    @property
+    def item_pos(self) -> List[Pos]:
+        file = self._file
+        if file is not None:
+            self.pos  # noqa: B018 - settles it
+            ip = self._ip
+            for i, p in enumerate(ip):
+                if p.__class__ is not Pos:
+                    ip[i] = settle(p, file)
+            self._file = None
+        return self._ip
+
+    @item_pos.setter
+    def item_pos(self, value: List[Pos]) -> None:
+        self._settled()
+        self._ip = value
+
+    def _settled(self) -> None:
+        if getattr(self, "_file", None) is not None:
+            self.item_pos  # noqa: B018 - settles them
+        self._file = None
 
 
 # libyaml's parser when PyYAML was built with it (Debian's is): the same events, ~10x faster.
@@ -42,6 +128,24 @@ _PLAIN_TAGS = ("tag:yaml.org,2002:map", "tag:yaml.org,2002:seq")
 def _pos(file: str, mark: Any, quoted: bool = False) -> Pos:
     """Where an event starts; for a quoted scalar, where its text starts (inside the quote)."""
     return _new_pos(Pos, (file, mark.line + 1, mark.column + 1 + quoted))
+
+
+_MARKS = tuple({yaml.error.Mark, getattr(getattr(yaml, "_yaml", None), "Mark", yaml.error.Mark)})
+
+
+def settle(p: Any, file: str) -> Any:
+    """The ``Pos`` of a position as the loader stores it: a scalar's event (where its text starts,
+    inside a quote), a mark (where an alias or a container starts), a nested container (its own
+    position) or already a ``Pos`` (anything else is returned as it is)."""
+    cls = p.__class__
+    if cls is yaml.ScalarEvent:
+        mark = p.start_mark
+        return _new_pos(Pos, (file, mark.line + 1, mark.column + (2 if p.style in _QUOTES else 1)))
+    if cls in _MARKS:
+        return _new_pos(Pos, (file, p.line + 1, p.column + 1))
+    if cls is LMap or cls is LList:
+        return p.pos
+    return p
 
 
 def file_of(loader: Any) -> str:
@@ -82,18 +186,18 @@ def _scalar(loader: Any, event: Any) -> Any:
             value, tag, type(exc).__name__))])
 
 
-def _merge(out: LMap, merges: List[Tuple[Any, Pos]]) -> LMap:
+def _merge(out: LMap, merges: List[Tuple[Any, Any]]) -> LMap:
     """A finished mapping with its ``<<`` merges applied (a merged key never overrides: a clash is an error)."""
     for merged, at in merges:
         sources = merged if isinstance(merged, list) else [merged]
         for src in sources:
             if not isinstance(src, LMap):
-                raise TreeErrors([TreeError(at, "'<<' merges a mapping or a list of mappings")])
+                raise TreeErrors([TreeError(settle(at, out._file), "'<<' merges a mapping or a list of mappings")])
             for k, v in src.items():
                 if k in out:
                     raise TreeErrors([TreeError(out.key_pos[k], "duplicate key %r" % (k,))])
                 out[k] = v
-                out.key_pos[k], out.val_pos[k] = src.key_pos[k], src.val_pos[k]
+                out._kp[k], out._vp[k] = src._kp[k], src._vp[k]   # raw or not: both settle the same
     return out
 
 
@@ -108,8 +212,7 @@ def _build(loader: Any, file: str) -> Any:
     ScalarEvent, MappingStart, SequenceStart, MappingEnd, SequenceEnd, Alias = (  # noqa: N806
         yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent, yaml.MappingEndEvent,
         yaml.SequenceEndEvent, yaml.AliasEvent)
-    new_pos, plain, str_tag, no_key, quotes, PosT = (  # noqa: N806
-        _new_pos, _PLAIN, _STR, _NO_KEY, _QUOTES, Pos)
+    plain, str_tag, no_key = _PLAIN, _STR, _NO_KEY
     first_chars = loader.yaml_implicit_resolvers   # plain text starting otherwise is a string
     get()  # StreamStart
     if check(yaml.StreamEndEvent):
@@ -140,11 +243,11 @@ def _build(loader: Any, file: str) -> Any:
             if tag is None and event.implicit[0]:   # plain: a string unless some implicit type matches
                 if value[:1] in first_chars and plain.get(value) != str_tag:
                     value = _scalar(loader, event)
-                at = new_pos(PosT, (file, mark.line + 1, mark.column + 1))
+                at = mark   # positions stay libyaml's objects until read (see settle)
             else:   # quoted or block text, or tagged
                 if tag is not None and tag != "!" and tag != str_tag:
                     value = _scalar(loader, event)
-                at = new_pos(PosT, (file, mark.line + 1, mark.column + (2 if event.style in quotes else 1)))
+                at = event
             count += 1
             if event.anchor is not None:
                 anchors[event.anchor] = (value, 1)
@@ -163,25 +266,26 @@ def _build(loader: Any, file: str) -> Any:
             if event.tag is not None and event.tag not in _PLAIN_TAGS and not event.implicit:
                 raise _fail(file, mark, "YAML tag %r is not allowed here (only plain mappings, sequences and "
                                         "scalars)" % event.tag)
-            at = new_pos(PosT, (file, mark.line + 1, mark.column + 1))
             stack.append((container, item_pos, key_pos, val_pos, key, key_at, merges, anchor, start))
             if cls is MappingStart:
                 container = LMap()
-                container.pos = at
-                container.key_pos = key_pos = {}
-                container.val_pos = val_pos = {}
+                container._pos = mark
+                container._kp = key_pos = {}
+                container._vp = val_pos = {}
+                container._file = file
                 item_pos = None
                 key = no_key
             else:
                 container = LList()
-                container.pos = at
-                container.item_pos = item_pos = []
+                container._pos = mark
+                container._ip = item_pos = []
+                container._file = file
             merges = None   # the enclosing mapping's merges wait on the stack
             anchor, start = event.anchor, count
             continue
         elif cls is MappingEnd or cls is SequenceEnd:
             value = container if merges is None else _merge(container, merges)
-            at = value.pos
+            at = value
             depth -= 1
             if anchor is not None:
                 anchors[anchor] = (value, count - start + 1)
@@ -191,7 +295,7 @@ def _build(loader: Any, file: str) -> Any:
                 raise _fail(file, event.start_mark, "found undefined alias %r" % event.anchor)
             value, size = anchors[event.anchor]
             count += size
-            at = _pos(file, event.start_mark)
+            at = event.start_mark
             if count > MAX_NODES:
                 raise _fail(file, event.start_mark, "the document expands to more than %d YAML nodes "
                                                     "(recursive or repeated aliases?)" % MAX_NODES)
@@ -204,7 +308,7 @@ def _build(loader: Any, file: str) -> Any:
             item_pos.append(at)
         elif key is no_key:
             if value.__class__ is not str and isinstance(value, (dict, list)):
-                raise TreeErrors([TreeError(at, "a mapping key must be a scalar")])
+                raise TreeErrors([TreeError(settle(at, file), "a mapping key must be a scalar")])
             key, key_at = value, at
         else:
             if key is _MERGE:
@@ -212,7 +316,7 @@ def _build(loader: Any, file: str) -> Any:
                     merges = []
                 merges.append((value, key_at))
             elif key in container:
-                raise TreeErrors([TreeError(key_at, "duplicate key %r" % (key,))])
+                raise TreeErrors([TreeError(settle(key_at, file), "duplicate key %r" % (key,))])
             else:
                 container[key] = value
                 key_pos[key] = key_at

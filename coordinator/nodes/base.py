@@ -154,6 +154,9 @@ class NodeKind(abc.ABC):
     options: Tuple[Option, ...] = ()
     summary = ""                       # what the node does, for the tables
     uses_blackboard_node = False
+    # True when ``parse`` reads its ``at`` only to report a problem: it is then given None and reads
+    # ``node.value_pos`` instead (the same position, made only when read: most never are)
+    parse_without_pos = False
 
     # parsing -----------------------------------------------------------------------------
     @abc.abstractmethod

@@ -110,15 +110,17 @@ class CheckKind(NodeKind):
     family = "leaf"
     value = ("expr", "an expression (below)")
     summary = "SUCCESS when the expression on tree keys is true, else FAILURE with the reason"
+    parse_without_pos = True
 
-    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> Optional[Expr]:
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Optional[Pos]) -> Optional[Expr]:
         if not isinstance(value, str) or not value.strip():
-            p.err(at, "check takes an expression string, e.g. 'answer == \"yes\"'")
+            p.err(at or node.value_pos, "check takes an expression string, e.g. 'answer == \"yes\"'")
             return None
         try:
             return Expr.parse(value)
         except ExprError as exc:
             # the column of the offending token, when the value is a plain one-line scalar
+            at = at or node.value_pos
             p.err(Pos(at.file, at.line, at.column + exc.offset), "bad expression: %s" % exc)
             return None
 
@@ -129,9 +131,10 @@ class CheckKind(NodeKind):
         return node.spec.keys if node.spec is not None else ()
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        if node.spec is not None and node.value_pos is not None:
-            at = node.value_pos
-            for off, msg in node.spec.type_errors(lambda r: ref_kind(types, r)):
+        if node.spec is not None:
+            found = node.spec.type_errors(lambda r: ref_kind(types, r))
+            at = node.value_pos if found else None   # a Pos made only when needed
+            for off, msg in found if at is not None else ():
                 errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
