@@ -27,7 +27,8 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dic
     """For each tree key, the ROS types written to it (None: not known statically)."""
     types: Dict[str, Set[Optional[str]]] = {k: {None} for k in tree.inputs}
     for n in nodes if nodes is not None else walk(tree.root):
-        written = n.nodekind.writes(n)
+        nk = n.nodekind
+        written = nk.writes(n) if nk.own_writes else None   # the base writes nothing
         for key, rostype in written.items() if written else ():
             types.setdefault(key, set()).add(rostype)
     return types
@@ -39,5 +40,7 @@ def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> L
     nodes = nodes_of(tree.root) if nodes is None else nodes
     types = key_types(tree, nodes)
     for n in nodes:
-        n.nodekind.check_types(n, types, errors)
+        nk = n.nodekind
+        if nk.own_check_types:   # the base checks nothing
+            nk.check_types(n, types, errors)
     return errors

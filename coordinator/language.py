@@ -33,6 +33,8 @@ _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REG
 _KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
 _KINDS = frozenset(REGISTRY)
 _LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
+# per kind, what parsing a node asks of it (one lookup per node)
+_INFO = {k: (nk, _ALLOWED[k], _KEYS[k], _REQUIRED[k], k in _LISTS) for k, nk in REGISTRY.items()}
 
 
 class Parser:
@@ -148,31 +150,26 @@ class Parser:
         return self._node(raw)
 
     def _node(self, raw: LMap) -> Optional[TreeNode]:
-        kinds = _KINDS.intersection(raw)
-        if len(kinds) > 1:
-            kinds = [k for k in raw if k in REGISTRY]   # in the order written, for the messages
-            kinds = [k for k in kinds if not any(k in _OPTION_NAMES[o] for o in kinds if o != k)]
-        if len(kinds) != 1:
-            if not kinds:
-                unknown = [k for k in raw if k not in _COMMON]
-                first = unknown[0] if unknown else None
-                if first is not None:
-                    self.err(raw.key_pos[first], "unknown node kind %r%s" % (first, did_you_mean(first, REGISTRY)))
-                else:
-                    self.err(raw.pos, "node has no kind (one of: %s)" % ", ".join(REGISTRY))
-            else:
-                self.err(raw.key_pos[kinds[1]], "node has two kinds, %r and %r: split it or nest it" % tuple(kinds[:2]))
+        kind = None
+        for k in raw:   # a node has few keys, one of them its kind
+            if k in _KINDS:
+                if kind is not None:
+                    kind = self._kind_of(raw)
+                    if kind is None:
+                        return None
+                    break
+                kind = k
+        if kind is None:
+            self._no_kind(raw)
             return None
-        kind, = kinds
-        nk = REGISTRY[kind]
-        allowed = _ALLOWED[kind]
-        if kind in _LISTS and isinstance(raw[kind], LMap):
+        nk, allowed, keys, required, inline = _INFO[kind]
+        if inline and isinstance(raw[kind], LMap):
             raw = self._inline(raw, kind, allowed)
-        if not _KEYS[kind].issuperset(raw):
+        if not keys.issuperset(raw):
             for k in raw:
                 if k != kind and k not in allowed:
                     self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
-        for o in _REQUIRED[kind]:
+        for o in required:
             if o not in raw:
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, o))
         name = raw.get("name")
@@ -186,6 +183,27 @@ class Parser:
         if not node.name:
             node.name = nk.default_name(node)
         return node
+
+    def _kind_of(self, raw: LMap) -> Optional[str]:
+        """The kind of a node with several kind keys: the one that is not an option of another (else None,
+        after reporting)."""
+        kinds = [k for k in raw if k in REGISTRY]   # in the order written, for the messages
+        kinds = [k for k in kinds if not any(k in _OPTION_NAMES[o] for o in kinds if o != k)]
+        if len(kinds) == 1:
+            return kinds[0]
+        if not kinds:
+            self._no_kind(raw)
+        else:
+            self.err(raw.key_pos[kinds[1]], "node has two kinds, %r and %r: split it or nest it" % tuple(kinds[:2]))
+        return None
+
+    def _no_kind(self, raw: LMap) -> None:
+        unknown = [k for k in raw if k not in _COMMON]
+        first = unknown[0] if unknown else None
+        if first is not None:
+            self.err(raw.key_pos[first], "unknown node kind %r%s" % (first, did_you_mean(first, REGISTRY)))
+        else:
+            self.err(raw.pos, "node has no kind (one of: %s)" % ", ".join(REGISTRY))
 
     def _inline(self, outer: LMap, kind: str, allowed: Tuple[str, ...]) -> LMap:
         """``selector: {name: …, children: […]}`` read as ``selector: […]`` with options beside it."""
@@ -356,7 +374,10 @@ def warnings(nodes: List[TreeNode]) -> List[TreeError]:
     seen: Set[Any] = set()
     out: List[TreeError] = []
     for n in nodes:
-        found = n.nodekind.warnings(n)
+        nk = n.nodekind
+        if not nk.own_warnings:   # the base warns about nothing
+            continue
+        found = nk.warnings(n)
         for w in found if found else ():
             if w not in seen:
                 seen.add(w)

@@ -104,7 +104,8 @@ def walk(node: TreeNode) -> Iterator[TreeNode]:
     while stack:
         n = stack.pop()
         yield n
-        below = n.nodekind.expand(n)
+        nk = n.nodekind
+        below = nk.expand(n) if nk.own_expand else n.children
         if below:
             stack.extend(reversed(below))
 
@@ -113,10 +114,12 @@ def nodes_of(node: TreeNode) -> List[TreeNode]:
     """The list of :func:`walk` (in its order), made without a generator."""
     out: List[TreeNode] = []
     stack = [node]
+    append, pop = out.append, stack.pop
     while stack:
-        n = stack.pop()
-        out.append(n)
-        below = n.nodekind.expand(n)
+        n = pop()
+        append(n)
+        nk = n.nodekind
+        below = nk.expand(n) if nk.own_expand else n.children   # the base's expand, without a call
         if below:
             stack.extend(reversed(below))
     return out

@@ -157,6 +157,14 @@ class NodeKind(abc.ABC):
     # True when ``parse`` reads its ``at`` only to report a problem: it is then given None and reads
     # ``node.value_pos`` instead (the same position, made only when read: most never are)
     parse_without_pos = False
+    # whether the kind overrides these hooks (set for each subclass): the whole-tree walks skip the base's,
+    # which find nothing
+    own_expand = own_writes = own_check_types = own_warnings = False
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        for hook in ("expand", "writes", "check_types", "warnings"):
+            setattr(cls, "own_" + hook, getattr(cls, hook) is not getattr(NodeKind, hook))
 
     # parsing -----------------------------------------------------------------------------
     @abc.abstractmethod
@@ -181,6 +189,8 @@ class NodeKind(abc.ABC):
         read = self.reads(node)
         if read:
             f.need(node, read, avail)
+        if not self.own_writes:
+            return _NOTHING
         written = self.writes(node)
         return frozenset(written) if written else _NOTHING
 
