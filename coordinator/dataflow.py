@@ -10,7 +10,7 @@ from typing import Dict, FrozenSet, List, Optional, Sequence, Set
 
 from coordinator.errors import TreeError
 from coordinator.nodes.base import Flow
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, nodes_of, walk
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of
 
 __all__ = ["check_flow", "check_types", "key_types"]
 
@@ -26,7 +26,10 @@ def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[Tree
 def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dict[str, Set[Optional[str]]]:
     """For each tree key, the ROS types written to it (None: not known statically)."""
     types: Dict[str, Set[Optional[str]]] = {k: {None} for k in tree.inputs}
-    for n in nodes if nodes is not None else walk(tree.root):
+    nodes = nodes_of(tree.root) if nodes is None else nodes
+    if not any(nk.own_writes for nk in kinds_in(nodes)):
+        return types
+    for n in nodes:
         nk = n.nodekind
         written = nk.writes(n) if nk.own_writes else None   # the base writes nothing
         for key, rostype in written.items() if written else ():

@@ -127,6 +127,7 @@ class Expr:
             raise ExprError("expression longer than 2000 characters", 0)
         self.text = text
         self._fixed_errors: Optional[List[Tuple[int, str]]] = None   # type errors when there are no refs
+        self.well_typed = False   # known to have no type errors, whatever the tree (no refs, none found)
         self.keys: Set[str] = set()
         self.refs: List[Ref] = []
         self._toks = _tokens(text)
@@ -300,6 +301,7 @@ class Expr:
         _static(self.tree, key_kind, errors)
         if not self.refs:
             self._fixed_errors = list(errors)
+            self.well_typed = not errors
         return errors
 
 

@@ -15,7 +15,16 @@ from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
 from coordinator.refs import RefError
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, used_modules, walk
+from coordinator.treeast import (
+    REQUIRED,
+    TreeFile,
+    TreeNode,
+    gc_paused,
+    kinds_in,
+    nodes_of,
+    used_modules,
+    walk,
+)
 from coordinator.values import literal, loose_dollars
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition
@@ -373,6 +382,8 @@ def warnings(nodes: List[TreeNode]) -> List[TreeError]:
     """What the kinds' checks warn about (the tree runs, but likely not as meant)."""
     seen: Set[Any] = set()
     out: List[TreeError] = []
+    if not any(nk.own_warnings for nk in kinds_in(nodes)):
+        return out
     for n in nodes:
         nk = n.nodekind
         if not nk.own_warnings:   # the base warns about nothing

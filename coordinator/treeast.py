@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import operator
 from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
 from coordinator.yamlsrc import settle
 
-__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "nodes_of", "used_modules", "walk"]
+__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "kinds_in", "nodes_of", "used_modules", "walk"]
 
 
 class TreeNode:
@@ -123,6 +124,14 @@ def nodes_of(node: TreeNode) -> List[TreeNode]:
         if below:
             stack.extend(reversed(below))
     return out
+
+
+def kinds_in(nodes: List[TreeNode]) -> Set[Any]:
+    """The kinds (registry objects) of these nodes: a walk asks them whether it has anything to do."""
+    return set(map(_NODEKIND, nodes))
+
+
+_NODEKIND = operator.attrgetter("nodekind")
 
 
 def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:

@@ -212,7 +212,7 @@ def _build(loader: Any, file: str) -> Any:
     ScalarEvent, MappingStart, SequenceStart, MappingEnd, SequenceEnd, Alias = (  # noqa: N806
         yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent, yaml.MappingEndEvent,
         yaml.SequenceEndEvent, yaml.AliasEvent)
-    plain, str_tag, no_key = _PLAIN, _STR, _NO_KEY
+    plain, str_tag, no_key, merge_key = _PLAIN, _STR, _NO_KEY, _MERGE
     first_chars = loader.yaml_implicit_resolvers   # plain text starting otherwise is a string
     get()  # StreamStart
     if check(yaml.StreamEndEvent):
@@ -238,12 +238,11 @@ def _build(loader: Any, file: str) -> Any:
         cls = event.__class__
         if cls is ScalarEvent:
             value = event.value
-            mark = event.start_mark
             tag = event.tag
             if tag is None and event.implicit[0]:   # plain: a string unless some implicit type matches
                 if value[:1] in first_chars and plain.get(value) != str_tag:
                     value = _scalar(loader, event)
-                at = mark   # positions stay libyaml's objects until read (see settle)
+                at = event.start_mark   # positions stay libyaml's objects until read (see settle)
             else:   # quoted or block text, or tagged
                 if tag is not None and tag != "!" and tag != str_tag:
                     value = _scalar(loader, event)
@@ -252,8 +251,8 @@ def _build(loader: Any, file: str) -> Any:
             if event.anchor is not None:
                 anchors[event.anchor] = (value, 1)
                 if count > MAX_NODES:
-                    raise _fail(file, mark, "the document expands to more than %d YAML nodes "
-                                            "(recursive or repeated aliases?)" % MAX_NODES)
+                    raise _fail(file, event.start_mark, "the document expands to more than %d YAML nodes "
+                                                        "(recursive or repeated aliases?)" % MAX_NODES)
         elif cls is MappingStart or cls is SequenceStart:
             count += 1
             depth += 1
@@ -311,7 +310,7 @@ def _build(loader: Any, file: str) -> Any:
                 raise TreeErrors([TreeError(settle(at, file), "a mapping key must be a scalar")])
             key, key_at = value, at
         else:
-            if key is _MERGE:
+            if key is merge_key:
                 if merges is None:
                     merges = []
                 merges.append((value, key_at))

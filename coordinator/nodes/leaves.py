@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterable, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, List, Optional
 
 import py_trees
 from py_trees.common import Status
@@ -10,13 +10,15 @@ from py_trees.common import Status
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError
-from coordinator.nodes.base import NodeKind, Option, param_keys, run_param
+from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
 from coordinator.values import ref_kind, value_type_errors
 
 __all__ = ["Check", "KINDS", "Recall", "SetKeys", "Wait", "WaitEvent"]
+
+_WRITES_NOTHING: FrozenSet[str] = frozenset()
 
 
 # recall -----------------------------------------------------------------------------------
@@ -130,8 +132,14 @@ class CheckKind(NodeKind):
     def reads(self, node: TreeNode) -> Iterable[str]:
         return node.spec.keys if node.spec is not None else ()
 
+    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+        """The base's flow, in one call (checks are many): a check reads keys and writes none."""
+        if node.spec is not None and node.spec.keys:
+            f.need(node, node.spec.keys, avail)
+        return _WRITES_NOTHING
+
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        if node.spec is not None:
+        if node.spec is not None and not node.spec.well_typed:
             found = node.spec.type_errors(lambda r: ref_kind(types, r))
             at = node.value_pos if found else None   # a Pos made only when needed
             for off, msg in found if at is not None else ():
