@@ -16,7 +16,9 @@ def build(node: TreeNode, ctx: RunContext) -> py_trees.behaviour.Behaviour:
     """The behaviour for one validated node (and its subtree)."""
 
     def child(n: TreeNode) -> py_trees.behaviour.Behaviour:
-        b = n.nodekind.build(n, ctx, child)
+        nk = n.nodekind
+        leaf = nk.leaf   # a leaf's class made here: one call fewer per leaf
+        b = leaf(n, ctx) if leaf is not None else nk.build(n, ctx, child)
         b.bmtree_node = n  # type: ignore[attr-defined]
         return b
 

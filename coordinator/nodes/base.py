@@ -160,11 +160,16 @@ class NodeKind(abc.ABC):
     # whether the kind overrides these hooks (set for each subclass): the whole-tree walks skip the base's,
     # which find nothing
     own_expand = own_writes = own_check_types = own_warnings = False
+    # a leaf kind's behaviour class, made as ``leaf(node, ctx)``: the builder makes it without calling
+    # ``build`` (None: ``build`` makes the behaviour)
+    leaf: Optional[Callable[[TreeNode, Any], py_trees.behaviour.Behaviour]] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         for hook in ("expand", "writes", "check_types", "warnings"):
             setattr(cls, "own_" + hook, getattr(cls, hook) is not getattr(NodeKind, hook))
+        if cls.build is not NodeKind.build:
+            cls.leaf = None   # its own build decides
 
     # parsing -----------------------------------------------------------------------------
     @abc.abstractmethod
@@ -213,9 +218,11 @@ class NodeKind(abc.ABC):
         return ()
 
     # building ----------------------------------------------------------------------------
-    @abc.abstractmethod
     def build(self, node: TreeNode, ctx: RunContext, child: BuildChild) -> py_trees.behaviour.Behaviour:
         """The behaviour of a validated node; ``child(n)`` builds a node below it."""
+        if self.leaf is None:
+            raise NotImplementedError("%s has neither a build nor a leaf class" % type(self).__name__)
+        return self.leaf(node, ctx)
 
     # documentation -----------------------------------------------------------------------
     def value_schema(self) -> Dict[str, Any]:

@@ -21,7 +21,7 @@ class Leaf(py_trees.behaviour.Behaviour):
     reason = ""   # why it failed (set on failure)
 
     def __init__(self, node: TreeNode, ctx: Any):
-        super().__init__(node.name)
+        py_trees.behaviour.Behaviour.__init__(self, node.name)   # (not super(): no proxy per leaf)
         self.node = node
         self.ctx = ctx
 

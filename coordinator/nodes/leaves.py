@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterable, List, Optional
 
-import py_trees
 from py_trees.common import Status
 
 from comm.errors import did_you_mean
@@ -88,8 +87,7 @@ class RecallKind(NodeKind):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec.names)
 
-    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return Recall(node, ctx)
+    leaf = Recall
 
 
 # check ------------------------------------------------------------------------------------
@@ -145,8 +143,7 @@ class CheckKind(NodeKind):
             for off, msg in found if at is not None else ():
                 errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
 
-    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return Check(node, ctx)
+    leaf = Check
 
 
 # wait_event -------------------------------------------------------------------------------
@@ -225,8 +222,7 @@ class WaitEventKind(NodeKind):
         t = node.spec.target
         return [t.split(".")[0]] if isinstance(t, str) and "." in t else []
 
-    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return WaitEvent(node, ctx)
+    leaf = WaitEvent
 
 
 # set --------------------------------------------------------------------------------------
@@ -274,8 +270,7 @@ class SetKind(NodeKind):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec)
 
-    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return SetKeys(node, ctx)
+    leaf = SetKeys
 
 
 # wait -------------------------------------------------------------------------------------
@@ -309,8 +304,7 @@ class WaitKind(NodeKind):
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec)
 
-    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return Wait(node, ctx)
+    leaf = Wait
 
 
 KINDS = (RecallKind(), CheckKind(), WaitEventKind(), SetKind(), WaitKind())
