@@ -221,7 +221,7 @@ class NodeKind(abc.ABC):
     def build(self, node: TreeNode, ctx: RunContext, child: BuildChild) -> py_trees.behaviour.Behaviour:
         """The behaviour of a validated node; ``child(n)`` builds a node below it."""
         if self.leaf is None:
-            raise NotImplementedError("%s has neither a build nor a leaf class" % type(self).__name__)
+            raise TypeError("node kind %s has neither a build method nor a leaf class" % type(self).__name__)
         return self.leaf(node, ctx)
 
     # documentation -----------------------------------------------------------------------
