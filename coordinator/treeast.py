@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
-from coordinator.yamlsrc import settle
+from coordinator.yamlsrc import OnDemandPos, settle
 
 __all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "kinds_in", "nodes_of", "used_modules", "walk"]
 
 
-class TreeNode:
+class TreeNode(OnDemandPos):
     """One node as written: its kind's typed ``spec`` (see ``coordinator.nodes``) and its children.
 
     ``nodekind`` is the registry's object for ``kind``: every generic walk (data flow, build,
@@ -37,18 +37,6 @@ class TreeNode:
         self._file = file
 
     @property
-    def pos(self) -> Pos:
-        p = self._pos
-        if self._file is not None and p.__class__ is not Pos:
-            p = self._pos = settle(p, self._file)
-        return p
-
-    @pos.setter
-    def pos(self, value: Pos) -> None:
-        self.value_pos  # noqa: B018 - settled before the file is forgotten
-        self._pos, self._file = value, None
-
-    @property
     def value_pos(self) -> Optional[Pos]:
         p = self._value_pos
         if self._file is not None and p is not None and p.__class__ is not Pos:
@@ -57,8 +45,12 @@ class TreeNode:
 
     @value_pos.setter
     def value_pos(self, value: Optional[Pos]) -> None:
-        self.pos  # noqa: B018
-        self._value_pos, self._file = value, None
+        self._settled()
+        self._value_pos = value
+
+    def _settle_all(self) -> None:
+        self.pos  # noqa: B018 - settles them
+        self.value_pos  # noqa: B018
 
     def __repr__(self) -> str:
         return "TreeNode(%s %r at %s)" % (self.kind, self.name, self.pos)

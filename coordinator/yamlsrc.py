@@ -1,25 +1,25 @@
 """YAML with positions: safe loading that remembers where every key and value came from."""
 from __future__ import annotations
 
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "load_yaml", "pos_of"]
+__all__ = ["LMap", "LList", "OnDemandPos", "load_yaml", "pos_of", "settle"]
 
 
-class LMap(dict):
-    """A mapping that knows the position of itself, of each key and of each value.
+class OnDemandPos:
+    """A ``pos`` kept as the loader stores it (slot ``_pos``, with its file in slot ``_file``) and made
+    a ``Pos`` when first read (see :func:`settle`): a valid tree reads few of its positions.
 
-    The loader keeps libyaml's own objects as positions (a mark, a scalar's event, a nested
-    container: see :func:`settle`) and makes each ``Pos`` only when asked: a tree reads few of
-    them. ``pos``, ``key_pos`` and ``val_pos`` always give ``Pos`` values; ``_kp``/``_vp`` are the
-    stored ones, still raw while ``_file`` (their file) is set.
+    Setting a position by hand first settles every stored one (``_settle_all``) and forgets the file.
     """
 
-    __slots__ = ("_pos", "_kp", "_vp", "_file")
+    __slots__ = ()
+    _pos: Any
+    _file: Optional[str]
 
     @property
     def pos(self) -> Pos:
@@ -33,10 +33,28 @@ class LMap(dict):
         self._settled()
         self._pos = value
 
+    def _settled(self) -> None:
+        if getattr(self, "_file", None) is not None:
+            self._settle_all()
+        self._file = None
+
+    def _settle_all(self) -> None:
+        self.pos  # noqa: B018 - settles it
+
+
+class LMap(dict, OnDemandPos):
+    """A mapping that knows the position of itself, of each key and of each value.
+
+    ``pos``, ``key_pos`` and ``val_pos`` always give ``Pos`` values; ``_kp``/``_vp`` are the
+    stored ones, still as the loader keeps them while ``_file`` is set.
+    """
+
+    __slots__ = ("_pos", "_kp", "_vp", "_file")
+
     @property
     def key_pos(self) -> Dict[Any, Pos]:
         if self._file is not None:
-            self._settle()
+            self._settled()
         return self._kp
 
     @key_pos.setter
@@ -47,7 +65,7 @@ class LMap(dict):
     @property
     def val_pos(self) -> Dict[Any, Pos]:
         if self._file is not None:
-            self._settle()
+            self._settled()
         return self._vp
 
     @val_pos.setter
@@ -55,49 +73,24 @@ class LMap(dict):
         self._settled()
         self._vp = value
 
-    def _settle(self) -> None:
+    def _settle_all(self) -> None:
         file = self._file
         self.pos  # noqa: B018 - settles it
         for d in (self._kp, self._vp):
             for k, p in d.items():
                 if p.__class__ is not Pos:
                     d[k] = settle(p, file)
-        self._file = None
-
-    def _settled(self) -> None:
-        """Before a position is set: the stored ones made ``Pos``, or marked as given."""
-        if getattr(self, "_file", None) is not None:
-            self._settle()
-        self._file = None
 
 
-class LList(list):
+class LList(list, OnDemandPos):
     """A sequence that knows the position of itself and of each item (made on demand, as for LMap)."""
 
     __slots__ = ("_pos", "_ip", "_file")
 
     @property
-    def pos(self) -> Pos:
-        p = self._pos
-        if self._file is not None and p.__class__ is not Pos:
-            p = self._pos = settle(p, self._file)
-        return p
-
-    @pos.setter
-    def pos(self, value: Pos) -> None:
-        self._settled()
-        self._pos = value
-
-    @property
     def item_pos(self) -> List[Pos]:
-        file = self._file
-        if file is not None:
-            self.pos  # noqa: B018 - settles it
-            ip = self._ip
-            for i, p in enumerate(ip):
-                if p.__class__ is not Pos:
-                    ip[i] = settle(p, file)
-            self._file = None
+        if self._file is not None:
+            self._settled()
         return self._ip
 
     @item_pos.setter
@@ -105,10 +98,13 @@ class LList(list):
         self._settled()
         self._ip = value
 
-    def _settled(self) -> None:
-        if getattr(self, "_file", None) is not None:
-            self.item_pos  # noqa: B018 - settles them
-        self._file = None
+    def _settle_all(self) -> None:
+        file = self._file
+        self.pos  # noqa: B018 - settles it
+        ip = self._ip
+        for i, p in enumerate(ip):
+            if p.__class__ is not Pos:
+                ip[i] = settle(p, file)
 
 
 # libyaml's parser when PyYAML was built with it (Debian's is): the same events, ~10x faster.
