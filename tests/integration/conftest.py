@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import time
 
@@ -12,6 +13,13 @@ import yaml
 from comm import FunctionCall, FunctionResult
 
 NODES = os.path.join(os.path.dirname(__file__), "nodes")
+
+# A shell starts a background job (`make test &`, a CI step run in the background) with SIGINT
+# ignored, and its children inherit that: Python then installs no KeyboardInterrupt handler, and
+# the tests' Ctrl-C to `bmtree run` would be ignored as the user asked. The processes these tests
+# start get the disposition of an interactive shell's.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(items):
