@@ -1,6 +1,7 @@
 """YAML with positions: safe loading that remembers where every key and value came from."""
 from __future__ import annotations
 
+import operator
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
@@ -42,6 +43,22 @@ class OnDemandPos:
         self.pos  # noqa: B018 - settles it
 
 
+def _stored(slot: str, doc: str) -> property:
+    """A container's positions of its parts (slot ``slot``), all made ``Pos`` on the first read."""
+    get = operator.attrgetter(slot)
+
+    def read(self: OnDemandPos) -> Any:
+        if self._file is not None:
+            self._settled()
+        return get(self)
+
+    def write(self: OnDemandPos, value: Any) -> None:
+        self._settled()
+        setattr(self, slot, value)
+
+    return property(read, write, doc=doc)
+
+
 class LMap(dict, OnDemandPos):
     """A mapping that knows the position of itself, of each key and of each value.
 
@@ -51,27 +68,8 @@ class LMap(dict, OnDemandPos):
 
     __slots__ = ("_pos", "_kp", "_vp", "_file")
 
-    @property
-    def key_pos(self) -> Dict[Any, Pos]:
-        if self._file is not None:
-            self._settled()
-        return self._kp
-
-    @key_pos.setter
-    def key_pos(self, value: Dict[Any, Pos]) -> None:
-        self._settled()
-        self._kp = value
-
-    @property
-    def val_pos(self) -> Dict[Any, Pos]:
-        if self._file is not None:
-            self._settled()
-        return self._vp
-
-    @val_pos.setter
-    def val_pos(self, value: Dict[Any, Pos]) -> None:
-        self._settled()
-        self._vp = value
+    key_pos = _stored("_kp", "Positions of the keys, by key.")
+    val_pos = _stored("_vp", "Positions of the values, by key.")
 
     def _settle_all(self) -> None:
         file = self._file
@@ -87,16 +85,7 @@ class LList(list, OnDemandPos):
 
     __slots__ = ("_pos", "_ip", "_file")
 
-    @property
-    def item_pos(self) -> List[Pos]:
-        if self._file is not None:
-            self._settled()
-        return self._ip
-
-    @item_pos.setter
-    def item_pos(self, value: List[Pos]) -> None:
-        self._settled()
-        self._ip = value
+    item_pos = _stored("_ip", "Positions of the items, by index.")
 
     def _settle_all(self) -> None:
         file = self._file
@@ -135,10 +124,9 @@ def settle(p: Any, file: str) -> Any:
     position) or already a ``Pos`` (anything else is returned as it is)."""
     cls = p.__class__
     if cls is yaml.ScalarEvent:
-        mark = p.start_mark
-        return _new_pos(Pos, (file, mark.line + 1, mark.column + (2 if p.style in _QUOTES else 1)))
+        return _pos(file, p.start_mark, p.style in _QUOTES)
     if cls in _MARKS:
-        return _new_pos(Pos, (file, p.line + 1, p.column + 1))
+        return _pos(file, p)
     if cls is LMap or cls is LList:
         return p.pos
     return p
