@@ -1,7 +1,10 @@
 """A private ROS graph: ``rosmaster`` on a free port and nodes as processes.
 
 Used by ``bmtree run --sim``/``demo``, the test kit's fixtures and the benchmarks.
-Every process it starts is ended by pid, nothing else is touched.
+Every process it starts is ended by pid, nothing else is touched. Each runs in its own session
+(a Ctrl-C in the terminal reaches only the coordinator, which stops the graph in order) and,
+where util-linux's ``setpriv`` is installed (Debian and Ubuntu always have it), gets SIGTERM
+when the process that started it dies, even by SIGKILL or the OOM killer: nothing is orphaned.
 """
 from __future__ import annotations
 
@@ -19,11 +22,21 @@ from typing import Callable, Dict, List, Optional, Sequence
 from comm.errors import EnvironmentProblem
 from modules.discovery import node_alive
 
-__all__ = ["RosGraph", "GraphError", "free_port", "LOOPBACK"]
+__all__ = ["RosGraph", "GraphError", "free_port", "orphan_guard", "LOOPBACK"]
 
 #: Address every process of a private graph advertises: the graph works where the machine's
 #: hostname does not resolve (minimal images, containers, chroots) and exposes nothing.
 LOOPBACK = "127.0.0.1"
+
+
+def orphan_guard() -> List[str]:
+    """The prefix that makes a child get SIGTERM when its starter dies (empty without ``setpriv``).
+
+    The kernel ties this to the *thread* that started the child (``PR_SET_PDEATHSIG``): start
+    a graph's processes from a thread that lives as long as the graph, as the main thread does.
+    """
+    exe = shutil.which("setpriv")
+    return [exe, "--pdeathsig", "TERM", "--"] if exe else []
 
 
 class GraphError(EnvironmentProblem):
@@ -104,7 +117,7 @@ class RosGraph:
             port = free_port()
             self.uri = "http://%s:%d/" % (self.address, port)
             log = self._log("rosmaster")
-            self.master = subprocess.Popen([exe, "--core", "-p", str(port), "-w", "3"], env=self.env,
+            self.master = subprocess.Popen([*orphan_guard(), exe, "--core", "-p", str(port), "-w", "3"], env=self.env,
                                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                            start_new_session=True)
             end = time.monotonic() + timeout
@@ -124,7 +137,7 @@ class RosGraph:
         """Start ``args`` (``sys.executable`` is used for a leading ``-m``) and, with ``wait``,
         wait until the node ``name`` is registered with the master and answers."""
         argv = [sys.executable, *args] if args and args[0] == "-m" else list(args)
-        proc = subprocess.Popen(argv, env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen([*orphan_guard(), *argv], env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
                                 stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
         self.nodes.append(proc)
         if wait:

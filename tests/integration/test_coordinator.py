@@ -168,3 +168,41 @@ def test_ctrl_c_cancels_and_cleans_up(slow_world):
         assert s.connect_ex(("127.0.0.1", port)) != 0, "the private rosmaster still runs"
     left = processes_running(slow_world)
     assert left == [], "nodes left running: %s" % left
+
+
+def _children(pid):
+    kids = set()
+    for tid in os.listdir("/proc/%d/task" % pid):
+        with open("/proc/%d/task/%s/children" % (pid, tid)) as fh:
+            kids.update(int(k) for k in fh.read().split())
+    return kids
+
+
+def _alive(pid):
+    try:
+        with open("/proc/%d/stat" % pid) as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_killed_coordinator_leaves_no_simulated_robot_behind(slow_world):
+    """SIGKILL (or the OOM killer) gives bmtree no chance to stop its graph: the graph's processes,
+    each in its own session, still end (util-linux's setpriv --pdeathsig)."""
+    proc = subprocess.Popen(bmtree_cmd("run", "--sim", "--world", slow_world, os.path.join(TREES, "find_apple.yaml")),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    seen = ""
+    while "RUNNING   navigation.go_to" not in seen and time.monotonic() < deadline:
+        seen += proc.stdout.readline()
+    graph = _children(proc.pid)
+    assert len(graph) >= 5, seen  # rosmaster, the Blackboard and the simulated modules
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    end = time.monotonic() + 20
+    while any(_alive(p) for p in graph) and time.monotonic() < end:
+        time.sleep(0.05)
+    left = [p for p in graph if _alive(p)]
+    for p in left:  # end what this test started, then fail
+        os.kill(p, signal.SIGKILL)
+    assert left == [], "left running after the coordinator was killed: %s" % left
