@@ -64,23 +64,48 @@ class PidLine:
         self._body = xmlrpc.client.dumps(("/bmtree_masterwatch",), "getPid").encode()
 
     def pid(self) -> Optional[int]:
-        """The master's pid; None when it does not answer (down, unreachable, or not a master)."""
+        """The pid; None when there is no answer (down, unreachable, busy, or not a ROS node)."""
         try:
-            if self._conn is None:
-                self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
-                self._conn.connect()
-                _keepalive(self._conn.sock)
-            self._conn.request("POST", self.path, self._body, {"Content-Type": "text/xml"})
-            resp = self._conn.getresponse()
-            data = resp.read()
-            self.kept = not resp.will_close
-            if not self.kept:
-                self.close()
-            (code, _, pid), = xmlrpc.client.loads(data)[0]
-        except (OSError, http.client.HTTPException, xmlrpc.client.Error, ValueError, TypeError):
-            self.close()
+            return self.ask()
+        except OSError:
             return None
-        return pid if code == 1 and isinstance(pid, int) else None
+
+    def ask(self) -> Optional[int]:
+        """The pid; None when no answer comes in time (alive but busy, or stopped).
+
+        Raises:
+            OSError: the connection was refused or broken (the process is gone).
+        """
+        for fresh in (self._conn is None, True):  # a kept connection closed meanwhile: once more, afresh
+            try:
+                if self._conn is None:
+                    self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
+                    self._conn.connect()
+                    _keepalive(self._conn.sock)
+                self._conn.request("POST", self.path, self._body, {"Content-Type": "text/xml"})
+                resp = self._conn.getresponse()
+                data = resp.read()
+                self.kept = not resp.will_close
+                if not self.kept:
+                    self.close()
+                (code, _, pid), = xmlrpc.client.loads(data)[0]
+                return pid if code == 1 and isinstance(pid, int) else None
+            except socket.timeout:
+                self.close()
+                return None
+            except (OSError, http.client.HTTPException) as exc:
+                self.close()
+                if fresh:
+                    raise exc if isinstance(exc, OSError) else OSError("bad answer: %s" % exc)
+            except (xmlrpc.client.Error, ValueError, TypeError):  # answered, but not as a ROS node does
+                self.close()
+                return None
+        return None
+
+    def fileno(self) -> int:
+        """The kept connection's socket (-1 when none is kept), to wait on with others."""
+        sock = self._conn.sock if self._conn is not None and self.kept else None
+        return sock.fileno() if sock is not None else -1
 
     def wait_closed(self, wake: socket.socket, limit: float) -> bool:
         """Wait until the master closes the connection or ``limit`` seconds pass (True: ask again),

@@ -1,32 +1,34 @@
-"""Liveness: a module (or the Blackboard) that dies mid-call is noticed in about a second.
+"""Liveness: a module (or the Blackboard) that dies mid-call is noticed within half a second.
 
 ROS 1 tells a subscriber nothing when a publisher's process dies, so a call to a killed
 module would wait out its whole timeout. The watchdog asks the node of every module that
 has calls in flight (and the Blackboard while requests are open) for its pid over the
-node's own XML-RPC API, every ``period`` seconds. A node whose port refuses connections,
-that is no longer registered, or that answers with another pid than when the watch on it
-began (it was restarted and forgot the call) is *lost*: its open calls are reported at once as :class:`ModuleLost`
-(requests as :class:`BlackboardLost`). A node that is merely slow to answer (busy, or
-stopped with SIGSTOP) is not lost: the call's own timeout covers it.
+node's own XML-RPC API, and keeps that connection open: a process that dies closes it, and
+the watchdog, waiting on every kept connection at once, asks again at that moment (a node
+that does not keep connections open is asked every ``period`` seconds). A node whose port
+refuses connections, that is no longer registered, or that answers with another pid than
+when the watch on it began (it was restarted and forgot the call) is *lost*: its open calls
+are reported at once as :class:`ModuleLost` (requests as :class:`BlackboardLost`). A node
+that is merely slow to answer (busy, or stopped with SIGSTOP) is not lost: the call's own
+timeout covers it.
 
-Only modules with a call in flight for at least one period are asked: most calls are
+Only modules with a call in flight for at least one period are watched: most calls are
 answered sooner, and asking every busy node every period (three XML-RPCs each, to the
 master and to the node) cost more than the calls themselves when a ``parallel`` kept 50
-modules busy. So a death is noticed one to two periods after the call was sent, at the
-latest; a restart within the call's first period, before the watch on the node began,
-is left to the call's timeout (as a restart before the first check always was).
+modules busy. So a death within a call's first period is noticed one to two periods after the
+call was sent; a later one at once. A restart within the call's first period, before the watch
+on the node began, is left to the call's timeout (as a restart before the first check always was).
 """
 from __future__ import annotations
 
 import logging
-import socket
+import selectors
 import threading
 import time
-import xmlrpc.client
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-from comm.rpc import proxy
+from comm.masterwatch import PidLine
 
 __all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "DEFAULT_PERIOD"]
 
@@ -55,38 +57,27 @@ class BlackboardLost:
     request_ids: List[str] = field(default_factory=list)
 
 
-def _pid(uri: str, timeout: float) -> Optional[int]:
-    """The pid a node answers with; None if it does not answer in time (alive but busy).
-
-    Raises:
-        OSError: the node's port refuses connections (its process is gone).
-    """
-    try:
-        code, _, pid = proxy(uri, timeout).getPid("/bmtree_liveness")
-    except (socket.timeout, TimeoutError):
-        return None
-    except xmlrpc.client.Error as exc:
-        raise OSError("the node answered badly: %s" % exc)
-    return pid if code == 1 else None
-
-
 class Watchdog:
     """Watches the nodes that owe answers; ``deliver`` gets ModuleLost/BlackboardLost items.
 
     Args:
         resolve: maps a module name (or :data:`BLACKBOARD`) to its node name, or None.
         lookup: maps a node name to its XML-RPC URI (raises or returns None if unregistered).
-        period: seconds between checks (the time to notice a death is about one period).
+        period: seconds between checks (a call is watched once it is a period old).
+        line: makes the connection that asks a node (URI, timeout) for its pid: a
+            :class:`~comm.masterwatch.PidLine`.
     """
 
     def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
-                 ping_timeout: float = 0.5):
+                 ping_timeout: float = 0.5, line: Callable[[str, float], Any] = PidLine):
         self.deliver = deliver
         self.resolve = resolve
         self.lookup = lookup
         self.period = period
         self.ping_timeout = ping_timeout
+        self._line = line
+        self._lines: Dict[str, Any] = {}  # key -> the connection kept to its node (watching thread only)
         self._lock = threading.Lock()
         self._calls: Dict[str, Tuple[str, float]] = {}  # call_id -> (module, when it was sent)
         self._requests: Set[str] = set()
@@ -123,14 +114,39 @@ class Watchdog:
 
     # the watching thread ------------------------------------------------------------
     def _loop(self) -> None:
-        while not self._stop.wait(self.period):
-            try:
-                self.check()
-            except Exception as exc:  # the master may be away; try again next period
-                log.debug("liveness check failed: %s", exc)
+        try:
+            while not self._stop.is_set():
+                self._wait()
+                if self._stop.is_set():
+                    return
+                try:
+                    self.check()
+                except Exception as exc:  # the master may be away; try again next period
+                    log.debug("liveness check failed: %s", exc)
+        finally:
+            for line in self._lines.values():
+                line.close()
+
+    def _wait(self) -> None:
+        """Wait a period, or less when a kept connection closes (that line is dropped: its node
+        is asked afresh)."""
+        kept = {fd: key for key, fd in ((k, line.fileno()) for k, line in self._lines.items() if line.kept)
+                if fd >= 0}
+        if not kept:
+            self._stop.wait(self.period)
+            return
+        with selectors.DefaultSelector() as sel:
+            for fd, key in kept.items():
+                sel.register(fd, selectors.EVENT_READ, key)
+            ready = sel.select(self.period)
+        for k, _ in ready:
+            line = self._lines.pop(k.data, None)
+            if line is not None:
+                line.close()
 
     def check(self) -> None:
-        """One round: every module with calls in flight for a period, and the Blackboard if asked."""
+        """One round: every module with calls in flight for a period, and the Blackboard if asked
+        (a node whose kept connection is still open lives, and is not asked)."""
         with self._lock:
             due = time.monotonic() - self.period  # calls younger than a period are not watched yet
             owing = {m for m, _ in self._calls.values()}
@@ -142,6 +158,8 @@ class Watchdog:
         # it must not be taken for one that forgot a call.
         for key in set(self._known) - owing:
             del self._known[key]
+        for key in set(self._lines) - set(self._known):
+            self._lines.pop(key).close()
         for key in busy:
             reason = self._lost(key)
             if reason is None:
@@ -164,6 +182,21 @@ class Watchdog:
                 log.warning("module %s (node %s) lost: %s", key, node, reason)
                 self.deliver(ModuleLost(module=key, node=node, reason=reason, call_ids=ids))
 
+    def _ask(self, key: str, uri: str) -> Optional[int]:
+        """The pid of the node of ``key`` at ``uri``, over the connection kept to it (made if needed).
+
+        Raises:
+            OSError: refused or broken (its process is gone).
+        """
+        line = self._lines.get(key)
+        if line is None:
+            line = self._lines[key] = self._line(uri, self.ping_timeout)
+        try:
+            return line.ask()
+        except OSError:
+            self._lines.pop(key).close()
+            raise
+
     def _lost(self, key: str) -> Optional[str]:
         """Why the node of ``key`` is lost, or None while it lives (or cannot be told)."""
         known = self._known.get(key)
@@ -178,15 +211,18 @@ class Watchdog:
             if not uri:
                 return "node %s is not registered with the master" % node
             try:
-                pid = _pid(uri, self.ping_timeout)
+                pid = self._ask(key, uri)
             except OSError:
                 return "node %s stopped (its process is gone)" % node
             if pid is not None:
                 self._known[key] = (node, uri, pid)
             return None
         node, uri, pid = known
+        line = self._lines.get(key)
+        if line is not None and line.kept:
+            return None  # its connection stays open: its process lives
         try:
-            now = _pid(uri, self.ping_timeout)
+            now = self._ask(key, uri)
         except OSError:
             now = -1
         if now is None or now == pid:

@@ -249,19 +249,37 @@ def test_unsafe_set_values_are_usage_errors(capsys):
     assert "not a plain YAML value" in capsys.readouterr().err
 
 
-def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls(monkeypatch):
+class _AskEveryTime:
+    """A watchdog line that keeps no connection (as a node closing each one): asked at every check."""
+
+    kept = False
+
+    def __init__(self, uri, timeout, pid):
+        self.uri, self._pid = uri, pid
+
+    def ask(self):
+        return self._pid(self.uri)
+
+    def fileno(self):
+        return -1
+
+    def close(self):
+        pass
+
+
+def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls():
     from coordinator import liveness
 
     state = {"uri": "http://h:1/", "pid": 10}
 
-    def pid(uri, timeout):
+    def pid(uri):
         if uri != state["uri"]:
             raise OSError("refused")
         return state["pid"]
 
-    monkeypatch.setattr(liveness, "_pid", pid)
     got = []
-    dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: state["uri"], period=0)
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: state["uri"], period=0,
+                            line=lambda uri, timeout: _AskEveryTime(uri, timeout, pid))
     dog.call_sent("a", "probe")
     dog.check()                       # the watch begins: pid 10
     dog.call_done("a")
@@ -318,14 +336,14 @@ def test_watchdog_asks_only_about_calls_in_flight_for_a_period(monkeypatch):
 
     asked = []
 
-    def pid(uri, timeout):
+    def pid(uri):
         asked.append(uri)
         raise OSError("refused")  # its process is gone
 
     monkeypatch.setattr(liveness, "time", _Time)
-    monkeypatch.setattr(liveness, "_pid", pid)
     got = []
-    dog = liveness.Watchdog(got.append, lambda m: "/bm_%s" % m, lambda n: "http://h%s/" % n, period=0.25)
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_%s" % m, lambda n: "http://h%s/" % n, period=0.25,
+                            line=lambda uri, timeout: _AskEveryTime(uri, timeout, pid))
     dog.call_sent("quick", "a")
     dog.check()
     dog.call_done("quick")            # answered within its first period: its node was never asked

@@ -1,68 +1,18 @@
 """MasterWatch against a stand-in master process (real sockets, real process death).
 
-The stand-in is rosgraph's own XML-RPC server (the one rosmaster uses, HTTP/1.1) answering
-``getPid`` and counting the questions in a file; killing it closes its connections as a dead
-rosmaster does. Re-registration itself needs a rospy node and is tested with a real master in
+Re-registration itself needs a rospy node and is tested with a real master in
 ``tests/integration/test_master_restart.py``.
 """
 from __future__ import annotations
 
 import os
-import signal
 import socket
-import subprocess
-import sys
 import time
 
 import pytest
 
 from comm.masterwatch import MasterWatch, PidLine
-
-STAND_IN = r"""
-import os, sys
-from rosgraph.xmlrpc import SilenceableXMLRPCRequestHandler, ThreadingXMLRPCServer
-port, counter, http10 = int(sys.argv[1]), sys.argv[2], sys.argv[3] == "1"
-if http10:  # a server that closes the connection after every answer
-    SilenceableXMLRPCRequestHandler.protocol_version = "HTTP/1.0"
-server = ThreadingXMLRPCServer(("127.0.0.1", port), log_requests=False)
-def getPid(caller):
-    with open(counter, "a") as fh:
-        fh.write("q\n")
-    return [1, "", os.getpid()]
-server.register_function(getPid)
-print("ready", flush=True)
-server.serve_forever()
-"""
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class StandIn:
-    def __init__(self, tmp_path, http10=False):
-        self.port = _free_port()
-        self.counter = str(tmp_path / "questions")
-        self.http10 = http10
-        self.proc = None
-
-    def start(self):
-        self.proc = subprocess.Popen([sys.executable, "-c", STAND_IN, str(self.port), self.counter,
-                                      "1" if self.http10 else "0"], stdout=subprocess.PIPE, text=True)
-        assert self.proc.stdout.readline().strip() == "ready"
-
-    def kill(self):
-        self.proc.send_signal(signal.SIGKILL)
-        self.proc.wait(5)
-
-    def questions(self):
-        try:
-            with open(self.counter) as fh:
-                return len(fh.readlines())
-        except FileNotFoundError:
-            return 0
+from tests.unit.xmlrpc_standin import StandIn, free_port
 
 
 @pytest.fixture
@@ -148,7 +98,7 @@ def test_a_master_that_closes_every_connection_is_asked_every_period(tmp_path, m
 
 
 def test_the_pid_line_answers_none_without_a_master_and_keeps_its_connection_with_one(stand_in):
-    line = PidLine("http://127.0.0.1:%d/" % _free_port(), 1.0)
+    line = PidLine("http://127.0.0.1:%d/" % free_port(), 1.0)
     assert line.pid() is None and not line.kept
     line = PidLine("http://127.0.0.1:%d/" % stand_in.port, 1.0)
     assert line.pid() == stand_in.proc.pid and line.kept
