@@ -150,15 +150,21 @@ def test_invalid_tree_exits_2_before_touching_ros(tmp_path):
     assert out.returncode == 2 and "bad.yaml:3:9: module 'speech' has no function 'sya'" in out.stderr
 
 
-def test_ctrl_c_cancels_and_cleans_up(slow_world):
-    import socket
-
+def _driving(slow_world):
+    """``bmtree run --sim`` of find_apple, once the robot drives: (process, its output so far)."""
     proc = subprocess.Popen(bmtree_cmd("run", "--sim", "--world", slow_world, os.path.join(TREES, "find_apple.yaml")),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     seen = ""
     while "RUNNING   navigation.go_to" not in seen and time.monotonic() < deadline:
         seen += proc.stdout.readline()
+    return proc, seen
+
+
+def test_ctrl_c_cancels_and_cleans_up(slow_world):
+    import socket
+
+    proc, seen = _driving(slow_world)
     uri = next(line.split("master at ")[1] for line in seen.splitlines() if "master at " in line)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
@@ -189,12 +195,7 @@ def _alive(pid):
 def test_a_killed_coordinator_leaves_no_simulated_robot_behind(slow_world):
     """SIGKILL (or the OOM killer) gives bmtree no chance to stop its graph: the graph's processes,
     each in its own session, still end (util-linux's setpriv --pdeathsig)."""
-    proc = subprocess.Popen(bmtree_cmd("run", "--sim", "--world", slow_world, os.path.join(TREES, "find_apple.yaml")),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    seen = ""
-    while "RUNNING   navigation.go_to" not in seen and time.monotonic() < deadline:
-        seen += proc.stdout.readline()
+    proc, seen = _driving(slow_world)
     graph = _children(proc.pid)
     assert len(graph) >= 5, seen  # rosmaster, the Blackboard and the simulated modules
     proc.send_signal(signal.SIGKILL)

@@ -12,7 +12,7 @@ import time
 import pytest
 
 from comm.masterwatch import MasterWatch, PidLine
-from tests.unit.xmlrpc_standin import StandIn, free_port
+from tests.unit.xmlrpc_standin import StandIn, free_port, until
 
 
 @pytest.fixture
@@ -23,13 +23,6 @@ def stand_in(tmp_path, monkeypatch):
     yield master
     if master.proc.poll() is None:
         master.kill()
-
-
-def _until(check, timeout=10.0):
-    end = time.monotonic() + timeout
-    while not check():
-        assert time.monotonic() < end, "condition not met within %gs" % timeout
-        time.sleep(0.02)
 
 
 @pytest.fixture
@@ -55,7 +48,7 @@ def test_a_killed_and_restarted_master_is_noticed_at_once_and_registered_with_ag
     stand_in.kill()
     killed = time.monotonic()
     stand_in.start()  # same port, another pid
-    _until(lambda: watch.registrations)
+    until(lambda: watch.registrations)
     assert watch.registrations[0] - killed < 2.0
     assert watch.restarts == 1 and watch._pid == stand_in.proc.pid != first_pid
     before = stand_in.questions()
@@ -68,7 +61,7 @@ def test_a_master_that_comes_back_after_a_while_is_waited_for(watch, stand_in):
     time.sleep(0.5)  # down: asked every period, nobody answers
     assert not watch.registrations
     stand_in.start()
-    _until(lambda: watch.registrations)
+    until(lambda: watch.registrations)
     assert watch.restarts == 1
 
 
@@ -89,7 +82,7 @@ def test_a_master_that_closes_every_connection_is_asked_every_period(tmp_path, m
         w = MasterWatch(period=0.05)
         w.start()
         try:
-            _until(lambda: master.questions() >= 6)
+            until(lambda: master.questions() >= 6)
         finally:
             w.stop()
         assert w.restarts == 0

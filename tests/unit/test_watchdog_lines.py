@@ -11,14 +11,7 @@ import time
 import pytest
 
 from coordinator.liveness import ModuleLost, Watchdog
-from tests.unit.xmlrpc_standin import StandIn
-
-
-def _until(check, timeout=10.0):
-    end = time.monotonic() + timeout
-    while not check():
-        assert time.monotonic() < end, "condition not met within %gs" % timeout
-        time.sleep(0.02)
+from tests.unit.xmlrpc_standin import StandIn, until
 
 
 @pytest.fixture
@@ -36,7 +29,7 @@ def _watching(node, period):
     dog = Watchdog(got.append, lambda module: "/bm_x", lambda name: uri, period=period)
     dog.start()
     dog.call_sent("c1", "x")
-    _until(lambda: "x" in dog._known)  # watched once the call is a period old
+    until(lambda: "x" in dog._known)  # watched once the call is a period old
     return dog, got
 
 
@@ -57,7 +50,7 @@ def test_a_watched_node_that_dies_is_reported_at_once_not_a_period_later(node, m
         shift["s"] = 1000.0  # and the call stays older than a period
         time.sleep(0.3)
         node.kill()
-        _until(lambda: got, timeout=20.0)
+        until(lambda: got, timeout=20.0)
     finally:
         dog.stop()
     assert len(got) == 1 and isinstance(got[0], ModuleLost)
@@ -80,7 +73,7 @@ def test_a_node_that_closes_every_connection_is_asked_every_period(tmp_path):
     try:
         dog, got = _watching(node, 0.05)
         try:
-            _until(lambda: node.questions() >= 6)
+            until(lambda: node.questions() >= 6)
             assert got == []
         finally:
             dog.stop()

@@ -10,8 +10,9 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 
-__all__ = ["StandIn", "free_port"]
+__all__ = ["StandIn", "free_port", "until"]
 
 STAND_IN = r"""
 import os, sys
@@ -58,3 +59,11 @@ class StandIn:
                 return len(fh.readlines())
         except FileNotFoundError:
             return 0
+
+
+def until(check, timeout=10.0):
+    """Wait until ``check()`` is true; fail the test after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < end, "condition not met within %gs" % timeout
+        time.sleep(0.02)
