@@ -28,117 +28,16 @@ not replayed.
 """
 from __future__ import annotations
 
-import http.client
 import logging
-import selectors
 import socket
 import threading
-import urllib.parse
-import xmlrpc.client
 from typing import Any, Callable, Dict, List, Optional
 
-from comm.rpc import proxy
+from comm.rpc import PidLine, proxy
 
-__all__ = ["MasterWatch", "PidLine", "watch_master"]
+__all__ = ["MasterWatch", "watch_master"]
 
 log = logging.getLogger("bmtree.master")
-
-KEEPALIVE = (("TCP_KEEPIDLE", 5), ("TCP_KEEPINTVL", 2), ("TCP_KEEPCNT", 3))  # a dead peer noticed in ~11 s
-
-
-class PidLine:
-    """The master's ``getPid`` over one kept-alive HTTP connection that can be waited on.
-
-    A new connection per question would cost the master a thread and this process a TCP
-    handshake each time; one kept open also tells, by closing, that the master went away.
-    """
-
-    def __init__(self, uri: str, timeout: float):
-        parts = urllib.parse.urlsplit(uri)
-        self.host = parts.hostname or "localhost"
-        self.port = parts.port or 11311
-        self.path = parts.path or "/"
-        self.timeout = timeout
-        self.kept = False  # the master kept the connection open after its last answer
-        self._conn: Optional[http.client.HTTPConnection] = None
-        self._body = xmlrpc.client.dumps(("/bmtree_masterwatch",), "getPid").encode()
-
-    def pid(self) -> Optional[int]:
-        """The pid; None when there is no answer (down, unreachable, busy, or not a ROS node)."""
-        try:
-            return self.ask()
-        except OSError:
-            return None
-
-    def ask(self) -> Optional[int]:
-        """The pid; None when no answer comes in time (alive but busy, or stopped).
-
-        Raises:
-            OSError: the connection was refused or broken (the process is gone).
-        """
-        for fresh in (self._conn is None, True):  # a kept connection closed meanwhile: once more, afresh
-            try:
-                if self._conn is None:
-                    self._conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout)
-                    self._conn.connect()
-                    _keepalive(self._conn.sock)
-                self._conn.request("POST", self.path, self._body, {"Content-Type": "text/xml"})
-                resp = self._conn.getresponse()
-                data = resp.read()
-                self.kept = not resp.will_close
-                if not self.kept:
-                    self.close()
-                (code, _, pid), = xmlrpc.client.loads(data)[0]
-                return pid if code == 1 and isinstance(pid, int) else None
-            except socket.timeout:
-                self.close()
-                return None
-            except (OSError, http.client.HTTPException) as exc:
-                self.close()
-                if fresh:
-                    raise exc if isinstance(exc, OSError) else OSError("bad answer: %s" % exc)
-            except (xmlrpc.client.Error, ValueError, TypeError):  # answered, but not as a ROS node does
-                self.close()
-                return None
-        return None
-
-    def fileno(self) -> int:
-        """The kept connection's socket (-1 when none is kept), to wait on with others."""
-        sock = self._conn.sock if self._conn is not None and self.kept else None
-        return sock.fileno() if sock is not None else -1
-
-    def wait_closed(self, wake: socket.socket, limit: float) -> bool:
-        """Wait until the master closes the connection or ``limit`` seconds pass (True: ask again),
-        or until ``wake`` is readable (False)."""
-        sock = self._conn.sock if self._conn is not None else None
-        if sock is None or not self.kept:
-            return True
-        with selectors.DefaultSelector() as sel:
-            sel.register(sock, selectors.EVENT_READ)
-            sel.register(wake, selectors.EVENT_READ)
-            ready = {key.fileobj for key, _ in sel.select(limit)}
-        if wake in ready:
-            return False
-        if sock in ready:  # closed (or something unasked for): a fresh connection next time
-            self.close()
-        return True
-
-    def close(self) -> None:
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
-        self.kept = False
-
-
-def _keepalive(sock: Any) -> None:
-    """Let the kernel probe an idle connection, so that a vanished master machine is noticed."""
-    if sock is None:
-        return
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
-    for name, value in KEEPALIVE:
-        if hasattr(socket, name):
-            sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, name), value)
-
 
 class MasterWatch:
     """One per process, after ``rospy.init_node``; :func:`watch_master` makes and starts it.
@@ -161,9 +60,8 @@ class MasterWatch:
         self.params: Dict[str, Callable[[], Any]] = {}
         self.on_restart: List[Callable[[], None]] = []
         self.restarts = 0
-        self.questions = 0  # getPid asked so far (an idle node asks none)
         self._pid: Optional[int] = None
-        self._line = PidLine(self.master_uri, timeout)
+        self._line = PidLine(self.master_uri, timeout, "/bmtree_masterwatch")
         self._stop = threading.Event()
         self._wake_r, self._wake_w = socket.socketpair()
         self._thread: Optional[threading.Thread] = None
@@ -193,7 +91,6 @@ class MasterWatch:
         return proxy(self.master_uri, self.timeout)
 
     def _master_pid(self) -> Optional[int]:
-        self.questions += 1
         return self._line.pid()
 
     def _loop(self) -> None:

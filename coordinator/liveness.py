@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-from comm.masterwatch import PidLine
+from comm.rpc import PidLine
 
 __all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "DEFAULT_PERIOD"]
 
@@ -64,13 +64,13 @@ class Watchdog:
         resolve: maps a module name (or :data:`BLACKBOARD`) to its node name, or None.
         lookup: maps a node name to its XML-RPC URI (raises or returns None if unregistered).
         period: seconds between checks (a call is watched once it is a period old).
-        line: makes the connection that asks a node (URI, timeout) for its pid: a
-            :class:`~comm.masterwatch.PidLine`.
+        line: makes the connection that asks a node (URI, timeout, caller id) for its pid: a
+            :class:`~comm.rpc.PidLine`.
     """
 
     def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
-                 ping_timeout: float = 0.5, line: Callable[[str, float], Any] = PidLine):
+                 ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine):
         self.deliver = deliver
         self.resolve = resolve
         self.lookup = lookup
@@ -130,8 +130,8 @@ class Watchdog:
     def _wait(self) -> None:
         """Wait a period, or less when a kept connection closes (that line is dropped: its node
         is asked afresh)."""
-        kept = {fd: key for key, fd in ((k, line.fileno()) for k, line in self._lines.items() if line.kept)
-                if fd >= 0}
+        kept = {line.fileno(): key for key, line in self._lines.items()}
+        kept.pop(-1, None)  # lines that keep no connection
         if not kept:
             self._stop.wait(self.period)
             return
@@ -190,7 +190,7 @@ class Watchdog:
         """
         line = self._lines.get(key)
         if line is None:
-            line = self._lines[key] = self._line(uri, self.ping_timeout)
+            line = self._lines[key] = self._line(uri, self.ping_timeout, "/bmtree_liveness")
         try:
             return line.ask()
         except OSError:

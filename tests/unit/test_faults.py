@@ -254,7 +254,7 @@ class _AskEveryTime:
 
     kept = False
 
-    def __init__(self, uri, timeout, pid):
+    def __init__(self, uri, pid):
         self.uri, self._pid = uri, pid
 
     def ask(self):
@@ -279,7 +279,7 @@ def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls():
 
     got = []
     dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: state["uri"], period=0,
-                            line=lambda uri, timeout: _AskEveryTime(uri, timeout, pid))
+                            line=lambda uri, timeout, caller: _AskEveryTime(uri, pid))
     dog.call_sent("a", "probe")
     dog.check()                       # the watch begins: pid 10
     dog.call_done("a")
@@ -343,7 +343,7 @@ def test_watchdog_asks_only_about_calls_in_flight_for_a_period(monkeypatch):
     monkeypatch.setattr(liveness, "time", _Time)
     got = []
     dog = liveness.Watchdog(got.append, lambda m: "/bm_%s" % m, lambda n: "http://h%s/" % n, period=0.25,
-                            line=lambda uri, timeout: _AskEveryTime(uri, timeout, pid))
+                            line=lambda uri, timeout, caller: _AskEveryTime(uri, pid))
     dog.call_sent("quick", "a")
     dog.check()
     dog.call_done("quick")            # answered within its first period: its node was never asked

@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from comm.masterwatch import MasterWatch, PidLine
+from comm.masterwatch import MasterWatch
+from comm.rpc import PidLine
 from tests.unit.xmlrpc_standin import StandIn, free_port, until
 
 
