@@ -33,7 +33,7 @@ import socket
 import threading
 from typing import Any, Callable, Dict, List, Optional
 
-from comm.rpc import PidLine, proxy
+from comm.rpc import PidLine, proxy, wait_closed
 
 __all__ = ["MasterWatch", "watch_master"]
 
@@ -99,7 +99,7 @@ class MasterWatch:
             if down or not self._line.kept:
                 if self._stop.wait(self.period):
                     return
-            elif not self._line.wait_closed(self._wake_r, self.recheck):
+            elif wait_closed({"master": self._line}, self.recheck, self._wake_r)[0]:
                 return
             pid = self._master_pid()
             if pid is None:

@@ -6,9 +6,9 @@ import selectors
 import socket
 import urllib.parse
 import xmlrpc.client
-from typing import Any, Optional
+from typing import Any, Mapping, Optional, Set, Tuple
 
-__all__ = ["proxy", "PidLine"]
+__all__ = ["proxy", "PidLine", "wait_closed"]
 
 
 class _TimeoutTransport(xmlrpc.client.Transport):
@@ -92,22 +92,6 @@ class PidLine:
         sock = self._conn.sock if self._conn is not None and self.kept else None
         return sock.fileno() if sock is not None else -1
 
-    def wait_closed(self, wake: socket.socket, limit: float) -> bool:
-        """Wait until the peer closes the connection or ``limit`` seconds pass (True: ask again),
-        or until ``wake`` is readable (False)."""
-        sock = self._conn.sock if self._conn is not None else None
-        if sock is None or not self.kept:
-            return True
-        with selectors.DefaultSelector() as sel:
-            sel.register(sock, selectors.EVENT_READ)
-            sel.register(wake, selectors.EVENT_READ)
-            ready = {key.fileobj for key, _ in sel.select(limit)}
-        if wake in ready:
-            return False
-        if sock in ready:  # closed (or something unasked for): a fresh connection next time
-            self.close()
-        return True
-
     def close(self) -> None:
         if self._conn is not None:
             self._conn.close()
@@ -123,3 +107,20 @@ def _keepalive(sock: Any) -> None:
     for name, value in KEEPALIVE:
         if hasattr(socket, name):
             sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, name), value)
+
+
+def wait_closed(lines: Mapping[Any, PidLine], limit: float, wake: Optional[socket.socket] = None
+                ) -> Tuple[bool, Set[Any]]:
+    """Wait on the kept connections of ``lines`` until one closes, ``wake`` is readable or ``limit``
+    seconds pass: (woken by ``wake``, the keys whose connection closed, now closed here: ask afresh)."""
+    with selectors.DefaultSelector() as sel:
+        for key, line in lines.items():
+            if line.fileno() >= 0:
+                sel.register(line.fileno(), selectors.EVENT_READ, key)
+        if wake is not None:
+            sel.register(wake, selectors.EVENT_READ, wake)
+        ready = [k.data for k, _ in sel.select(limit)] if sel.get_map() else []
+    closed = {key for key in ready if key is not wake}
+    for key in closed:  # closed by the peer (or something unasked for): a fresh connection next time
+        lines[key].close()
+    return wake is not None and wake in ready, closed

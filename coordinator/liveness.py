@@ -22,13 +22,12 @@ on the node began, is left to the call's timeout (as a restart before the first 
 from __future__ import annotations
 
 import logging
-import selectors
 import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-from comm.rpc import PidLine
+from comm.rpc import PidLine, wait_closed
 
 __all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "DEFAULT_PERIOD"]
 
@@ -130,19 +129,12 @@ class Watchdog:
     def _wait(self) -> None:
         """Wait a period, or less when a kept connection closes (that line is dropped: its node
         is asked afresh)."""
-        kept = {line.fileno(): key for key, line in self._lines.items()}
-        kept.pop(-1, None)  # lines that keep no connection
+        kept = {key: line for key, line in self._lines.items() if line.fileno() >= 0}
         if not kept:
             self._stop.wait(self.period)
             return
-        with selectors.DefaultSelector() as sel:
-            for fd, key in kept.items():
-                sel.register(fd, selectors.EVENT_READ, key)
-            ready = sel.select(self.period)
-        for k, _ in ready:
-            line = self._lines.pop(k.data, None)
-            if line is not None:
-                line.close()
+        for key in wait_closed(kept, self.period)[1]:
+            self._lines.pop(key, None)
 
     def check(self) -> None:
         """One round: every module with calls in flight for a period, and the Blackboard if asked
