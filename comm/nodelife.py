@@ -10,13 +10,20 @@ handlers disabled) and :meth:`StopSignals.spin` shuts rospy down from the main t
 
 A node that does not stop is diagnosed with ``kill -USR1 PID``: it prints every thread's stack
 to its stderr (the node's log under roslaunch) and goes on.
+
+The handler takes no lock (a ``threading.Event`` would): signals can come in bursts (a parent
+killed with threads re-sends ``PR_SET_PDEATHSIG`` as each of its threads ends), and a handler
+that runs again inside itself while holding a lock waits for itself for ever. It sets a flag
+and writes a byte to a pipe that :meth:`StopSignals.wait` reads. The kernel may deliver the
+signal to any thread of the node (one that happens to check first), which leaves a main thread
+blocked in a system call asleep: the pipe is also Python's ``signal.set_wakeup_fd``.
 """
 from __future__ import annotations
 
 import faulthandler
+import os
 import signal
 import sys
-import threading
 from typing import Any, Optional
 
 __all__ = ["StopSignals", "stop_requested"]
@@ -30,10 +37,15 @@ class StopSignals:
     def __init__(self) -> None:
         global _installed
         _installed = self
-        self._event = threading.Event()
+        self._stopped = False
+        self._read_fd, self._write_fd = os.pipe()
+        os.set_blocking(self._write_fd, False)
         self.signal: Optional[int] = None
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._on_signal)
+        # the kernel may hand the signal to any thread; Python runs handlers in the main thread
+        # only, so the C-level handler also writes to the pipe the main thread waits on
+        signal.set_wakeup_fd(self._write_fd)
         try:
             faulthandler.register(signal.SIGUSR1, file=sys.stderr, all_threads=True)
         except (AttributeError, ValueError, OSError):  # no usable stderr (closed, or not a file)
@@ -41,12 +53,19 @@ class StopSignals:
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.signal = signum
-        self._event.set()
+        self._wake()
+
+    def _wake(self) -> None:
+        self._stopped = True
+        try:
+            os.write(self._write_fd, b"x")
+        except OSError:  # the pipe is full: a wake-up is already waiting to be read
+            pass
 
     @property
     def requested(self) -> bool:
         """A stop signal came, or rospy shut down."""
-        return self._event.is_set()
+        return self._stopped
 
     def init_node(self, name: str, **kwargs: Any) -> bool:
         """``rospy.init_node`` without rospy's signal handlers; False when a stop signal came first."""
@@ -58,14 +77,16 @@ class StopSignals:
         rospy.on_shutdown(self._wake)
         return not self.requested
 
-    def _wake(self) -> None:
-        self._event.set()
+    def wait(self) -> None:
+        """Block until a stop signal or :meth:`_wake` (rospy's shutdown)."""
+        while not self._stopped:
+            os.read(self._read_fd, 64)
 
     def spin(self) -> None:
         """Block until a stop signal or rospy's shutdown (master kicked us out), then shut rospy down."""
         import rospy
 
-        self._event.wait()
+        self.wait()
         if not rospy.is_shutdown():
             rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
 

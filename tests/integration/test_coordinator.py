@@ -192,6 +192,28 @@ def _alive(pid):
         return False
 
 
+def _cmdline(pid):
+    try:
+        with open("/proc/%d/cmdline" % pid, "rb") as fh:
+            return fh.read().replace(b"\0", b" ").decode(errors="replace").strip()
+    except OSError:
+        return "?"
+
+
+def _stacks(pid):
+    """Every thread's stack of a bmtree node (SIGUSR1, printed to its log, which is its stderr)."""
+    try:
+        log = os.readlink("/proc/%d/fd/2" % pid)
+        size = os.path.getsize(log)
+        os.kill(pid, signal.SIGUSR1)
+        time.sleep(1)
+        with open(log, errors="replace") as fh:
+            fh.seek(size)
+            return "%s:\n%s" % (log, fh.read()[-6000:])
+    except OSError as exc:
+        return "no stacks of %d: %s" % (pid, exc)
+
+
 def test_a_killed_coordinator_leaves_no_simulated_robot_behind(slow_world):
     """SIGKILL (or the OOM killer) gives bmtree no chance to stop its graph: the graph's processes,
     each in its own session, still end (util-linux's setpriv --pdeathsig)."""
@@ -203,7 +225,8 @@ def test_a_killed_coordinator_leaves_no_simulated_robot_behind(slow_world):
     end = time.monotonic() + 20
     while any(_alive(p) for p in graph) and time.monotonic() < end:
         time.sleep(0.05)
-    left = [p for p in graph if _alive(p)]
+    left = {p: _cmdline(p) for p in graph if _alive(p)}
+    stacks = {p: _stacks(p) for p in left}
     for p in left:  # end what this test started, then fail
         os.kill(p, signal.SIGKILL)
-    assert left == [], "left running after the coordinator was killed: %s" % left
+    assert left == {}, "left running after the coordinator was killed: %s\n%s" % (left, "\n".join(stacks.values()))

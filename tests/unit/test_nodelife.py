@@ -1,0 +1,74 @@
+"""StopSignals in a process of its own: real signals, sent in bursts."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+_BURST = textwrap.dedent("""
+    import os, subprocess, sys
+    from comm.nodelife import StopSignals, stop_requested
+
+    stop = StopSignals()
+    # another process, so the signals keep coming while the handler runs
+    sender = subprocess.Popen([sys.executable, "-c", "import os, signal\\n"
+                              "while True: os.kill(%%d, signal.SIG%s)" %% os.getpid()])
+    stop.wait()
+    sender.kill()
+    sender.wait()  # Python restores the default handlers as it exits
+    print("stopped by", stop.signal, stop_requested(), flush=True)
+""")
+
+
+def _run(script: str) -> subprocess.CompletedProcess:
+    try:
+        return subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=20)
+    except subprocess.TimeoutExpired as exc:
+        raise AssertionError("the process did not stop: %s" % exc.stderr) from None
+
+
+def test_a_burst_of_sigterm_stops_the_wait():
+    """A parent killed with many threads sends its pdeathsig once per ending thread; a handler
+    that took a lock deadlocked on itself (the Blackboard node stayed alive, orphaned)."""
+    out = _run(_BURST % "TERM")
+    assert out.returncode == 0 and "stopped by 15 True" in out.stdout, out.stderr
+
+
+def test_a_burst_of_sigint_stops_the_wait():
+    out = _run(_BURST % "INT")
+    assert out.returncode == 0 and "stopped by 2 True" in out.stdout, out.stderr
+
+
+def test_a_wake_from_another_thread_stops_the_wait():
+    """rospy's shutdown hook (master kicked the node out) runs in another thread."""
+    out = _run(textwrap.dedent("""
+        import threading
+        from comm.nodelife import StopSignals
+
+        stop = StopSignals()
+        threading.Timer(0.2, stop._wake).start()
+        stop.wait()
+        print("woken", stop.signal, stop.requested, flush=True)
+    """))
+    assert out.returncode == 0 and "woken None True" in out.stdout, out.stderr
+
+
+def test_a_signal_taken_by_another_thread_stops_the_wait():
+    """The kernel gives a process-wide signal to whichever thread takes it; here the main thread
+    blocks SIGTERM, so another one must. Python runs the handler in the main thread only, and
+    only once that thread wakes up."""
+    out = _run(textwrap.dedent("""
+        import os, signal, subprocess, sys, threading, time
+        from comm.nodelife import StopSignals
+
+        stop = StopSignals()
+        threading.Thread(target=time.sleep, args=(60,), daemon=True).start()  # SIGTERM not blocked here
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+        subprocess.Popen([sys.executable, "-c", "import os, time\\ntime.sleep(0.3)\\nos.kill(%d, 15)" % os.getpid()])
+        stop.wait()
+        print("stopped by", stop.signal, flush=True)
+    """))
+    assert out.returncode == 0 and "stopped by 15" in out.stdout, out.stderr
