@@ -129,7 +129,7 @@ class RosGraph:
                 except OSError:
                     pass
                 time.sleep(0.05)
-            self._end(self.master)
+            self._end(self.master, sig=signal.SIGTERM)
         raise GraphError("rosmaster did not start (see %s)" % os.path.join(self.ros_home, "rosmaster.out"))
 
     def start_node(self, args: Sequence[str], name: str, timeout: float = 20.0,
@@ -171,10 +171,10 @@ class RosGraph:
             self.nodes.remove(proc)
 
     @staticmethod
-    def _end(proc: subprocess.Popen, timeout: float = 5.0) -> None:
+    def _end(proc: subprocess.Popen, timeout: float = 5.0, sig: int = signal.SIGINT) -> None:
         if proc.poll() is not None:
             return
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         try:
             proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -186,7 +186,10 @@ class RosGraph:
             self._end(proc, 3.0)
         self.nodes.clear()
         if self.master is not None:
-            self._end(self.master, 3.0)
+            # SIGTERM: a process started with SIGINT ignored (``cmd &`` in a script, nohup) passes
+            # that on, and rosmaster, a plain Python program, then ignores Ctrl-C; bmtree's nodes
+            # and roscpp catch SIGINT themselves. rosmaster keeps nothing to save.
+            self._end(self.master, 3.0, signal.SIGTERM)
             self.master = None
         for fh in self._logs:
             fh.close()

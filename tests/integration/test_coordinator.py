@@ -230,3 +230,19 @@ def test_a_killed_coordinator_leaves_no_simulated_robot_behind(slow_world):
     for p in left:  # end what this test started, then fail
         os.kill(p, signal.SIGKILL)
     assert left == {}, "left running after the coordinator was killed: %s\n%s" % (left, "\n".join(stacks.values()))
+
+
+def test_a_graph_started_with_sigint_ignored_still_stops_its_master(tmp_path):
+    """``bmtree run --sim &`` in a script starts everything with SIGINT ignored (inherited):
+    closing the graph must still end rosmaster by asking, not by SIGKILL after a wait."""
+    from coordinator.graph import RosGraph
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        graph = RosGraph(str(tmp_path / "ros"))
+        graph.start_master()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    master = graph.master
+    graph.close()
+    assert master.returncode == -signal.SIGTERM
