@@ -24,7 +24,7 @@ import faulthandler
 import os
 import signal
 import sys
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 __all__ = ["StopSignals", "stop_requested"]
 
@@ -75,6 +75,7 @@ class StopSignals:
             return False
         rospy.init_node(name, disable_signals=True, **kwargs)
         rospy.on_shutdown(self._wake)
+        rospy.core.add_shutdown_hook(_wake_registration_thread())  # hooks that run once is_shutdown()
         return not self.requested
 
     def wait(self) -> None:
@@ -89,6 +90,26 @@ class StopSignals:
         self.wait()
         if not rospy.is_shutdown():
             rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
+
+
+def _wake_registration_thread() -> Callable[[str], None]:
+    """A shutdown hook that wakes rospy's registration thread, which ``rospy.signal_shutdown``
+    joins: the thread looks for the shutdown every half second, so each node took 0.6 s to stop
+    (and ``bmtree run --sim`` stops four). rospy keeps its RegManager only among its pre-shutdown
+    hooks; without one (another rospy) this does nothing."""
+    import rospy.core
+    from rospy.impl.registration import RegManager
+
+    found = [getattr(h, "__self__", None) for h in getattr(rospy.core, "_preshutdown_hooks", [])]
+    managers = [m for m in found if isinstance(m, RegManager)]
+
+    def wake(reason: str) -> None:
+        for manager in managers:
+            cond = getattr(manager, "cond", None)
+            if cond is not None:
+                with cond:
+                    cond.notify_all()
+    return wake
 
 
 def stop_requested() -> bool:

@@ -2,9 +2,10 @@
 
 Used by ``bmtree run --sim``/``demo``, the test kit's fixtures and the benchmarks.
 Every process it starts is ended by pid, nothing else is touched. Each runs in its own session
-(a Ctrl-C in the terminal reaches only the coordinator, which stops the graph in order) and,
-where util-linux's ``setpriv`` is installed (Debian and Ubuntu always have it), gets SIGTERM
-when the process that started it dies, even by SIGKILL or the OOM killer: nothing is orphaned.
+(a Ctrl-C in the terminal reaches only the coordinator, which stops the graph: its nodes
+together, then the ``stop_last`` ones, then the master) and, where util-linux's ``setpriv`` is
+installed (Debian and Ubuntu always have it), gets SIGTERM when the process that started it
+dies, even by SIGKILL or the OOM killer: nothing is orphaned.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import sys
 import tempfile
 import time
 import xmlrpc.client
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Set
 
 from comm.errors import EnvironmentProblem
 from modules.discovery import node_alive
@@ -68,6 +69,7 @@ class RosGraph:
         self.uri = master_uri  # given: use that master, never stop it
         self.master: Optional[subprocess.Popen] = None
         self.nodes: List[subprocess.Popen] = []
+        self._last: Set[int] = set()  # pids of the nodes stopped after the others
         self._logs: List = []
 
     @property
@@ -133,13 +135,20 @@ class RosGraph:
         raise GraphError("rosmaster did not start (see %s)" % os.path.join(self.ros_home, "rosmaster.out"))
 
     def start_node(self, args: Sequence[str], name: str, timeout: float = 20.0,
-                   env: Optional[Dict[str, str]] = None, wait: bool = True) -> subprocess.Popen:
+                   env: Optional[Dict[str, str]] = None, wait: bool = True,
+                   stop_last: bool = False) -> subprocess.Popen:
         """Start ``args`` (``sys.executable`` is used for a leading ``-m``) and, with ``wait``,
-        wait until the node ``name`` is registered with the master and answers."""
+        wait until the node ``name`` is registered with the master and answers.
+
+        :meth:`close` stops the nodes all at once (rospy takes over half a second to stop a node:
+        its XML-RPC server polls twice a second), those started with ``stop_last`` (the
+        Blackboard, which stores what the others sent) once the others have ended."""
         argv = [sys.executable, *args] if args and args[0] == "-m" else list(args)
         proc = subprocess.Popen([*orphan_guard(), *argv], env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
                                 stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
         self.nodes.append(proc)
+        if stop_last:
+            self._last.add(proc.pid)
         if wait:
             self.wait_node(name, timeout, proc)
         return proc
@@ -181,10 +190,25 @@ class RosGraph:
             proc.kill()
             proc.wait(5)
 
+    @staticmethod
+    def _end_all(procs: Sequence[subprocess.Popen], timeout: float) -> None:
+        """:meth:`_end` of several processes at once: all asked, then all waited for."""
+        asked = [p for p in procs if p.poll() is None]
+        for proc in asked:
+            proc.send_signal(signal.SIGINT)
+        end = time.monotonic() + timeout
+        for proc in asked:
+            try:
+                proc.wait(max(0.0, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+
     def close(self) -> None:
-        for proc in reversed(self.nodes):
-            self._end(proc, 3.0)
+        self._end_all([p for p in self.nodes if p.pid not in self._last], 3.0)
+        self._end_all([p for p in self.nodes if p.pid in self._last], 3.0)
         self.nodes.clear()
+        self._last.clear()
         if self.master is not None:
             # SIGTERM: a process started with SIGINT ignored (``cmd &`` in a script, nohup) passes
             # that on, and rosmaster, a plain Python program, then ignores Ctrl-C; bmtree's nodes

@@ -58,7 +58,7 @@ def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, black
         names = []
         if blackboard:
             db = os.path.join(graph.ros_home, "blackboard.sqlite")
-            graph.start_node(["-m", "blackboard.node", "--db", db], "/blackboard", wait=False)
+            graph.start_node(["-m", "blackboard.node", "--db", db], "/blackboard", wait=False, stop_last=True)
             names.append("/blackboard")
         for m in modules:
             extra = list((params or {}).get(m, ()))

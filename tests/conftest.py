@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
 
 import pytest
 
@@ -40,3 +41,11 @@ def private_ros_home():
 # tests/reliability holds the long fault runs of `make reliability` (BMTREE_RELIABILITY=1); the
 # reduced versions of the others run in the normal suite.
 collect_ignore = [] if os.environ.get("BMTREE_RELIABILITY") == "1" else ["reliability"]
+
+
+def until(check, timeout=10.0):
+    """Wait until ``check()`` is true; fail the test after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < end, "condition not met within %gs" % timeout
+        time.sleep(0.02)

@@ -9,7 +9,7 @@ import time
 
 import yaml
 
-from tests.conftest import REFERENCE, TREES
+from tests.conftest import REFERENCE, TREES, until
 from tests.integration.conftest import NODES, bmtree_cmd, processes_running, start_sim_module
 
 
@@ -246,3 +246,45 @@ def test_a_graph_started_with_sigint_ignored_still_stops_its_master(tmp_path):
     master = graph.master
     graph.close()
     assert master.returncode == -signal.SIGTERM
+
+
+_STOPPING = """
+import os, signal, sys, time
+def alive(pid):
+    try:
+        os.kill(pid, 0)
+        return "alive"
+    except ProcessLookupError:
+        return "gone"
+def on_int(*_):
+    with open(sys.argv[1], "w") as fh:
+        fh.write(" ".join(alive(int(p)) for p in sys.argv[3:]))
+    time.sleep(float(sys.argv[2]))
+    sys.exit(0)
+signal.signal(signal.SIGINT, on_int)
+open(sys.argv[1] + ".ready", "w").close()
+while True:
+    time.sleep(60)
+"""
+
+
+def test_closing_a_graph_stops_its_nodes_together_and_the_stop_last_ones_after(tmp_path):
+    """rospy takes a while to stop a node; four of them one after another made every
+    ``bmtree run --sim`` seconds longer. The Blackboard still ends after the modules."""
+    from coordinator.graph import RosGraph
+
+    script = tmp_path / "stopping.py"
+    script.write_text(_STOPPING)
+    graph = RosGraph(str(tmp_path / "ros"))
+    graph.start_master()
+    try:
+        first = graph.start_node([sys.executable, str(script), str(tmp_path / "first"), "1"], "/first", wait=False)
+        second = graph.start_node([sys.executable, str(script), str(tmp_path / "second"), "0", str(first.pid)],
+                                  "/second", wait=False)
+        graph.start_node([sys.executable, str(script), str(tmp_path / "last"), "0", str(first.pid), str(second.pid)],
+                         "/last", wait=False, stop_last=True)
+        until(lambda: all((tmp_path / (n + ".ready")).exists() for n in ("first", "second", "last")), 30)
+    finally:
+        graph.close()
+    assert (tmp_path / "second").read_text() == "alive"  # asked while the first was still stopping
+    assert (tmp_path / "last").read_text() == "gone gone"

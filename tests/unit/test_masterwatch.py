@@ -13,7 +13,8 @@ import pytest
 
 from comm.masterwatch import MasterWatch
 from comm.rpc import PidLine
-from tests.unit.xmlrpc_standin import StandIn, free_port, until
+from tests.conftest import until
+from tests.unit.xmlrpc_standin import StandIn, free_port
 
 
 @pytest.fixture

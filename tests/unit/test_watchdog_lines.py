@@ -11,7 +11,8 @@ import time
 import pytest
 
 from coordinator.liveness import ModuleLost, Watchdog
-from tests.unit.xmlrpc_standin import StandIn, until
+from tests.conftest import until
+from tests.unit.xmlrpc_standin import StandIn
 
 
 @pytest.fixture

@@ -10,9 +10,8 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 
-__all__ = ["StandIn", "free_port", "until"]
+__all__ = ["StandIn", "free_port"]
 
 STAND_IN = r"""
 import os, sys
@@ -59,11 +58,3 @@ class StandIn:
                 return len(fh.readlines())
         except FileNotFoundError:
             return 0
-
-
-def until(check, timeout=10.0):
-    """Wait until ``check()`` is true; fail the test after ``timeout`` seconds."""
-    end = time.monotonic() + timeout
-    while not check():
-        assert time.monotonic() < end, "condition not met within %gs" % timeout
-        time.sleep(0.02)
