@@ -181,21 +181,15 @@ class RosGraph:
 
     @staticmethod
     def _end(proc: subprocess.Popen, timeout: float = 5.0, sig: int = signal.SIGINT) -> None:
-        if proc.poll() is not None:
-            return
-        proc.send_signal(sig)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
+        RosGraph._end_all([proc], timeout, sig)
 
     @staticmethod
-    def _end_all(procs: Sequence[subprocess.Popen], timeout: float) -> None:
-        """:meth:`_end` of several processes at once: all asked, then all waited for."""
+    def _end_all(procs: Sequence[subprocess.Popen], timeout: float, sig: int = signal.SIGINT) -> None:
+        """Ask every process still running to stop, then wait for them together; kill what is left
+        after ``timeout`` seconds."""
         asked = [p for p in procs if p.poll() is None]
         for proc in asked:
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(sig)
         end = time.monotonic() + timeout
         for proc in asked:
             try:
