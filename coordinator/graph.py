@@ -23,7 +23,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Set
 from comm.errors import EnvironmentProblem
 from modules.discovery import node_alive
 
-__all__ = ["RosGraph", "GraphError", "free_port", "orphan_guard", "LOOPBACK"]
+__all__ = ["RosGraph", "GraphError", "free_port", "orphan_guard", "end_processes", "LOOPBACK"]
 
 #: Address every process of a private graph advertises: the graph works where the machine's
 #: hostname does not resolve (minimal images, containers, chroots) and exposes nothing.
@@ -38,6 +38,21 @@ def orphan_guard() -> List[str]:
     """
     exe = shutil.which("setpriv")
     return [exe, "--pdeathsig", "TERM", "--"] if exe else []
+
+
+def end_processes(procs: Sequence[subprocess.Popen], timeout: float, sig: int = signal.SIGINT) -> None:
+    """Ask every process still running to stop, then wait for them together; kill what is left
+    after ``timeout`` seconds."""
+    asked = [p for p in procs if p.poll() is None]
+    for proc in asked:
+        proc.send_signal(sig)
+    end = time.monotonic() + timeout
+    for proc in asked:
+        try:
+            proc.wait(max(0.0, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
 
 
 class GraphError(EnvironmentProblem):
@@ -181,26 +196,11 @@ class RosGraph:
 
     @staticmethod
     def _end(proc: subprocess.Popen, timeout: float = 5.0, sig: int = signal.SIGINT) -> None:
-        RosGraph._end_all([proc], timeout, sig)
-
-    @staticmethod
-    def _end_all(procs: Sequence[subprocess.Popen], timeout: float, sig: int = signal.SIGINT) -> None:
-        """Ask every process still running to stop, then wait for them together; kill what is left
-        after ``timeout`` seconds."""
-        asked = [p for p in procs if p.poll() is None]
-        for proc in asked:
-            proc.send_signal(sig)
-        end = time.monotonic() + timeout
-        for proc in asked:
-            try:
-                proc.wait(max(0.0, end - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5)
+        end_processes([proc], timeout, sig)
 
     def close(self) -> None:
-        self._end_all([p for p in self.nodes if p.pid not in self._last], 3.0)
-        self._end_all([p for p in self.nodes if p.pid in self._last], 3.0)
+        end_processes([p for p in self.nodes if p.pid not in self._last], 3.0)
+        end_processes([p for p in self.nodes if p.pid in self._last], 3.0)
         self.nodes.clear()
         self._last.clear()
         if self.master is not None:

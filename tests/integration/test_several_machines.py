@@ -11,14 +11,13 @@ inside the namespaces this test creates, and everything is deleted by name at th
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import tempfile
-import time
 
 import pytest
 
+from coordinator.graph import end_processes
 from tests.conftest import TREES
 
 TAG = "bmt%d" % (os.getpid() % 100000)
@@ -111,16 +110,7 @@ class Hosts:
 
     def close(self):
         """SIGINT to all at once, then wait: a node cut off from the master cannot unregister in time."""
-        live = [p for p in self.procs if p.poll() is None]
-        for p in live:
-            p.send_signal(signal.SIGINT)
-        end = time.monotonic() + 10
-        for p in live:
-            try:
-                p.wait(max(0.1, end - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(10)
+        end_processes(self.procs, 10)
 
 
 @pytest.fixture
