@@ -39,6 +39,7 @@ __all__ = ["MasterWatch", "watch_master"]
 
 log = logging.getLogger("bmtree.master")
 
+
 class MasterWatch:
     """One per process, after ``rospy.init_node``; :func:`watch_master` makes and starts it.
 
