@@ -1,4 +1,4 @@
-"""The Blackboard node: ``bmtree-blackboard [--db PATH] [--keep N]``.
+"""The Blackboard node: ``bmtree-blackboard [--db PATH] [--keep N] [--max-bytes N]``.
 
 Subscribes to ``/function/output`` and ``/blackboard/input``, answers on
 ``/blackboard/output``, and after each commit publishes on ``/blackboard/stored``
@@ -18,9 +18,9 @@ from blackboard.service import BlackboardService
 from blackboard.store import DEFAULT_KEEP, Store, default_db_path
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TOPIC_RESULT, sync_publisher
 from comm.masterwatch import watch_master
-from comm.messages import DEFAULT_MAX_BYTES
+from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES
 from comm.nodelife import StopSignals
-from comm.nodeopts import parse_node_args
+from comm.nodeopts import count, parse_node_args
 from comm.roslog import log_to_rosout
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
@@ -46,7 +46,9 @@ def _announcements() -> Any:
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bmtree-blackboard", description="Run the Blackboard node.")
     p.add_argument("--db", help="SQLite file (default $ROS_HOME/bmtree/blackboard.sqlite; ':memory:' allowed)")
-    p.add_argument("--keep", type=int, help="values kept per name (default %d)" % DEFAULT_KEEP)
+    p.add_argument("--keep", type=count(), help="values kept per name (default %d)" % DEFAULT_KEEP)
+    p.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="an answer must fit"),
+                   help="largest payload accepted (bytes; default %d)" % DEFAULT_MAX_BYTES)
     return p
 
 
@@ -60,12 +62,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 0
     log_to_rosout()
     path = args.db or rospy.get_param("~db", "") or default_db_path()
-    try:
-        keep = args.keep or int(rospy.get_param("~keep", DEFAULT_KEEP))
-        max_bytes = int(rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
-    except (TypeError, ValueError) as exc:
-        sys.stderr.write("error: parameters ~keep and ~max_bytes must be integers: %s\n" % exc)
-        return 2
+    keep = args.keep if args.keep is not None else DEFAULT_KEEP
+    max_bytes = args.max_bytes if args.max_bytes is not None else DEFAULT_MAX_BYTES
     try:
         store = Store(path, keep=keep)
     except Exception as exc:

@@ -21,6 +21,7 @@ from comm.textenum import TextEnum
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
+    "MIN_MAX_BYTES",
     "STATUSES",
     "CallStatus",
     "FunctionCall",
@@ -36,6 +37,7 @@ __all__ = [
 ]
 
 DEFAULT_MAX_BYTES = 1 << 20
+MIN_MAX_BYTES = 1024  # smaller, and even a ping's answer or a short result would be refused
 _SURROGATE = re.compile(r"\\u[dD][89a-fA-F]")
 
 

@@ -10,12 +10,50 @@ removed from argv first, as ``rospy.myargv`` does.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import socket
 import xmlrpc.client
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
-__all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params"]
+__all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "count",
+           "PORT"]
+
+
+def seconds(zero: str = "") -> Callable[[Any], float]:
+    """An argparse ``type`` for a duration: a finite number of seconds, more than 0 (or also 0
+    when ``zero`` says what 0 means, e.g. ``"off"``), so a typo never becomes a busy loop or a
+    call that fails at once."""
+    def parse(text: Any) -> float:
+        try:
+            value = float(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError("expected a number of seconds, got %r" % (text,))
+        if not math.isfinite(value) or value < 0 or (value == 0 and not zero):
+            raise argparse.ArgumentTypeError("expected a finite number of seconds %s, got %r" % (
+                "of 0 or more (0: %s)" % zero if zero else "greater than 0", text))
+        return value
+    parse.__name__ = "seconds"  # argparse names the type in its messages
+    return parse
+
+
+def count(low: int = 1, high: Optional[int] = None, what: str = "") -> Callable[[Any], int]:
+    """An argparse ``type`` for a whole number from ``low`` (to ``high``); ``what`` says why."""
+    def parse(text: Any) -> int:
+        try:
+            value = int(text) if not isinstance(text, float) or text.is_integer() else None
+        except (TypeError, ValueError):
+            value = None
+        if value is None or isinstance(text, bool) or value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError("expected a whole number %s%s, got %r" % (
+                "from %d to %d" % (low, high) if high is not None else "of at least %d" % low,
+                " (%s)" % what if what else "", text))
+        return value
+    parse.__name__ = "count"
+    return parse
+
+
+PORT = count(0, 65535, "0: any free port")
 
 
 def myargv(argv: Sequence[str]) -> List[str]:
@@ -129,9 +167,10 @@ def fill_from_params(parser: argparse.ArgumentParser, args: argparse.Namespace, 
             continue
         try:
             value = _as_option(action, params[key])
-        except (TypeError, ValueError):
-            parser.error("private parameter ~%s: %r is not valid for %s" % (
-                key, params[key], "/".join(action.option_strings) or action.dest))
+        except (TypeError, ValueError, argparse.ArgumentTypeError) as exc:
+            why = ": %s" % exc if isinstance(exc, argparse.ArgumentTypeError) else ""
+            parser.error("private parameter ~%s: %r is not valid for %s%s" % (
+                key, params[key], "/".join(action.option_strings) or action.dest, why))
         if action.choices is not None and value not in action.choices:
             parser.error("private parameter ~%s: %r is not one of %s" % (
                 key, value, ", ".join(map(str, action.choices))))

@@ -7,7 +7,8 @@ import sys
 from typing import Any, Dict, List, Optional
 
 from comm.errors import did_you_mean
-from comm.nodeopts import fill_from_params, myargv, node_params, private_namespace
+from comm.messages import MIN_MAX_BYTES
+from comm.nodeopts import PORT, count, fill_from_params, myargv, node_params, private_namespace, seconds
 from coordinator import __version__
 from coordinator.cliutil import (
     EXIT_ENV,
@@ -217,19 +218,20 @@ def make_parser() -> argparse.ArgumentParser:
                              "only; give this machine's address to let other machines in: ROS 1 has no "
                              "authentication)")
         sp.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a tree input (YAML value)")
-        sp.add_argument("--call-timeout", type=float, default=30.0, help="default timeout of a call (s)")
-        sp.add_argument("--period", type=float, default=0.25, help="longest time between ticks (s)")
-        sp.add_argument("--max-duration", type=float, help="stop the task after this many seconds")
-        sp.add_argument("--wait", type=float, default=10.0, help="how long to wait for the master and modules (s)")
-        sp.add_argument("--max-bytes", type=int, default=1 << 20, help="largest payload accepted (bytes)")
-        sp.add_argument("--liveness", type=float, default=0.25, metavar="SECONDS",
+        sp.add_argument("--call-timeout", type=seconds(), default=30.0, help="default timeout of a call (s)")
+        sp.add_argument("--period", type=seconds(), default=0.25, help="longest time between ticks (s)")
+        sp.add_argument("--max-duration", type=seconds(), help="stop the task after this many seconds")
+        sp.add_argument("--wait", type=seconds("do not wait"), default=10.0,
+                        help="how long to wait for the master and modules (s)")
+        sp.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"), default=1 << 20, help="largest payload accepted (bytes)")
+        sp.add_argument("--liveness", type=seconds("off"), default=0.25, metavar="SECONDS",
                         help="how often the nodes owing answers are checked; a dead module's calls fail as "
                              "module_lost about this long after it died (0: off, calls wait their timeout)")
         sp.add_argument("-q", "--quiet", action="store_true", help="no live tree display")
         sp.add_argument("--record", metavar="PATH", help="write the run log to PATH (default: a new file under "
                                                          "$ROS_HOME/bmtree/runs/)")
         sp.add_argument("--no-record", action="store_true", help="write no run log")
-        sp.add_argument("--keep-runs", type=int, default=None, metavar="N",
+        sp.add_argument("--keep-runs", type=count(), default=None, metavar="N",
                         help="keep the newest N runs under $ROS_HOME/bmtree/runs/ (default $BMTREE_KEEP_RUNS or 50)")
 
     d = sub.add_parser("demo", help="run find_apple on the simulated robot (private master)")
@@ -264,7 +266,7 @@ def make_parser() -> argparse.ArgumentParser:
     m = sub.add_parser("modules", help="list module definitions, or the modules running now (--live)")
     m.add_argument("paths", nargs="*")
     m.add_argument("--live", action="store_true", help="the modules running now on $ROS_MASTER_URI")
-    m.add_argument("--wait", type=float, default=2.0, help="how long to wait for the master with --live (s)")
+    m.add_argument("--wait", type=seconds("do not wait"), default=2.0, help="how long to wait for the master with --live (s)")
     m.set_defaults(func=cmd_modules)
     b = sub.add_parser("blackboard", help="inspect the Blackboard node's store offline")
     bsub = b.add_subparsers(dest="bb_command", metavar="ACTION")
@@ -272,7 +274,7 @@ def make_parser() -> argparse.ArgumentParser:
     dump = bsub.add_parser("dump", help="latest value of every name, or the history of one")
     dump.add_argument("--db", help="store file (default $ROS_HOME/bmtree/blackboard.sqlite)")
     dump.add_argument("--name", help="show the history of this name (or module/function/name)")
-    dump.add_argument("--history", type=int, default=20, help="how many values of --name")
+    dump.add_argument("--history", type=count(), default=20, help="how many values of --name")
     dump.set_defaults(func=cmd_blackboard)
     t = sub.add_parser("test", help="run YAML test scenarios against mocked modules")
     t.add_argument("scenarios", nargs="+")
@@ -280,21 +282,21 @@ def make_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=cmd_test)
     rs = sub.add_parser("runs", help="list recorded runs (newest first)")
     rs.add_argument("--dir", help="where the run logs are (default $ROS_HOME/bmtree/runs)")
-    rs.add_argument("-n", "--limit", type=int, default=0, help="only the newest N")
+    rs.add_argument("-n", "--limit", type=count(0, what="0: all"), default=0, help="only the newest N (0: all)")
     rs.set_defaults(func=cmd_runs)
     rp = sub.add_parser("replay", help="show a recorded run again, or turn it into a test scenario")
     rp.add_argument("run", help="a run log file, 'last', its number in 'bmtree runs', or the start of its name")
     rp.add_argument("--dir", help="where the run logs are (default $ROS_HOME/bmtree/runs)")
     how = rp.add_mutually_exclusive_group()
-    how.add_argument("--at", type=float, metavar="SECONDS", help="the tree, blackboard and calls at that moment")
+    how.add_argument("--at", type=seconds("the start"), metavar="SECONDS", help="the tree, blackboard and calls at that moment")
     how.add_argument("--step", action="store_true", help="tick by tick (Enter for the next one on a terminal)")
     how.add_argument("--failure", action="store_true", help="jump to the first failing leaf")
     how.add_argument("--scenario", metavar="OUT.yaml", help="write a 'bmtree test' scenario that replays this run")
-    rp.add_argument("--speed", type=float, metavar="X", help="play at X times the recorded pace (on a terminal "
+    rp.add_argument("--speed", type=seconds(), metavar="X", help="play at X times the recorded pace (on a terminal "
                                                              "redrawn in place, like the live display)")
     how.add_argument("--web", action="store_true", help="serve the run as a page with a timeline to scrub")
     rp.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")
-    rp.add_argument("--port", type=int, default=8765, help="port of the page with --web (0: any free one)")
+    rp.add_argument("--port", type=PORT, default=8765, help="port of the page with --web (0: any free one)")
     rp.set_defaults(func=cmd_replay)
     from coordinator.watch import add_control_parser, add_watch_parser
 

@@ -14,6 +14,7 @@ import sys
 import threading
 from typing import Any, Callable, List, Optional, Tuple
 
+from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
 from coordinator.watchview import LinePrinter, now_since, render
@@ -266,10 +267,10 @@ def add_watch_parser(sub: Any) -> None:
     w.add_argument("--plain", action="store_true", help="one line per change even on a terminal")
     w.add_argument("--follow", action="store_true", help="keep watching after the run ends (the next run too)")
     w.add_argument("--namespace", default=STREAM_NS, help="the run stream's topics (default %(default)s)")
-    w.add_argument("--wait", type=float, default=10.0, help="how long to wait for the master and a run (s)")
+    w.add_argument("--wait", type=seconds("do not wait"), default=10.0, help="how long to wait for the master and a run (s)")
     w.add_argument("--web", action="store_true", help="serve a live page instead of the terminal view")
     w.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")
-    w.add_argument("--port", type=int, default=8765, help="port of the page with --web (0: any free one)")
+    w.add_argument("--port", type=PORT, default=8765, help="port of the page with --web (0: any free one)")
     w.set_defaults(func=cmd_watch)
 
 
@@ -306,5 +307,5 @@ def add_control_parser(sub: Any) -> None:
     c = sub.add_parser("control", help="steer the run on $ROS_MASTER_URI (started with 'bmtree run --control')")
     c.add_argument("words", nargs="+", metavar="COMMAND",
                    help="pause | resume | step | break NODE | clear NODE | force NODE SUCCESS|FAILURE | set KEY VALUE")
-    c.add_argument("--wait", type=float, default=10.0, help="how long to wait for the run's answer (s)")
+    c.add_argument("--wait", type=seconds(), default=10.0, help="how long to wait for the run's answer (s)")
     c.set_defaults(func=cmd_control)

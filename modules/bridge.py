@@ -25,6 +25,7 @@ from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload
 from comm.nodelife import stop_requested
+from comm.nodeopts import seconds
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -374,14 +375,14 @@ def make_parser() -> argparse.ArgumentParser:
                                 "bmtree module: wire protocol v2 outside, the original C++ protocol inside.")
     p.add_argument("--definition", required=True, help="the C++ module's definition JSON")
     p.add_argument("--node-name", help="ROS node name of the bridge (default <module>_bridge)")
-    p.add_argument("--call-timeout", type=float, default=30.0,
+    p.add_argument("--call-timeout", type=seconds("no limit"), default=30.0,
                    help="seconds a call may wait for the C++ node's BM_output, 0 = no limit (default 30)")
-    p.add_argument("--input-gap", type=float, default=None,
+    p.add_argument("--input-gap", type=seconds("none"), default=None,
                    help="seconds between the last input and BM_input (default: 0 for nodes built with bmtree's "
                         "C++ library, %g for others)" % DEFAULT_INPUT_GAP)
-    p.add_argument("--output-wait", type=float, default=1.0,
+    p.add_argument("--output-wait", type=seconds("do not wait"), default=1.0,
                    help="seconds to wait after BM_output for output values still in flight (default 1)")
-    p.add_argument("--wait", type=float, default=30.0,
+    p.add_argument("--wait", type=seconds("do not wait"), default=30.0,
                    help="seconds to wait at start-up for the C++ node's connections (default 30)")
     return p
 
@@ -391,12 +392,10 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     from modules.node import run_module
 
-    args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
-    for flag, value in (("--call-timeout", args.call_timeout), ("--output-wait", args.output_wait),
-                        ("--wait", args.wait), ("--input-gap", args.input_gap or 0.0)):
-        if value < 0:
-            sys.stderr.write("error: %s must not be negative\n" % flag)
-            return 2
+    try:
+        args = make_parser().parse_args(rospy.myargv(argv if argv is not None else sys.argv)[1:])
+    except SystemExit as exc:  # argparse said what is wrong (or printed --help)
+        return 2 if exc.code else 0
     try:
         definition = load_definition(args.definition)
         impl = make_bridge(definition, call_timeout=args.call_timeout, input_gap=args.input_gap,
@@ -408,7 +407,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    return run_module(definition, impl, args.node_name or "%s_bridge" % definition.name, {BridgeError: 3})
+    return run_module(definition, impl, args.node_name, {BridgeError: 3}, name_format="%s_bridge")
 
 
 if __name__ == "__main__":

@@ -5,8 +5,9 @@ Run one from the command line::
     bmtree-module --definition my_module.json --class my_package.my_module:MyModule
 
 or ``python -m modules.node ...``. ROS remappings and private parameters work as
-usual (``_definition:=``, ``_class:=`` and roslaunch ``<param>`` stand for the options); ``_basic_mod:=other_name`` renames the module as the original modules did, and
-``_max_bytes:=N`` changes the payload size limit (default 1 MiB).
+usual (``_definition:=``, ``_class:=``, ``_max_bytes:=`` and roslaunch ``<param>`` stand for the
+options); ``_basic_mod:=other_name`` renames the module as the original modules did (and its
+node, ``bm_other_name``, unless ``--node-name`` or ``__name:=`` names it).
 """
 from __future__ import annotations
 
@@ -23,15 +24,16 @@ from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publi
 from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, surely_not_for
 from comm.errors import ProtocolError
 from comm.masterwatch import watch_master
-from comm.messages import DEFAULT_MAX_BYTES, FunctionResult, load_payload, new_id
+from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, FunctionResult, load_payload, new_id
 from comm.nodelife import StopSignals
-from comm.nodeopts import parse_node_args
+from comm.nodeopts import count, node_params, parse_node_args
 from comm.roslog import log_to_rosout
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
 from modules.runtime import BasicModule, BindingError, ModuleServer
 
-__all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_parser", "main", "run_module"]
+__all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_parser", "main", "renamed_by_argument",
+           "run_module"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -136,10 +138,10 @@ class CallInbox:
 class ModuleNode:
     """Wires a :class:`ModuleServer` to ROS; call :meth:`start` after ``rospy.init_node``."""
 
-    def __init__(self, definition: ModuleDefinition, impl: BasicModule, max_bytes: int = DEFAULT_MAX_BYTES):
+    def __init__(self, definition: ModuleDefinition, impl: BasicModule, max_bytes: Optional[int] = None):
         self.definition = definition
         self.impl = impl
-        self.max_bytes = max_bytes
+        self.max_bytes = max_bytes  # None: the private parameter ~max_bytes, else 1 MiB
         self.server: Optional[ModuleServer] = None
         self.inbox: Optional[CallInbox] = None
         self.event_publisher: Any = None
@@ -167,18 +169,20 @@ class ModuleNode:
         if "new node registered with same name" in reason:
             self.kicked_out = reason
             sys.stderr.write("error: another node registered with this node's name %s, so the master stopped "
-                             "this one; module %r is left to the new node\n" % (rospy.get_name(),
-                                                                                 self.definition.name))
+                             "this one, which served module %r (give each module node its own name: "
+                             "--node-name or __name:=)\n" % (rospy.get_name(), self.definition.name))
 
     def start(self) -> None:
         import rospy
         from std_msgs.msg import String
 
         name = rospy.get_param("~basic_mod", self.definition.name)
-        try:
-            self.max_bytes = int(rospy.get_param("~max_bytes", self.max_bytes))
-        except (TypeError, ValueError):
-            raise BindingError("parameter ~max_bytes must be an integer, got %r" % (rospy.get_param("~max_bytes"),))
+        if self.max_bytes is None:
+            value = rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES)
+            if isinstance(value, bool) or not isinstance(value, int) or value < MIN_MAX_BYTES:
+                raise BindingError("parameter ~max_bytes must be a whole number of at least %d, got %r" % (
+                    MIN_MAX_BYTES, value))
+            self.max_bytes = value
         if name != self.definition.name:
             try:
                 self.definition = self.definition.renamed(name)
@@ -258,19 +262,40 @@ def _where(exc: BaseException, spec: str) -> str:
     return "%s:%s" % (frames[-1].filename, frames[-1].lineno) if frames else spec
 
 
+def renamed_by_argument(definition: ModuleDefinition, argv: Optional[List[str]] = None) -> ModuleDefinition:
+    """The definition under the name a ``_basic_mod:=NAME`` argument gives (``sys.argv`` by default),
+    known before the node starts so that the node is named after it; DefinitionError if NAME is not
+    a module name."""
+    name = node_params(sys.argv[1:] if argv is None else argv, None).get("basic_mod")
+    if name is None or name == definition.name:
+        return definition
+    try:
+        return definition.renamed(name)
+    except (DefinitionError, TypeError):
+        raise DefinitionError(["_basic_mod:=%s: not a module name (letters, digits and '_', not starting with a "
+                               "digit)" % (name,)])
+
+
 def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optional[str] = None,
-               failures: Optional[Dict[type, int]] = None) -> int:
+               failures: Optional[Dict[type, int]] = None, name_format: str = "bm_%s",
+               max_bytes: Optional[int] = None) -> int:
     """Init a ROS node, serve until SIGINT/SIGTERM or ROS shutdown, clean up. Exit code.
 
+    The node is ``node_name``, else ``name_format`` of the module's name (after ``_basic_mod:=``).
     ``failures`` maps more start-up exceptions to exit codes (the bridge's C++ side missing is 3).
     A stop signal at any moment, start-up included, ends it with 0."""
     codes: Dict[type, int] = {BindingError: 2, DuplicateModule: 3}
     codes.update(failures or {})
+    try:
+        definition = renamed_by_argument(definition)
+    except DefinitionError as exc:
+        sys.stderr.write("error: %s\n" % exc)
+        return 2
     stop = StopSignals()
-    if not stop.init_node(node_name or "bm_%s" % definition.name, anonymous=False):
+    if not stop.init_node(node_name or name_format % definition.name, anonymous=False):
         return 0
     log_to_rosout()
-    node = ModuleNode(definition, impl)
+    node = ModuleNode(definition, impl, max_bytes)
     try:
         try:
             node.start()
@@ -290,6 +315,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--definition", help="the module's definition JSON (or the private parameter ~definition)")
     p.add_argument("--class", dest="cls", help="MODULE:CLASS or FILE.py:CLASS implementing it (or ~class)")
     p.add_argument("--node-name", help="ROS node name (default bm_<module>)")
+    p.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"),
+                   help="largest payload accepted (bytes; default %d, or ~max_bytes)" % DEFAULT_MAX_BYTES)
     return p
 
 
@@ -319,7 +346,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    return run_module(definition, impl, args.node_name)
+    return run_module(definition, impl, args.node_name, max_bytes=args.max_bytes)
 
 
 if __name__ == "__main__":

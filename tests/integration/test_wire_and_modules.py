@@ -226,6 +226,22 @@ def test_module_name_overridable_by_ros_parameter(ros_graph, sim_defs, caller_fa
     assert (r.status, r.basic_mod) == ("succeeded", "voice")
 
 
+def test_a_module_renamed_by_basic_mod_gets_a_node_of_that_name(ros_graph, sim_defs, caller_factory):
+    """Two copies of one module side by side, told apart only by _basic_mod:= (no __name:=)."""
+    from modules.sim import DEFAULT_WORLD
+
+    for name in ("left_voice", "right_voice"):
+        ros_graph.start_node(["-m", "modules.sim", "speech", "--world", DEFAULT_WORLD, "_basic_mod:=" + name],
+                             "/bm_" + name)
+        wait_announced(name)
+    c = caller_factory(nodes=["/bm_left_voice", "/bm_right_voice"], answering=["left_voice", "right_voice"])
+    for name in ("left_voice", "right_voice"):
+        call = sim_defs["speech"].function("say").build_call({"text": "hi"})
+        call.basic_mod = name
+        c.send(call)
+        assert (c.result(call.call_id).status, c.result(call.call_id).basic_mod) == ("succeeded", name)
+
+
 def test_module_node_cli_binds_and_reports_errors(tmp_path, ros_master):
     bad = tmp_path / "impl.py"
     bad.write_text("from modules import BasicModule\nclass Speech(BasicModule):\n    def say(self, text):\n"

@@ -83,4 +83,5 @@ def test_command_line_errors_exit_2_without_a_traceback(tmp_path, capsys):
     assert main(["bmtree-bridge", "--definition", str(bad)]) == 2
     assert "Functions" in capsys.readouterr().err
     assert main(["bmtree-bridge", "--definition", GRIPPER, "--call-timeout", "-1"]) == 2
-    assert "--call-timeout must not be negative" in capsys.readouterr().err
+    assert "argument --call-timeout: expected a finite number of seconds of 0 or more (0: no limit), got '-1'" in \
+        capsys.readouterr().err

@@ -300,6 +300,66 @@ def test_run_options_from_private_parameters(no_master, monkeypatch):
     assert (args.call_timeout, args.set, args.wait, args.quiet) == (5.0, ["a=1"], 1.5, True)
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["run", "--period", "0"], "argument --period: expected a finite number of seconds greater than 0, got '0'"),
+    (["run", "--call-timeout", "-1"], "argument --call-timeout: expected a finite number of seconds greater than 0"),
+    (["run", "--max-duration", "nan"], "argument --max-duration: expected a finite number of seconds greater than 0"),
+    (["run", "--liveness", "-1"], "argument --liveness: expected a finite number of seconds of 0 or more (0: off)"),
+    (["run", "--wait", "soon"], "argument --wait: expected a number of seconds, got 'soon'"),
+    (["run", "--max-bytes", "0"], "argument --max-bytes: expected a whole number of at least 1024 (a ping's answer"),
+    (["run", "--keep-runs", "-2"], "argument --keep-runs: expected a whole number of at least 1, got '-2'"),
+    (["demo", "--period", "inf"], "argument --period: expected a finite number of seconds greater than 0"),
+    (["runs", "-n", "-1"], "argument -n/--limit: expected a whole number of at least 0 (0: all), got '-1'"),
+    (["replay", "last", "--port", "70000"], "argument --port: expected a whole number from 0 to 65535"),
+    (["watch", "--wait", "-3"], "argument --wait: expected a finite number of seconds of 0 or more (0: do not wait)"),
+])
+def test_a_number_option_out_of_range_is_exit_2_before_anything_starts(no_master, capsys, argv, says):
+    full = argv + ([FIND_APPLE] if argv[0] == "run" else [])
+    assert main(full) == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err
+
+
+def test_a_number_parameter_out_of_range_is_refused_like_the_option(no_master, capsys):
+    from comm.nodeopts import fill_from_params
+    from coordinator.cli import make_parser
+
+    args = make_parser().parse_args(["run", "t.yaml"])
+    with pytest.raises(SystemExit) as exc:
+        fill_from_params(args.command_parser, args, ["t.yaml"], {"period": 0})
+    assert exc.value.code == 2
+    assert ("private parameter ~period: 0 is not valid for --period: expected a finite number of seconds greater "
+            "than 0, got 0") in capsys.readouterr().err
+
+
+def test_node_number_options_are_checked_before_the_node_starts(no_master, tmp_path):
+    """bmtree-module and bmtree-blackboard refuse them with exit 2 (the master is not even asked)."""
+    for argv, says in (
+            (["-m", "modules.node", "--definition", "g.json", "--class", "g.py:G", "--max-bytes", "10"],
+             "argument --max-bytes: expected a whole number of at least 1024"),
+            (["-m", "modules.node", "--definition", "g.json", "--class", "g.py:G", "_max_bytes:=-1"],
+             "private parameter ~max_bytes: -1 is not valid for --max-bytes"),
+            (["-m", "blackboard.node", "--keep", "0"], "argument --keep: expected a whole number of at least 1"),
+            (["-m", "blackboard.node", "_keep:=-1"], "private parameter ~keep: -1 is not valid for --keep")):
+        out = subprocess.run([sys.executable] + argv, cwd=ROOT, capture_output=True, text=True, timeout=60,
+                             env=dict(os.environ, ROS_HOME=str(tmp_path)))
+        assert out.returncode == 2, out.stderr
+        assert says in out.stderr and "Traceback" not in out.stderr
+
+
+def test_basic_mod_argument_renames_the_module_and_names_its_node_after_it(monkeypatch):
+    from modules.definition import load_definition
+    from modules.node import renamed_by_argument
+
+    d = load_definition(os.path.join(GRIPPER, "gripper.json"))
+    assert renamed_by_argument(d, ["--definition", "x", "_basic_mod:=left_gripper"]).name == "left_gripper"
+    assert renamed_by_argument(d, ["--definition", "x"]) is d
+    from modules.definition import DefinitionError
+
+    with pytest.raises(DefinitionError, match="_basic_mod:=two words: not a module name"):
+        renamed_by_argument(d, ["_basic_mod:=two words"])
+
+
 # the catkin package's files ------------------------------------------------------------------
 def test_launch_files_use_the_package_executables():
     nodes = set(os.listdir(os.path.join(ROOT, "nodes")))
