@@ -43,8 +43,12 @@ def cmd_check(args: argparse.Namespace) -> int:
         for w in tree.warnings:
             err(str(w))
         warned += len(tree.warnings)
-        print("%s: ok%s" % (path, " (%d warning%s)" % (len(tree.warnings), "s" if len(tree.warnings) > 1 else "")
-                                  if tree.warnings else ""))
+        n = len(tree.warnings)
+        counted = "%d warning%s" % (n, "s" if n > 1 else "")
+        if n and args.strict:
+            print("%s: refused: %s (--strict makes warnings errors)" % (path, counted))
+        else:
+            print("%s: ok%s" % (path, " (%s)" % counted if n else ""))
     return EXIT_INVALID if problems or (args.strict and warned) else EXIT_OK
 
 
@@ -90,6 +94,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     if fmt not in ("dot", "svg", "png"):
         raise UsageError("-o must end in .dot, .svg or .png, got %r" % out)
     tree, root = offline_tree(args.tree, definitions_from(args.modules))
+    folder = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(folder):
+        raise UsageError("-o %s: folder %s does not exist" % (out, folder))
     graph = py_trees.display.dot_tree(root, collapse_decorators=False)
     graph.set_name(tree.name)
     if fmt == "dot":
@@ -97,7 +104,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         try:
             graph.write(out, format=fmt)
-        except (OSError, FileNotFoundError) as exc:
+        except OSError as exc:
+            if not os.access(folder, os.W_OK):
+                raise UsageError("-o %s: cannot write in %s" % (out, folder))
             err("cannot render %s: %s (is graphviz installed? 'make setup' installs it)" % (fmt, exc))
             return EXIT_ENV
     print("wrote %s" % out)

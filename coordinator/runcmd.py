@@ -34,10 +34,9 @@ def _report(result: Any, tree_name: str) -> None:
     if result.reason and not result.succeeded:
         print("reason: %s" % result.reason)
     print("calls:")
-    start = result.calls[0].started if result.calls else 0.0
     for c in result.calls:
         dur = "%.3fs" % c.duration if c.duration is not None else "-"
-        print("  +%7.3fs  %-26s %-10s %8s  %s" % (c.started - start, c.target, c.status, dur, c.error))
+        print("  +%7.3fs  %-26s %-10s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
 
 
 def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
@@ -84,6 +83,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise
     if tree is not None:
         _check_given(tree, given, args.tree)
+    if args.sim:  # before anything starts: a wrong --world is the user's, exit 2
+        from modules.sim.world import DEFAULT_WORLD, World, WorldError
+
+        try:
+            World.load(args.world or DEFAULT_WORLD)
+        except WorldError as exc:
+            raise PlainError("error: --world %s" % exc)
     files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
     graph = None
     transport = None

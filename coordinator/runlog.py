@@ -55,24 +55,29 @@ def _logs_in(directory: str) -> List[str]:
 
 
 def prune(directory: str, keep: int) -> List[str]:
-    """Delete all but the newest ``keep`` run logs of ``directory``, and all but the newest ``keep``
-    ``.sim`` directories (a simulated robot's store and logs); the names sort by start time."""
+    """Delete all but the newest ``keep`` runs of ``directory``: a run's log and its ``.sim``
+    directory (a simulated robot's store and logs) go together; the names sort by start time."""
     import shutil
 
-    logs = _logs_in(directory)
-    gone = logs[:max(0, len(logs) - keep)]
-    for path in gone:
-        try:
-            os.remove(path)
-        except OSError:
-            pass
     try:
-        sims = sorted(n for n in os.listdir(directory) if _SIM.match(n))
+        names = [n for n in os.listdir(directory) if _NAME.match(n) or _SIM.match(n)]
     except OSError:
-        sims = []
-    for name in sims[:max(0, len(sims) - keep)]:
-        shutil.rmtree(os.path.join(directory, name), ignore_errors=True)
-        gone.append(os.path.join(directory, name))
+        return []
+    runs = sorted({os.path.splitext(n)[0] for n in names})
+    old = set(runs[:max(0, len(runs) - keep)])
+    gone = []
+    for name in sorted(names):
+        if os.path.splitext(name)[0] not in old:
+            continue
+        path = os.path.join(directory, name)
+        if name.endswith(_SUFFIX):
+            try:
+                os.remove(path)
+            except OSError:
+                continue
+        else:
+            shutil.rmtree(path, ignore_errors=True)
+        gone.append(path)
     return gone
 
 

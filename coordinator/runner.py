@@ -31,6 +31,7 @@ class RunResult:
     ticks: int
     reason: str = ""
     history: Dict[Any, List[Status]] = field(default_factory=dict)
+    started: float = 0.0  # the clock's time at the first tick (call times are on the same clock)
 
     @property
     def succeeded(self) -> bool:
@@ -183,7 +184,10 @@ class TreeRunner:
                     self._tell([])
                     reason = "stopped after %g s" % max_duration
                     break
-                item = ctx.clock.wait(ctx.inbox, self.period)
+                wait = self.period
+                if max_duration is not None:  # wake at the limit, not at the next period after it
+                    wait = min(wait, max(0.0, start + max_duration - ctx.clock.now()))
+                item = ctx.clock.wait(ctx.inbox, wait)
                 while item is not None:
                     if item is not WAKE:
                         ctx.dispatch(item)
@@ -197,7 +201,8 @@ class TreeRunner:
             if ctx.observers:
                 notify(ctx.observers, "on_end", RunResult(
                     status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason="interrupted", history=self.history))
+                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason="interrupted", history=self.history,
+                    started=start))
             raise
         status = self.root.status
         if reason:  # stopped by max_duration: the task did not get done
@@ -205,7 +210,8 @@ class TreeRunner:
         elif status == Status.FAILURE:
             reason = self.explainer.reason(self.root)
         result = RunResult(status=status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                           blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history)
+                           blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
+                           started=start)
         if ctx.observers:
             notify(ctx.observers, "on_end", result)
         return result

@@ -28,7 +28,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         parser.error("which module? one of %s (or the private parameter ~module)" % ", ".join(sorted(SIM_CLASSES)))
     try:
         world = World.load(args.world)
-    except (OSError, WorldError) as exc:
+    except WorldError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
     return run_module(load_definition(definition_path(args.module)), SIM_CLASSES[args.module](world))

@@ -99,8 +99,18 @@ class World:
 
     @classmethod
     def load(cls, path: str = DEFAULT_WORLD) -> World:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+        """The world in ``path``; WorldError says where when it cannot be read or is not valid."""
+        try:
+            with open(path, encoding="utf-8") as fh:
+                data = yaml.safe_load(fh)
+        except OSError as exc:
+            raise WorldError("%s: cannot read: %s" % (path, exc.strerror or exc))
+        except UnicodeDecodeError as exc:
+            raise WorldError("%s: not UTF-8 text (byte %d)" % (path, exc.start))
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = "%s:%d:%d" % (path, mark.line + 1, mark.column + 1) if mark is not None else path
+            raise WorldError("%s: not valid YAML: %s" % (where, getattr(exc, "problem", None) or exc))
         return cls.from_dict(data, path)
 
     @classmethod

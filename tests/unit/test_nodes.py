@@ -89,7 +89,9 @@ def test_parallel_of_two_non_concurrent_functions_of_one_module_warns(capsys):
     err = capsys.readouterr().err
     assert "parallel_busy.yaml:8:11: warning: navigation.approach can run while navigation.go_to (line 4)" in err
     assert "where_am_i" not in err and "speech" not in err  # concurrent, or another module
+    capsys.readouterr()
     assert bmtree(["check", "--strict", path]) == 2
+    assert capsys.readouterr().out == "%s: refused: 1 warning (--strict makes warnings errors)\n" % path
     assert bmtree(["check", "--strict", os.path.join(TREES, "find_apple.yaml")]) == 0
 
 

@@ -13,6 +13,7 @@ from py_trees.common import Status
 
 from coordinator import cli
 from coordinator.replay import Replay, cmd_replay, find_run
+from coordinator.replay import _report as replay_summary
 from coordinator.runevents import RunObserver, StatusWatcher
 from coordinator.runlog import RunLogError, RunLogWriter, list_runs, plan_run_files, prune, read_log
 from coordinator.runstream import RunStream, Sink
@@ -149,6 +150,32 @@ def test_max_duration_ends_in_failure_with_its_reason(sim_defs):
     assert run.calls("navigation.go_to")[0].status == "halted"
 
 
+def test_max_duration_stops_at_the_limit_not_at_the_next_period(sim_defs):
+    t = TreeTest(GO, definitions=sim_defs)
+    t.mocks["navigation.go_to"].hang()
+    run = t.run(max_duration=0.1)  # the period is 0.25 s: the run used to stop at 0.25 s
+    assert run.reason == "stopped after 0.1 s"
+    assert abs(run.result.duration - 0.1) < 1e-9
+
+
+def test_the_run_summary_times_calls_from_the_runs_start_as_replay_does(sim_defs, tmp_path, capsys):
+    from coordinator.runcmd import _report
+
+    tree = tmp_path / "later.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - wait: 2\n    - call: speech.say\n"
+                    "      inputs: {text: hi}\n")
+    log_path, run = recorded(str(tree), sim_defs, tmp_path, lambda m: None)
+    _report(run.result, "later")
+    live = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  +")]
+    shown = io.StringIO()
+    replay = Replay(read_log(log_path))
+    while replay.next(None) is not None:
+        pass
+    replay_summary(replay, shown)
+    replayed = [line for line in shown.getvalue().splitlines() if line.startswith("  +")]
+    assert live[0].startswith("  +  2.000s  speech.say") and replayed[0].startswith("  +  2.000s  speech.say")
+
+
 def test_max_duration_halts_show_in_the_log(sim_defs, tmp_path):
     from coordinator.runner import Display
 
@@ -240,6 +267,24 @@ def test_retention_keeps_the_newest_runs(tmp_path, monkeypatch):
         plan_run_files("x.yaml", None, False, 0)
     assert prune(str(runs), 1)  # the newest stays
     assert sorted(os.listdir(runs)) == ["20260104-120000-abcdef-t.jsonl", "20260104-120000-abcdef-t.sim", "notes.txt"]
+
+
+def test_retention_keeps_or_drops_a_runs_log_and_sim_folder_together(tmp_path):
+    """A run without --sim has no .sim folder, a run with --no-record no log: the newest N runs
+    keep both of their files, whatever the others have."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    (runs / "20260101-120000-aaaaaa-go.jsonl").write_text("{}\n")
+    (runs / "20260101-120000-aaaaaa-go.sim").mkdir()
+    (runs / "20260102-120000-bbbbbb-go.jsonl").write_text("{}\n")  # no --sim
+    (runs / "20260103-120000-cccccc-go.sim").mkdir()  # --sim --no-record
+    (runs / "20260104-120000-dddddd-go.jsonl").write_text("{}\n")
+    (runs / "20260104-120000-dddddd-go.sim").mkdir()
+    gone = prune(str(runs), 2)
+    assert sorted(os.path.basename(p) for p in gone) == [
+        "20260101-120000-aaaaaa-go.jsonl", "20260101-120000-aaaaaa-go.sim", "20260102-120000-bbbbbb-go.jsonl"]
+    assert sorted(os.listdir(runs)) == ["20260103-120000-cccccc-go.sim", "20260104-120000-dddddd-go.jsonl",
+                                        "20260104-120000-dddddd-go.sim"]
 
 
 # replay ------------------------------------------------------------------------------------------------

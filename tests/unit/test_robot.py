@@ -320,6 +320,23 @@ def test_a_number_option_out_of_range_is_exit_2_before_anything_starts(no_master
     assert says in err and "Traceback" not in err
 
 
+def test_render_into_a_folder_that_does_not_exist_is_a_usage_error(no_master, tmp_path, capsys):
+    out = tmp_path / "nosuch" / "tree.png"
+    assert main(["render", FIND_APPLE, "-o", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == "error: -o %s: folder %s does not exist" % (out, out.parent)
+
+
+def test_a_world_that_cannot_be_read_is_exit_2_before_the_simulated_robot_starts(no_master, tmp_path, capsys):
+    bad = tmp_path / "world.yaml"
+    bad.write_text("rooms:\n  kitchen: {x: 1, y: [\n")
+    for world, says in ((tmp_path / "nosuch.yaml", "cannot read: No such file or directory"),
+                        (bad, "%s:3:1: not valid YAML: " % bad)):
+        assert main(["run", "--sim", "--world", str(world), FIND_APPLE]) == 2
+        out = capsys.readouterr()
+        assert out.err.startswith("error: --world %s" % world) and says in out.err
+        assert "starting the simulated robot" not in out.out
+
+
 def test_a_number_parameter_out_of_range_is_refused_like_the_option(no_master, capsys):
     from comm.nodeopts import fill_from_params
     from coordinator.cli import make_parser
