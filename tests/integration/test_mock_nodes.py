@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
 
 import pytest
 from std_msgs.msg import Float64, String
@@ -10,8 +11,10 @@ from std_msgs.msg import Float64, String
 from coordinator.testing import MockError, Mocks, fail, reject, respond, succeed
 from coordinator.testing.mocknode import start_mock_node
 from modules.definition import default_module_paths, load_definitions
-from tests.conftest import TREES
+from tests.conftest import ROOT, TREES
 from tests.integration.conftest import bmtree_cmd
+
+pytest_plugins = ["pytester"]
 
 
 def test_find_apple_against_mock_module_nodes(ros_graph):
@@ -107,3 +110,17 @@ def test_no_blackboard_node_is_a_clear_timeout(ros_master):
             client.get(["room"], timeout=0.3)
     finally:
         client.close()
+
+
+def test_the_readme_example_against_module_processes_runs(pytester, monkeypatch):
+    """The README's second example, as written (only the tree's path made absolute): its own
+    master, three mock module processes, and a real ``bmtree run`` against them."""
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        section = fh.read().split("## Testing your trees without a robot", 1)[1]
+    code = section.split("```python")[2].split("```", 1)[0]
+    assert "def test_against_module_processes(ros_graph)" in code
+    code = code.replace('"trees/find_apple.yaml"', repr(os.path.join(TREES, "find_apple.yaml")))
+    monkeypatch.setenv("PATH", os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", ""))
+    pytester.makepyfile(test_readme_processes=code)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
