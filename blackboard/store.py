@@ -77,6 +77,25 @@ class Store:
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(_SCHEMA)
 
+    @classmethod
+    def read_only(cls, path: str) -> Store:
+        """The store at ``path``, opened so that nothing in it is created or changed (``bmtree blackboard
+        dump``, maybe while the node writes); sqlite3.DatabaseError if it is not a store."""
+        import urllib.parse
+
+        store = cls.__new__(cls)
+        store.path, store.keep = path, DEFAULT_KEEP
+        store.db = sqlite3.connect("file:%s?mode=ro" % urllib.parse.quote(os.path.abspath(path)), uri=True,
+                                   check_same_thread=False, isolation_level=None)
+        try:
+            columns = {row[1] for row in store.db.execute("PRAGMA table_info(value)")}
+            if not {"name", "rostype", "msg", "basic_mod", "function", "call_id", "stamp"} <= columns:
+                raise sqlite3.DatabaseError("it has no table of Blackboard values")
+        except sqlite3.DatabaseError:
+            store.db.close()
+            raise
+        return store
+
     def close(self) -> None:
         self.db.close()
 

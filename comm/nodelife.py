@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import faulthandler
 import os
+import select
 import signal
 import sys
+import threading
 from typing import Any, Callable, Optional
 
 __all__ = ["StopSignals", "stop_requested"]
@@ -73,10 +75,31 @@ class StopSignals:
 
         if self.requested:
             return False
-        rospy.init_node(name, disable_signals=True, **kwargs)
+        # without a master, init_node retries its registrations for ever, holding rospy's topic
+        # lock, which rospy's own shutdown needs too: a stop then ends the process (below)
+        started = threading.Event()
+        threading.Thread(target=self._stop_start_up, args=(started,), name="bmtree-start-stop",
+                         daemon=True).start()
+        try:
+            rospy.init_node(name, disable_signals=True, **kwargs)
+        finally:
+            started.set()
         rospy.on_shutdown(self._wake)
         rospy.core.add_shutdown_hook(_wake_registration_thread())  # hooks that run once is_shutdown()
         return not self.requested
+
+    def _stop_start_up(self, started: threading.Event, grace: float = 1.0) -> None:
+        """While ``init_node`` runs: after a stop signal it has ``grace`` seconds to return (it
+        does whenever the master answers, and the node then stops as usual); if it is still stuck
+        in registrations that no master takes, nothing was registered or announced, and the
+        process exits with 0 at once (the pipe is watched, never read)."""
+        while not started.is_set() and not self._stopped:
+            select.select([self._read_fd], [], [], 0.05)
+        if not started.wait(grace):
+            sys.stderr.write("stopped during start-up: no ROS master answered at %s\n" % os.environ.get(
+                "ROS_MASTER_URI", "http://localhost:11311/"))
+            sys.stderr.flush()
+            os._exit(0)
 
     def wait(self) -> None:
         """Block until a stop signal or :meth:`_wake` (rospy's shutdown)."""

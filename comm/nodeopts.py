@@ -17,7 +17,7 @@ import xmlrpc.client
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
 __all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "count",
-           "PORT"]
+           "PORT", "node_name"]
 
 
 def seconds(zero: str = "") -> Callable[[Any], float]:
@@ -54,6 +54,16 @@ def count(low: int = 1, high: Optional[int] = None, what: str = "") -> Callable[
 
 
 PORT = count(0, 65535, "0: any free port")
+
+
+def node_name(text: Any) -> str:
+    """An argparse ``type`` for a node's own name (rospy refuses others in ``init_node``)."""
+    import rosgraph.names
+
+    if not isinstance(text, str) or not text or not rosgraph.names.is_legal_base_name(text):
+        raise argparse.ArgumentTypeError("%r is not a node name: letters, digits and '_', starting with a letter "
+                                         "(no namespace: give one with __ns:=)" % (text,))
+    return text
 
 
 def myargv(argv: Sequence[str]) -> List[str]:

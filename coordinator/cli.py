@@ -62,8 +62,12 @@ def cmd_schema(args: argparse.Namespace) -> int:
     if not args.markdown:
         print(json.dumps(json_schema(), indent=2, ensure_ascii=False))
     elif args.write:
-        with open(args.write, encoding="utf-8") as fh:
-            text = fh.read()
+        try:
+            with open(args.write, encoding="utf-8") as fh:
+                text = fh.read()
+        except UnicodeDecodeError as exc:
+            raise UsageError("--write %s: not UTF-8 text (byte %d); it should be the language reference, "
+                             "trees/README.md" % (args.write, exc.start))
         new = replace_tables(text)
         if new != text:
             with open(args.write, "w", encoding="utf-8") as fh:
@@ -153,11 +157,13 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
     from blackboard.store import Store, default_db_path
 
     path = args.db or default_db_path()
-    if path != ":memory:" and not os.path.exists(path):
+    if not os.path.exists(path):
         err("error: no Blackboard store at %s" % path)
         return EXIT_ENV
+    if not os.path.isfile(path):
+        raise UsageError("%s is not a Blackboard store (not a file)" % path)
     try:
-        store = Store(path)
+        store = Store.read_only(path)
     except sqlite3.DatabaseError as exc:
         raise UsageError("%s is not a Blackboard store (%s)" % (path, exc))
     try:

@@ -7,12 +7,12 @@ from typing import Any, Dict, List, Optional
 
 import yaml
 
-from coordinator.errors import UsageError
+from coordinator.errors import EnvironmentProblem, UsageError
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
 __all__ = ["EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV", "PlainError", "err", "definitions_from", "set_values",
-           "legacy_option", "master_up", "wait_master"]
+           "legacy_option", "check_master_uri", "master_up", "wait_master"]
 
 EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_ENV = 0, 1, 2, 3
 
@@ -56,11 +56,30 @@ def legacy_option(pairs: Optional[List[str]], defs: Dict[str, ModuleDefinition])
     return out
 
 
+def check_master_uri() -> None:
+    """EnvironmentProblem (exit 3) unless ``$ROS_MASTER_URI`` is an ``http://host:port/`` address
+    (rosgraph raises a bare ValueError on anything else)."""
+    import urllib.parse
+
+    uri = os.environ.get("ROS_MASTER_URI")
+    if uri is None:
+        return  # rosgraph's default, http://localhost:11311/
+    try:
+        parts = urllib.parse.urlsplit(uri)
+        ok = parts.scheme == "http" and bool(parts.hostname) and parts.port is not None
+    except ValueError:  # a port out of range
+        ok = False
+    if not ok:
+        raise EnvironmentProblem("ROS_MASTER_URI=%r is not a master's address: expected http://HOST:PORT/, e.g. "
+                                 "http://localhost:11311/" % uri)
+
+
 def master_up(timeout: float) -> bool:
     import time
 
     import rosgraph
 
+    check_master_uri()
     end = time.monotonic() + timeout
     while True:
         if rosgraph.is_master_online():

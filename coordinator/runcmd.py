@@ -54,6 +54,23 @@ def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
             path, "s" if len(missing) > 1 else "", ", ".join(missing)))
 
 
+def _check_local_address(address: str) -> None:
+    """UsageError unless ``address`` is an IP address of this machine (the private graph listens there)."""
+    import ipaddress
+    import socket
+
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        raise UsageError("--ros-ip %r is not an IP address (e.g. 192.168.1.10)" % address)
+    try:
+        with socket.socket(socket.AF_INET6 if ip.version == 6 else socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.bind((address, 0))
+    except OSError as exc:
+        raise UsageError("--ros-ip %s is not an address of this machine (%s); `ip -brief address` lists them" % (
+            address, exc.strerror or exc))
+
+
 def _needs_live_definitions(exc: TreeErrors) -> bool:
     """True if the tree may still be valid once the live modules' definitions are known."""
     return any(e.message.startswith("unknown module") for e in exc.errors)
@@ -83,8 +100,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise
     if tree is not None:
         _check_given(tree, given, args.tree)
-    if args.sim:  # before anything starts: a wrong --world is the user's, exit 2
+    if args.sim:  # before anything starts: a wrong --world or --ros-ip is the user's, exit 2
         from modules.sim.world import DEFAULT_WORLD, World, WorldError
+
+        if args.ros_ip:
+            _check_local_address(args.ros_ip)
 
         try:
             World.load(args.world or DEFAULT_WORLD)
@@ -204,6 +224,8 @@ def _user_module(spec: str) -> Any:
             compile(source, where, "exec", dont_inherit=True)
         except SyntaxError as exc:
             raise PlainError("%s:%s:%s: syntax error: %s" % (where, exc.lineno, exc.offset or 0, exc.msg))
+        except ValueError as exc:  # NUL bytes: not a Python source file at all
+            raise PlainError("%s: not a Python source file (%s)" % (where, exc))
         cls = os.path.abspath(where) + ":" + cls.rsplit(":", 1)[1]
     return UserModule(os.path.abspath(definition), cls, load_definition(definition))
 

@@ -129,9 +129,26 @@ def plan_run_files(tree_path: str, record: Optional[str], no_record: bool, keep:
     run_id = "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
     name = os.path.splitext(os.path.basename(tree_path))[0]
     default = new_log_path(directory, run_id, name)
-    prune(directory, keep - 1)
     log_path = None if no_record else (os.path.abspath(record) if record else default)
+    if record and not no_record and os.path.lexists(log_path):
+        if not _is_run_log(log_path):  # the tree itself, or any file of the user's: never appended to
+            raise RunLogError("--record %s: the file exists and is not a bmtree run log; bmtree does not write "
+                              "into it (choose a new name)" % record)
+        os.remove(log_path)  # an earlier run's log: this run's replaces it
+    prune(directory, keep - 1)
     return RunFiles(run_id, log_path, default[:-len(_SUFFIX)] + ".sim")
+
+
+def _is_run_log(path: str) -> bool:
+    """True if ``path`` is a regular file whose first record is a run log's ``tree`` record."""
+    if not os.path.isfile(path):
+        return False
+    try:
+        with open(path, "rb") as fh:
+            head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(head, dict) and head.get("type") == "tree"
 
 
 class RunLogWriter(Sink):
@@ -208,6 +225,13 @@ class RunLog:
         return [r for r in self.records if r.get("type") == kind]
 
 
+# what the readers of a log rely on, wherever a record has the key
+_FIELDS = (("t", (int, float), "a number of seconds"), ("started", (int, float), "a number of seconds"),
+           ("duration", (int, float), "a number of seconds"), ("ticks", int, "a whole number"),
+           ("blackboard", dict, "a mapping"), ("nodes", list, "a list"), ("changes", list, "a list"),
+           ("inputs", dict, "a mapping"), ("outputs", dict, "a mapping"), ("params", dict, "a mapping"))
+
+
 def read_log(path: str) -> RunLog:
     """Read a run log; a cut last line is dropped. RunLogError for anything else that is wrong."""
     size = os.path.getsize(path)
@@ -225,6 +249,8 @@ def read_log(path: str) -> RunLog:
             raise RunLogError("%s:%d: record larger than %d bytes" % (path, i + 1, MAX_RECORD_BYTES))
         try:
             rec = json.loads(raw.decode("utf-8"))
+        except RecursionError:
+            raise RunLogError("%s:%d: a record nested too deep to be bmtree's" % (path, i + 1))
         except (ValueError, UnicodeDecodeError) as exc:
             if i == last:      # no newline after it: the writer was killed in the middle of it
                 truncated = True
@@ -232,6 +258,11 @@ def read_log(path: str) -> RunLog:
             raise RunLogError("%s:%d: not a JSON record: %s" % (path, i + 1, exc))
         if not isinstance(rec, dict) or not isinstance(rec.get("type"), str):
             raise RunLogError("%s:%d: a record is a JSON object with a 'type'" % (path, i + 1))
+        for key, kinds, what in _FIELDS:
+            value = rec.get(key)
+            if value is not None and (not isinstance(value, kinds) or isinstance(value, bool)):
+                raise RunLogError("%s:%d: %r of the %s record must be %s, got %r" % (
+                    path, i + 1, key, rec["type"], what, value if len(repr(value)) < 80 else type(value).__name__))
         records.append(rec)
     if not records or records[0].get("type") != "tree":
         raise RunLogError("%s:1: not a bmtree run log (it must start with a 'tree' record)" % path)
@@ -261,7 +292,7 @@ def _tail_record(path: str) -> Optional[Dict[str, Any]]:
     for raw in reversed(tail):
         try:
             rec = json.loads(raw.decode("utf-8"))
-        except (ValueError, UnicodeDecodeError):
+        except (ValueError, UnicodeDecodeError, RecursionError):
             continue
         if isinstance(rec, dict):
             return rec
@@ -276,15 +307,16 @@ def list_runs(directory: str) -> List[RunSummary]:
             with open(path, "rb") as fh:
                 head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
             tail = _tail_record(path)
-        except (OSError, ValueError, UnicodeDecodeError):
-            continue
-        if not isinstance(head, dict) or head.get("type") != "tree":
-            continue
-        end = tail if tail is not None and tail.get("type") == "end" else None
-        last_t = tail.get("t") if isinstance(tail, dict) else None
-        out.append(RunSummary(
-            path=path, name=str(head.get("name", "?")), started=float(head.get("started") or 0.0),
-            duration=end.get("t") if end else last_t,
-            status=str(end.get("status")) if end else "UNFINISHED",
-            reason=str(end.get("reason") or "") if end else "the log ends without an end record (killed?)"))
+            if not isinstance(head, dict) or head.get("type") != "tree":
+                continue
+            end = tail if tail is not None and tail.get("type") == "end" else None
+            last_t = tail.get("t") if isinstance(tail, dict) else None
+            duration = end.get("t") if end else last_t
+            out.append(RunSummary(
+                path=path, name=str(head.get("name", "?")), started=float(head.get("started") or 0.0),
+                duration=float(duration) if duration is not None else None,
+                status=str(end.get("status")) if end else "UNFINISHED",
+                reason=str(end.get("reason") or "") if end else "the log ends without an end record (killed?)"))
+        except (OSError, ValueError, TypeError, UnicodeDecodeError, RecursionError):
+            continue  # not a log bmtree wrote, or damaged: `bmtree replay FILE` says what is wrong
     return out

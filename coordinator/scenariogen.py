@@ -68,10 +68,24 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     return {"tree": rel, "scenarios": [scenario]}
 
 
+_HEADER_START = "# Written by 'bmtree replay"
+
+
 def write_scenario(log: RunLog, out_path: str) -> None:
+    """Write the scenario of ``log`` to ``out_path``: a new file, or one this wrote before (a
+    tree or anything else of the user's there is refused, RunLogError, never overwritten)."""
+    if os.path.lexists(out_path):
+        try:
+            with open(out_path, encoding="utf-8") as fh:
+                ours = fh.read(len(_HEADER_START)) == _HEADER_START
+        except (OSError, UnicodeDecodeError):
+            ours = False
+        if not ours:
+            raise RunLogError("--scenario %s: the file exists and was not written by 'bmtree replay --scenario'; "
+                              "bmtree does not overwrite it (choose a new name)" % out_path)
     data = scenario_from_log(log, out_path)
     end = log.end or {}
-    header = ("# Written by 'bmtree replay %s --scenario': the modules answer as they did in that run,\n"
+    header = (_HEADER_START + " %s --scenario': the modules answer as they did in that run,\n"
               "# and the run must end the same way (%s%s) with the same calls.\n" % (
                   os.path.basename(log.path), end.get("status"), ": %s" % end.get("reason") if end.get("reason") else ""))
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=110)

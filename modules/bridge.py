@@ -25,7 +25,7 @@ from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload
 from comm.nodelife import stop_requested
-from comm.nodeopts import seconds
+from comm.nodeopts import node_name, seconds
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -374,7 +374,7 @@ def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bmtree-bridge", description="Serve a C++ basic module (manual §4.3) as a "
                                 "bmtree module: wire protocol v2 outside, the original C++ protocol inside.")
     p.add_argument("--definition", required=True, help="the C++ module's definition JSON")
-    p.add_argument("--node-name", help="ROS node name of the bridge (default <module>_bridge)")
+    p.add_argument("--node-name", type=node_name, help="ROS node name of the bridge (default <module>_bridge)")
     p.add_argument("--call-timeout", type=seconds("no limit"), default=30.0,
                    help="seconds a call may wait for the C++ node's BM_output, 0 = no limit (default 30)")
     p.add_argument("--input-gap", type=seconds("none"), default=None,

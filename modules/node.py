@@ -26,7 +26,7 @@ from comm.errors import ProtocolError
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, FunctionResult, load_payload, new_id
 from comm.nodelife import StopSignals
-from comm.nodeopts import count, node_params, parse_node_args
+from comm.nodeopts import count, node_name, node_params, parse_node_args
 from comm.roslog import log_to_rosout
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
@@ -241,6 +241,9 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
         sp = importlib.util.spec_from_file_location(mod_name, where)
         if sp is None or sp.loader is None:
             raise ValueError("cannot load %s" % where)
+        with open(where, "rb") as fh:
+            if b"\0" in fh.read():
+                raise ValueError("%s: not a Python source file (it contains NUL bytes)" % where)
         module = importlib.util.module_from_spec(sp)
         sys.modules[mod_name] = module
         sp.loader.exec_module(module)
@@ -249,6 +252,9 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
     cls = getattr(module, cls_name, None)
     if cls is None:
         raise ValueError("%s has no class %r" % (where, cls_name))
+    if not isinstance(cls, type) or not issubclass(cls, BasicModule):
+        raise ValueError("%s: %s is not a subclass of BasicModule (from modules.runtime import BasicModule; "
+                         "class %s(BasicModule): ...)" % (where, cls_name, cls_name))
     return cls
 
 
@@ -314,7 +320,7 @@ def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bmtree-module", description="Run a Python basic module as a ROS node.")
     p.add_argument("--definition", help="the module's definition JSON (or the private parameter ~definition)")
     p.add_argument("--class", dest="cls", help="MODULE:CLASS or FILE.py:CLASS implementing it (or ~class)")
-    p.add_argument("--node-name", help="ROS node name (default bm_<module>)")
+    p.add_argument("--node-name", type=node_name, help="ROS node name (default bm_<module>)")
     p.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"),
                    help="largest payload accepted (bytes; default %d, or ~max_bytes)" % DEFAULT_MAX_BYTES)
     return p
@@ -325,6 +331,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parse_node_args(parser, (argv if argv is not None else sys.argv)[1:], None)
     if not args.definition or not args.cls:
         parser.error("--definition and --class are required (or the private parameters ~definition, ~class)")
+
     try:
         definition = load_definition(args.definition)
         factory = load_class(args.cls)

@@ -99,3 +99,29 @@ def test_the_shutdown_hook_wakes_rospys_registration_thread(monkeypatch):
     assert waiting.wait(10)
     hook("signal-2")
     assert woken.wait(10), "the registration thread was not woken"
+
+
+def test_a_stop_while_no_master_answers_the_start_up_ends_the_node(tmp_path):
+    """rospy.init_node retries its registrations for ever without a master, holding the lock its
+    own shutdown needs: the node must still end, with 0, soon after SIGTERM."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+        from comm.nodelife import StopSignals
+
+        stop = StopSignals()
+        print("init_node returned", stop.init_node("no_master_yet"), flush=True)
+    """)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/", ROS_HOME=str(tmp_path)))
+    try:
+        time.sleep(1.5)  # in init_node's registration loop by now
+        assert proc.poll() is None, proc.stderr.read()
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert "stopped during start-up: no ROS master answered at http://127.0.0.1:9/" in err

@@ -269,6 +269,50 @@ def test_retention_keeps_the_newest_runs(tmp_path, monkeypatch):
     assert sorted(os.listdir(runs)) == ["20260104-120000-abcdef-t.jsonl", "20260104-120000-abcdef-t.sim", "notes.txt"]
 
 
+def test_record_and_scenario_never_write_into_a_users_file(sim_defs, tmp_path, monkeypatch):
+    monkeypatch.setenv("ROS_HOME", str(tmp_path))
+    tree = tmp_path / "mine.yaml"
+    shutil.copy(GO, str(tree))
+    before = tree.read_text()
+    with pytest.raises(RunLogError, match="the file exists and is not a bmtree run log; bmtree does not write"):
+        plan_run_files(str(tree), str(tree), False, 3)
+    log_path, _run = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    again = plan_run_files(str(tree), log_path, False, 3)  # an earlier run's log is replaced
+    assert again.log_path == log_path and not os.path.exists(log_path)
+    log_path, _run = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    with pytest.raises(RunLogError, match="was not written by 'bmtree replay --scenario'; bmtree does not overwrite"):
+        write_scenario(read_log(log_path), str(tree))
+    assert tree.read_text() == before
+    out = tmp_path / "again.scenarios.yaml"
+    write_scenario(read_log(log_path), str(out))
+    write_scenario(read_log(log_path), str(out))  # its own earlier scenario is rewritten
+    assert out.read_text().startswith("# Written by 'bmtree replay")
+
+
+def test_a_damaged_run_log_is_an_error_that_says_where_and_runs_lists_the_others(sim_defs, tmp_path, capsys):
+    log_path, _run = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    lines = open(log_path).read().splitlines()
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    shutil.copy(log_path, str(runs / "20260101-120000-aaaaaa-good.jsonl"))
+    bad = {"b-deep": ["[" * 100000 + "]" * 100000] + lines[1:],
+           "c-started": [json.dumps(dict(json.loads(lines[0]), started="abc"))] + lines[1:],
+           "d-board": [json.dumps(dict(json.loads(lines[0]), blackboard=[1]))] + lines[1:],
+           "e-end": lines[:-1] + [json.dumps(dict(json.loads(lines[-1]), duration="x"))]}
+    for n, (name, content) in enumerate(sorted(bad.items())):
+        (runs / ("2026010%d-120000-bbbbbb-%s.jsonl" % (n + 2, name))).write_text("\n".join(content) + "\n")
+    assert [r.name for r in list_runs(str(runs))] == ["go_kitchen", "go_kitchen", "go_kitchen"]  # deep, bad start: out
+    says = {"b-deep": ":1: a record nested too deep to be bmtree's",
+            "c-started": ":1: 'started' of the tree record must be a number of seconds, got 'abc'",
+            "d-board": ":1: 'blackboard' of the tree record must be a mapping, got [1]",
+            "e-end": ":%d: 'duration' of the end record must be a number of seconds, got 'x'" % len(lines)}
+    for n, (name, message) in enumerate(sorted(says.items())):
+        path = str(runs / ("2026010%d-120000-bbbbbb-%s.jsonl" % (n + 2, name)))
+        for extra in ([], ["--at", "0.1"], ["--scenario", str(tmp_path / "out.yaml")]):
+            assert cli.main(["replay", path] + extra) == 2
+            assert capsys.readouterr().err == "error: %s%s\n" % (path, message)
+
+
 def test_retention_keeps_or_drops_a_runs_log_and_sim_folder_together(tmp_path):
     """A run without --sim has no .sim folder, a run with --no-record no log: the newest N runs
     keep both of their files, whatever the others have."""
