@@ -19,7 +19,7 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 from comm.errors import did_you_mean
 from coordinator.refs import Ref, RefError, scan_ref, unwrap
 
-__all__ = ["Expr", "ExprError", "FUNCTIONS", "kind_of", "text_of"]
+__all__ = ["Expr", "ExprError", "FUNCTIONS", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
 
 
 class ExprError(RefError):
@@ -309,9 +309,22 @@ def _described(v: Any) -> str:
     return "%s %r" % (kind_of(v), v) if kind_of(v) in ("number", "string", "bool") else kind_of(v)
 
 
+MAX_TEXT = 1 << 20  # characters a computed text may have (a call's whole payload is 1 MiB)
+
+
+def check_text_size(text: str) -> str:
+    """``text``, unless it is longer than :data:`MAX_TEXT` (a text doubled in a loop would take all memory)."""
+    if len(text) > MAX_TEXT:
+        raise ExprError("the text would be %d characters long, more than the %d a value may have" % (
+            len(text), MAX_TEXT))
+    return text
+
+
 def _arith(op: str, a: Any, b: Any) -> Any:
     ka, kb = kind_of(a), kind_of(b)
     if op == "+" and ka == kb == "string":
+        if len(a) + len(b) > MAX_TEXT:
+            return check_text_size(a + b[:MAX_TEXT + 1 - len(a)])  # raises without building it whole
         return a + b
     if ka != "number" or kb != "number":
         raise ExprError("cannot %s %s and %s" % (_VERB[op], _described(a), _described(b)))

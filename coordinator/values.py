@@ -12,7 +12,7 @@ import re
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple, Union
 
 from coordinator.errors import Pos, TreeError
-from coordinator.expr import Expr, ExprError, text_of
+from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.refs import Computed, Ref, RefError, parse_ref
 
 __all__ = ["ExprValue", "Template", "at_value_errors", "literal", "loose_dollars", "ref_kind", "value_type_errors"]
@@ -43,7 +43,7 @@ class Template(Computed):
         self.refs = [r for p in parts if not isinstance(p, str) for r in p[0].refs]
 
     def resolve(self, lookup: Callable[[str], Any]) -> str:
-        return "".join(p if isinstance(p, str) else text_of(p[0].value(lookup)) for p in self.parts)
+        return check_text_size("".join(p if isinstance(p, str) else text_of(p[0].value(lookup)) for p in self.parts))
 
     def exprs(self) -> List[Tuple[Expr, int]]:
         return [p for p in self.parts if not isinstance(p, str)]

@@ -26,14 +26,14 @@ if [ ! -f "$stamp" ] || [ setup.py -nt "$stamp" ] || [ scripts/test-py38.sh -nt 
   echo "py38: installing py_trees 2.2.x and the test dependencies"
   # the package's own requirements (setup.py), py_trees held at the oldest supported 2.2.x
   "$V/bin/python" -m pip install -q --disable-pip-version-check "py_trees>=2.2,<2.3" -e . \
-    pytest rospkg catkin_pkg 2>&1 | grep -v "^WARNING: Location" || true
+    pytest rospkg catkin_pkg defusedxml 2>&1 | grep -v "^WARNING: Location" || true
   touch "$stamp"
 fi
 site=$("$V/bin/python" -c 'import site; print(site.getsitepackages()[0])')
 ros="$PWD/$V/ros"
 mkdir -p "$ros"
 rosdir=$(/usr/bin/python3 -c 'import os, genpy; print(os.path.dirname(os.path.dirname(genpy.__file__)))')
-for p in catkin genmsg genpy roscpp rosgraph rosgraph_msgs roslib rospy std_msgs std_srvs geometry_msgs sensor_msgs; do
+for p in catkin genmsg genpy roscpp rosgraph rosgraph_msgs roslaunch rosmaster roslib rospy std_msgs std_srvs geometry_msgs sensor_msgs; do
   if [ -e "$rosdir/$p" ]; then ln -sfn "$rosdir/$p" "$ros/$p"; fi
 done
 echo "$ros" > "$site/bmtree-ros.pth"

@@ -20,6 +20,10 @@
             - speech.say
             - navigation.go_to: {place: living_room}
           blackboard: {object_room: kitchen}
+
+The whole file is checked before any scenario runs. Every run ends: after ``max_duration``
+simulated seconds, ``max_ticks`` ticks, or ``max_ticks_per_instant`` ticks without the simulated
+clock moving (a livelock); a limit reached is a FAIL naming it. The format: docs/scenarios.md.
 """
 from __future__ import annotations
 
@@ -27,19 +31,31 @@ import json
 import os
 import sys
 import time
-from typing import Any, Dict, List, Optional, TextIO
+from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
+
+from py_trees.common import Status
 
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError, TreeErrors
+from coordinator.language import load_tree
+from coordinator.runevents import RunObserver
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
-__all__ = ["run_scenarios", "run_scenario_file", "calls_diff"]
+__all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_INSTANT", "TickGuard",
+           "calls_diff", "load_scenario_file", "run_scenario_file", "run_scenarios"]
 
-_SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect", "max_duration")
+DEFAULT_MAX_DURATION = 3600.0
+"""Simulated seconds a scenario may run (scenario key ``max_duration``); reaching it is a FAIL."""
+DEFAULT_MAX_TICKS = 100000
+"""Ticks a scenario may take in all (``max_ticks``): an hour of waiting is 14400 ticks of 0.25 s."""
+DEFAULT_MAX_TICKS_PER_INSTANT = 10000
+"""Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
+_LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
+_SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect") + _LIMITS
 _EXPECT_KEYS = ("status", "calls", "blackboard")
 
 
@@ -63,6 +79,30 @@ def _number(m: LMap, key: str, default: float, at: Pos) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
         raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))])
     return float(value)
+
+
+def _count(m: LMap, key: str, default: int, at: Pos) -> int:
+    """``m[key]`` as a whole number >= 1, else a positioned error."""
+    value = m.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a whole number >= 1, got %r" % (key, value))])
+    return value
+
+
+def _mapping(m: Any, key: str, at: Pos, what: str) -> Any:
+    """``m[key]`` as a mapping (empty when absent or null), else a positioned error saying ``what``."""
+    value = m.get(key)
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise TreeErrors([TreeError(pos_of(m, key, at), what)])
+    return value
+
+
+def _call_form(c: Any) -> bool:
+    """An expected call: ``module.function`` or ``{module.function: {input: value}}``."""
+    return isinstance(c, str) or (isinstance(c, dict) and len(c) == 1 and isinstance(next(iter(c)), str)
+                                  and isinstance(next(iter(c.values())), (dict, type(None))))
 
 
 def _want(want: Any) -> Any:
@@ -118,65 +158,182 @@ def _expect_calls(run: TreeRun, expected: List[Any]) -> List[str]:
     return problems
 
 
-def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
-                      out: Optional[TextIO] = None) -> List[bool]:
-    """Run every scenario of a file; one PASS/FAIL line each. TreeErrors for a bad file."""
-    out = out or sys.stdout
+class _Scenario:
+    """One scenario of a file, checked and ready to run."""
+
+    def __init__(self, name: str, test: TreeTest, expect: Any, limits: Dict[str, Any], given: Set[str]):
+        self.name, self.test, self.expect, self.limits, self.given = name, test, expect, limits, given
+
+
+class TickGuard(RunObserver):
+    """Ends a run that ticks ``max_ticks`` times in all, or ``max_ticks_per_instant`` times without the
+    simulated clock moving (loops restarting one another at once: a livelock). ``hit`` says which."""
+
+    def __init__(self, max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT):
+        self.max_ticks, self.max_ticks_per_instant = max_ticks, max_ticks_per_instant
+        self.hit = ""
+        self.ticks = 0
+        self._instant: Optional[float] = None
+        self._same = 0
+
+    def on_tick(self, root: Any, changes: Any, now: float) -> None:
+        self.ticks += 1
+        if now == self._instant:
+            self._same += 1
+        else:
+            self._instant, self._same = now, 1
+        if root.status != Status.RUNNING or self.hit:
+            return
+        if self.ticks >= self.max_ticks:
+            self.hit = ("stopped after %d ticks (max_ticks) at simulated time %g s; raise the scenario key "
+                        "'max_ticks' if this tree needs more" % (self.ticks, now))
+        elif self._same >= self.max_ticks_per_instant:
+            self.hit = ("stopped after %d ticks at simulated time %g s without the clock advancing "
+                        "(max_ticks_per_instant): a livelock, loops restarting at once? Raise the scenario key "
+                        "'max_ticks_per_instant' if this tree needs more" % (self._same, now))
+        else:
+            return
+        # the runner ends the run after a tick that leaves the root done: halt everything, then FAILURE
+        root.stop(Status.INVALID)
+        root.status = Status.FAILURE
+
+
+def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition]) -> _Scenario:
+    """Check one scenario (TreeErrors with positions) and script its mocks and events."""
+    if not isinstance(sc, LMap):
+        raise TreeErrors([TreeError(at, "a scenario is a mapping")])
+    _check_keys(sc, _SCENARIO_KEYS, "scenario")
+    inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value")
+    mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)")
+    expect = _mapping(sc, "expect", at, "expect is a mapping with status, calls, blackboard")
+    _check_keys(expect, _EXPECT_KEYS, "expect")
+    status = str(expect.get("status", "success"))
+    if status.lower() not in ("success", "failure"):
+        raise TreeErrors([TreeError(pos_of(expect, "status", at), "status is success or failure, got %r" % status)])
+    calls = expect.get("calls") or []
+    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
+        raise TreeErrors([TreeError(pos_of(expect, "calls", at), "calls is a list of module.function or "
+                                                                 "{module.function: {input: value}}")])
+    _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value")
+    limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at),
+              "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at),
+              "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at)}
+    test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs))
+    declared = test.tree.inputs
+    errs = [TreeError(inputs.key_pos[k], "the tree declares no input %r%s (its inputs: %s)" % (
+        k, did_you_mean(k, declared), ", ".join(sorted(declared)) or "none")) for k in inputs if k not in declared]
+    missing = sorted(test.tree.required_inputs - set(inputs))
+    if missing:
+        errs.append(TreeError(pos_of(sc, "inputs", at), "the tree needs the input%s %s: give %s in 'inputs'" % (
+            "s" if len(missing) > 1 else "", ", ".join(missing), "them" if len(missing) > 1 else "it")))
+    if errs:
+        raise TreeErrors(errs)
+    for target, outcomes in mocks.items():
+        t_at = mocks.key_pos.get(target, at) if isinstance(mocks, LMap) else at
+        if isinstance(outcomes, LList):
+            outcomes_list, positions = list(outcomes), outcomes.item_pos
+        else:
+            outcomes_list, positions = [outcomes], [pos_of(mocks, target, at)]
+        try:
+            test.mocks[target].script(*[_outcome(o, p) for o, p in zip(outcomes_list, positions)])
+        except MockError as exc:
+            raise TreeErrors([TreeError(t_at, str(exc))])
+    events = sc.get("events") or []
+    if not isinstance(events, list):
+        raise TreeErrors([TreeError(pos_of(sc, "events", at), "events is a list of {at, event, params}")])
+    for j, ev in enumerate(events):
+        ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
+        if not isinstance(ev, LMap) or "event" not in ev:
+            raise TreeErrors([TreeError(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")])
+        _check_keys(ev, ("at", "event", "params"), "event")
+        params = ev.get("params") or {}
+        if not isinstance(params, dict):
+            raise TreeErrors([TreeError(pos_of(ev, "params", ev_at), "params is a mapping of name: value")])
+        try:
+            test.mocks.event(_number(ev, "at", 0.0, ev_at), str(ev["event"]), **dict(params))
+        except MockError as exc:
+            raise TreeErrors([TreeError(ev_at, str(exc))])
+    return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
+                     {k for k in _LIMITS if k in sc})
+
+
+def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None) -> List[_Scenario]:
+    """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file."""
     with open(path, encoding="utf-8") as fh:
         data = load_yaml(fh.read(), path)
     top = Pos(path, 1, 1)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     _check_keys(data, ("tree", "scenarios"), "top-level")
-    tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(data["tree"]))
+    errors = []
     defs = definitions if definitions is not None else default_definitions()
-    results = []
-    for i, sc in enumerate(data["scenarios"]):
-        at = data["scenarios"].item_pos[i]
-        if not isinstance(sc, LMap):
-            raise TreeErrors([TreeError(at, "a scenario is a mapping")])
-        _check_keys(sc, _SCENARIO_KEYS, "scenario")
-        name = str(sc.get("name", "scenario %d" % (i + 1)))
-        test = TreeTest(tree_path, definitions=defs, inputs=dict(sc.get("inputs") or {}))
+    tree = data["tree"]
+    tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(tree))
+    if not isinstance(tree, str) or not tree.strip():
+        errors.append(TreeError(pos_of(data, "tree", top), "tree is the path of a tree file, got %r" % (tree,)))
+    elif not os.path.isfile(tree_path):
+        errors.append(TreeError(pos_of(data, "tree", top), "tree %s: no such file (relative paths are from the "
+                                                           "scenario file's folder)" % tree_path))
+    else:
         try:
-            for target, outcomes in (sc.get("mocks") or {}).items():
-                if not isinstance(outcomes, LList):
-                    outcomes_list = [outcomes]
-                    positions = [pos_of(sc["mocks"], target, at)]
-                else:
-                    outcomes_list, positions = list(outcomes), outcomes.item_pos
-                test.mocks[target].script(*[_outcome(o, p) for o, p in zip(outcomes_list, positions)])
-            events = sc.get("events") or []
-            for j, ev in enumerate(events):
-                ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
-                if not isinstance(ev, LMap) or "event" not in ev:
-                    raise TreeErrors([TreeError(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")])
-                _check_keys(ev, ("at", "event", "params"), "event")
-                params = ev.get("params") or {}
-                if not isinstance(params, dict):
-                    raise TreeErrors([TreeError(pos_of(ev, "params", ev_at), "params is a mapping of name: value")])
-                test.mocks.event(_number(ev, "at", 0.0, ev_at), str(ev["event"]), **dict(params))
-        except MockError as exc:
-            raise TreeErrors([TreeError(pos_of(sc, "mocks", at), str(exc))])
-        expect = sc.get("expect") or {}
-        if isinstance(expect, LMap):
-            _check_keys(expect, _EXPECT_KEYS, "expect")
+            load_tree(tree_path, defs)   # the tree itself, before the scenarios give it inputs
+        except TreeErrors as exc:
+            errors.extend(exc.errors)
+    if not data["scenarios"]:
+        errors.append(TreeError(pos_of(data, "scenarios", top), "scenarios is empty: write at least one scenario"))
+    if errors:
+        raise TreeErrors(errors)
+    scenarios = []
+    for i, sc in enumerate(data["scenarios"]):
+        try:
+            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs))
+        except TreeErrors as exc:
+            errors.extend(exc.errors)
+    if errors:
+        raise TreeErrors(errors)
+    return scenarios
+
+
+def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
+    """Run one scenario; its problems (none: PASS)."""
+    limits = s.limits
+    guard = TickGuard(limits["max_ticks"], limits["max_ticks_per_instant"])
+    run = s.test.run(max_duration=limits["max_duration"], observers=[guard])
+    if guard.hit:
+        return run, [guard.hit]
+    stopped = run.reason == "stopped after %g s" % limits["max_duration"]
+    if stopped and "max_duration" not in s.given:
+        return run, ["stopped after %g simulated seconds, the default max_duration: the tree did not end; set the "
+                     "scenario key 'max_duration' to raise the limit (or to expect the stop)" % limits["max_duration"]]
+    problems = []
+    expect = s.expect
+    want_status = str(expect.get("status", "success")).upper()
+    if run.status.value != want_status:
+        problems.append("status %s, expected %s%s" % (run.status.value, want_status,
+                                                      " (%s)" % run.reason if run.reason else ""))
+        if stopped:
+            problems.append("the run reached the scenario's max_duration (%g s of simulated time); raise it if "
+                            "the tree needs longer" % limits["max_duration"])
+    if "calls" in expect:
+        problems.extend(_expect_calls(run, list(expect["calls"] or [])))
+    bb = run.blackboard
+    for k, v in (expect.get("blackboard") or {}).items():
+        if bb.get(k) != v:
+            problems.append("blackboard %s is %r, expected %r" % (k, bb.get(k), v))
+    return run, problems
+
+
+def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
+                      out: Optional[TextIO] = None) -> List[bool]:
+    """Run every scenario of a file (all checked first); one PASS/FAIL line each. TreeErrors for a bad file."""
+    out = out or sys.stdout
+    results = []
+    for s in load_scenario_file(path, definitions):
         t0 = time.perf_counter()
-        run = test.run(max_duration=_number(sc, "max_duration", 3600.0, at))
+        run, problems = _run(s)
         ms = (time.perf_counter() - t0) * 1000
-        problems = []
-        want_status = str(expect.get("status", "success")).upper()
-        if run.status.value != want_status:
-            problems.append("status %s, expected %s%s" % (run.status.value, want_status,
-                                                          " (%s)" % run.reason if run.reason else ""))
-        if "calls" in expect:
-            problems.extend(_expect_calls(run, list(expect["calls"] or [])))
-        bb = run.blackboard
-        for k, v in (expect.get("blackboard") or {}).items():
-            if bb.get(k) != v:
-                problems.append("blackboard %s is %r, expected %r" % (k, bb.get(k), v))
         ok = not problems
-        out.write("%s %s: %s (%d calls, %.1f ms)\n" % ("PASS" if ok else "FAIL", path, name, len(run.calls()), ms))
+        out.write("%s %s: %s (%d calls, %.1f ms)\n" % ("PASS" if ok else "FAIL", path, s.name, len(run.calls()), ms))
         for p in problems:
             out.write("    %s\n" % p)
         results.append(ok)

@@ -145,6 +145,14 @@ def test_templates_fill_text_and_escape_braces(tree):
     assert said(run) == ["I found the apple in the kitchen: {literally} 3 at x=1.5", "$5 for abc"]
 
 
+@pytest.mark.parametrize("doubling", ['"$(s + s)"', '"{s}{s}"'])
+def test_a_text_doubled_in_a_loop_fails_at_the_size_limit_instead_of_taking_all_memory(tree, doubling):
+    t = tree("  repeat: 64\n  child:\n    set: {s: %s}\n" % doubling, "  s: {default: x}\n")
+    run = t.run()
+    assert not run.succeeded
+    assert "characters long, more than the 1048576 a value may have" in run.reason, run.reason
+
+
 def test_template_errors_are_found_before_running(tmp_path):
     errs = errors_of(tmp_path, "format: 1\ninputs:\n  object: {default: apple}\nroot:\n"
                                "  call: speech.say\n  inputs: {text: \"the {objet} is {here\"}\n")

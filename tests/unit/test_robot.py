@@ -111,6 +111,23 @@ def test_blackboard_dump_of_a_file_that_is_not_a_store(tmp_path, capsys):
     assert path.read_text() == "hello, I am text\n" * 100  # untouched
 
 
+def test_blackboard_dump_never_writes_into_the_file_it_is_given(tmp_path, capsys):
+    import sqlite3
+
+    empty = tmp_path / "notes.yaml"
+    empty.write_text("")
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(str(other)) as db:
+        db.execute("CREATE TABLE mine (x)")
+    before = other.read_bytes()
+    for path in (empty, other):
+        assert main(["blackboard", "dump", "--db", str(path)]) == 2
+        assert "is not a Blackboard store (it has no table of Blackboard values)" in capsys.readouterr().err
+    assert empty.read_bytes() == b"" and other.read_bytes() == before
+    assert main(["blackboard", "dump", "--db", str(tmp_path)]) == 2
+    assert "is not a Blackboard store (not a file)" in capsys.readouterr().err
+
+
 def test_blackboard_dump_of_an_unknown_name_says_so(tmp_path, capsys):
     from blackboard.store import Store
 
@@ -254,6 +271,47 @@ def test_an_exception_while_loading_the_class_file_names_file_and_line(tmp_path)
     out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"), "--class", "%s:Gripper" % bad)
     assert out.returncode == 2
     assert out.stderr.strip() == "error: %s:2: ZeroDivisionError: division by zero" % bad
+
+
+def test_a_class_file_that_is_not_python_or_a_class_not_of_basic_module_is_one_line(no_master, tmp_path, capsys):
+    binary = tmp_path / "binary.py"
+    binary.write_bytes(b"class Gripper:\n    pass\0\n")
+    plain = tmp_path / "plain.py"
+    plain.write_text("class Gripper:\n    def open(self, width):\n        return {}\n")
+    definition = os.path.join(GRIPPER, "gripper.json")
+    out = _module_main("--definition", definition, "--class", "%s:Gripper" % binary)
+    assert out.returncode == 2
+    assert out.stderr.strip() == "error: %s: not a Python source file (it contains NUL bytes)" % binary
+    out = _module_main("--definition", definition, "--class", "%s:Gripper" % plain)
+    assert out.returncode == 2
+    assert out.stderr.strip() == ("error: %s: Gripper is not a subclass of BasicModule (from modules.runtime import "
+                                  "BasicModule; class Gripper(BasicModule): ...)" % plain)
+    out = _module_main("--definition", definition, "--class", "%s:Gripper" % plain, "--node-name", "bad//name")
+    assert out.returncode == 2 and "argument --node-name: 'bad//name' is not a node name" in out.stderr
+    assert main(["run", "--sim", "--module", "%s=%s:Gripper" % (definition, binary), GRASP]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "%s: not a Python source file (source code string cannot contain null bytes)" % binary)
+
+
+@pytest.mark.parametrize("address, says", [
+    ("not an ip", "--ros-ip 'not an ip' is not an IP address"),
+    ("999.999.1.1", "--ros-ip '999.999.1.1' is not an IP address"),
+    ("192.0.2.1", "--ros-ip 192.0.2.1 is not an address of this machine"),  # TEST-NET-1: never assigned
+])
+def test_ros_ip_must_be_an_address_of_this_machine(no_master, capsys, address, says):
+    assert main(["run", "--sim", "--ros-ip", address, FIND_APPLE]) == 2
+    out = capsys.readouterr()
+    assert says in out.err and "starting the simulated robot" not in out.out
+
+
+@pytest.mark.parametrize("uri", ["notaurl", "", "http://127.0.0.1:99999/", "localhost:11311"])
+def test_a_master_uri_that_is_not_an_address_is_an_environment_error(monkeypatch, capsys, uri):
+    monkeypatch.setenv("ROS_MASTER_URI", uri)
+    for argv in (["modules", "--live", "--wait", "0"], ["run", FIND_APPLE, "--wait", "0"], ["control", "pause"]):
+        assert main(argv) == 3
+        err = capsys.readouterr().err
+        assert "ROS_MASTER_URI=%r is not a master's address: expected http://HOST:PORT/" % uri in err, err
+        assert "Traceback" not in err
 
 
 def test_run_module_option_errors(no_master, capsys):
@@ -400,3 +458,53 @@ def test_package_xml_names_its_dependencies_by_rosdep_keys():
     deps = {e.text for e in root if e.tag.endswith("depend")}
     assert {"catkin", "rospy", "std_msgs", "geometry_msgs", "rospy_message_converter", "py_trees",
             "python3-yaml", "python3-jsonschema"} <= deps
+
+
+
+# launch files: relative paths are from where roslaunch was started -------------------------------
+LAUNCH_PATH_ARGS = {"module": ("definition", "class"), "run": ("tree", "modules"), "sim": ("world",), "blackboard": ("db",)}
+
+
+def _launch_uses(name):
+    """The <arg>s of launch/NAME.launch and (element, attribute, value) of each attribute using one."""
+    root = ET.parse(os.path.join(ROOT, "launch", "%s.launch" % name)).getroot()
+    return list(root.iter("arg")), [(e, k, v) for e in root.iter() for k, v in e.attrib.items() if "arg" in v]
+
+
+def test_launch_file_path_args_are_made_absolute_against_the_launch_directory():
+    for name, paths in LAUNCH_PATH_ARGS.items():
+        uses = _launch_uses(name)[1]
+        for arg in paths:
+            used = [(k, v) for _, k, v in uses if k not in ("if", "unless") and ("$(arg %s)" % arg in v or "arg('%s')" % arg in v)]
+            assert used, (name, arg)
+            for k, v in used:  # only inside an $(eval) that joins it to $PWD
+                assert v.startswith("$(eval ") and "(str(arg('%s')), optenv('PWD'))" % arg in v, (name, k, v)
+                assert "$(arg %s)" % arg not in v, (name, k, v)
+
+
+def test_launch_file_path_args_resolve_with_roslaunch_substitution(monkeypatch):
+    from roslaunch import substitution_args
+    monkeypatch.setenv("PWD", "/home/me/robot")
+
+    def resolved(name, **given):
+        decl, uses = _launch_uses(name)
+        args = dict({a.get("name"): a.get("default", "") for a in decl}, **given)
+        return {"%s %s" % (e.get("name"), k): substitution_args.resolve_args(v, {"arg": dict(args)})
+                for e, k, v in uses if "optenv('PWD')" in v}
+
+    assert resolved("module", module="g", definition="defs/g.json", **{"class": "g.py:G"}) == {
+        "definition value": "/home/me/robot/defs/g.json", "class value": "/home/me/robot/g.py:G",
+        "bm_$(arg module) args": "--definition /home/me/robot/defs/g.json "}
+    assert resolved("module", module="g", definition="/opt/g.json", bridge_args="-x 1", **{"class": "my.g:G"}) == {
+        "definition value": "/opt/g.json", "class value": "my.g:G",  # a module, not a file: as given
+        "bm_$(arg module) args": "--definition /opt/g.json -x 1"}
+    assert resolved("module", module="g", definition="g.json", **{"class": "/opt/g.py:G"})["class value"] == "/opt/g.py:G"
+    assert resolved("run", tree="trees/t.yaml", set="object=book", modules="defs") == {
+        "coordinator args": "run -q /home/me/robot/trees/t.yaml --set object=book", "modules value": "/home/me/robot/defs"}
+    assert resolved("run", tree="/srv/t.yaml")["coordinator args"] == "run -q /srv/t.yaml"
+    assert set(resolved("sim", world="w.yaml").values()) == {"/home/me/robot/w.yaml"}
+    assert set(resolved("sim", world="/srv/w.yaml").values()) == {"/srv/w.yaml"}
+    assert resolved("blackboard", db="bb.sqlite") == {"db value": "/home/me/robot/bb.sqlite"}
+    assert resolved("blackboard", db=":memory:") == {"db value": ":memory:"}
+    monkeypatch.delenv("PWD")  # no $PWD: the path is passed on as given
+    assert resolved("blackboard", db="bb.sqlite") == {"db value": "bb.sqlite"}

@@ -1,9 +1,19 @@
 """``bmtree test``: declarative YAML scenarios."""
 from __future__ import annotations
 
+import io
 import os
+import re
+import subprocess
+import sys
 
 from coordinator.cli import main as bmtree
+from coordinator.testing.scenario import (
+    DEFAULT_MAX_TICKS,
+    DEFAULT_MAX_TICKS_PER_INSTANT,
+    TickGuard,
+    run_scenario_file,
+)
 from tests.conftest import ROOT, TREES
 
 SCENARIOS = os.path.join(ROOT, "tests", "scenarios", "find_apple.scenarios.yaml")
@@ -35,3 +45,177 @@ def test_invalid_scenario_file(tmp_path, capsys):
                  % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 2
     assert "unknown output 'volume'" in capsys.readouterr().err
+
+
+# every scenario ends ------------------------------------------------------------------------------
+# A selector re-checking its first child on every tick (memory: false) over a repeat and a for_each
+# that restart one another at once: the repeat succeeds once (x is b), resets x and halts the for_each;
+# its second run fails; the for_each starts again and writes b ... The simulated clock never moves.
+LIVELOCK = """format: 1
+name: livelock
+inputs:
+  x: {default: a}
+root:
+  selector:
+    memory: false
+    children:
+      - repeat: 2
+        child:
+          sequence:
+            - check: x == "b"
+            - set: {x: a}
+      - for_each: [a, b]
+        as: x
+        child:
+          %s
+"""
+
+
+def _files(tmp_path, scenarios, leaf="set: {y: 1}"):
+    (tmp_path / "livelock.yaml").write_text(LIVELOCK % leaf)
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: livelock.yaml\nscenarios:\n" + scenarios)
+    return str(f)
+
+
+def test_a_livelock_at_one_simulated_instant_is_a_fail_naming_the_limit(tmp_path):
+    path = _files(tmp_path, "  - name: spins\n    expect: {status: failure}\n")
+    # a subprocess with a timeout: without the guard this run never ends
+    out = subprocess.run([sys.executable, "-m", "coordinator", "test", path], cwd=ROOT, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "Traceback" not in out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("FAIL %s: spins" % path)  # even though FAILURE was expected
+    assert lines[1] == ("    stopped after %d ticks at simulated time 0 s without the clock advancing "
+                        "(max_ticks_per_instant): a livelock, loops restarting at once? Raise the scenario key "
+                        "'max_ticks_per_instant' if this tree needs more" % DEFAULT_MAX_TICKS_PER_INSTANT)
+    assert lines[-1] == "0 passed, 1 failed"
+
+
+def test_a_livelock_in_which_the_clock_creeps_hits_max_ticks(tmp_path):
+    path = _files(tmp_path, "  - name: creeps\n    max_ticks: 2000\n", leaf="wait: 0.001")
+    out = io.StringIO()
+    assert run_scenario_file(path, out=out) == [False]
+    assert "    stopped after 2000 ticks (max_ticks) at simulated time " in out.getvalue()
+    assert "raise the scenario key 'max_ticks' if this tree needs more" in out.getvalue()
+    assert DEFAULT_MAX_TICKS >= 100000
+
+
+def test_the_tick_limits_are_scenario_keys(tmp_path):
+    path = _files(tmp_path, "  - name: a few\n    max_ticks_per_instant: 50\n")
+    out = io.StringIO()
+    assert run_scenario_file(path, out=out) == [False]
+    assert "stopped after 50 ticks at simulated time 0 s" in out.getvalue()
+
+
+def test_many_ticks_at_one_instant_that_end_pass(tmp_path):
+    tree = tmp_path / "t.yaml"
+    tree.write_text("format: 1\nroot:\n  for_each: %s\n  as: i\n  child:\n"
+                    "    repeat: 90\n    child:\n      set: {y: $i}\n" % list(range(100)))
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: t.yaml\nscenarios:\n  - name: 9000 ticks at 0 s\n    expect: {blackboard: {y: 99}}\n")
+    out = io.StringIO()
+    assert run_scenario_file(str(f), out=out) == [True], out.getvalue()
+    f.write_text("tree: t.yaml\nscenarios:\n  - name: 9000 ticks at 0 s\n    max_ticks: 1000\n")
+    assert run_scenario_file(str(f), out=out) == [False]
+
+
+def test_max_duration_default_and_given(tmp_path):
+    tree = tmp_path / "t.yaml"
+    tree.write_text("format: 1\nroot:\n  wait: 5000\n")
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: t.yaml\nscenarios:\n"
+                 "  - name: default\n    expect: {status: failure}\n"
+                 "  - name: given, stop expected\n    max_duration: 10\n    expect: {status: failure}\n"
+                 "  - name: given, success expected\n    max_duration: 10\n"
+                 "  - name: raised\n    max_duration: 6000\n")
+    out = io.StringIO()
+    assert run_scenario_file(str(f), out=out) == [False, True, False, True], out.getvalue()
+    text = out.getvalue()
+    assert ("    stopped after 3600 simulated seconds, the default max_duration: the tree did not end; set the "
+            "scenario key 'max_duration' to raise the limit (or to expect the stop)\n") in text
+    assert "    status FAILURE, expected SUCCESS (stopped after 10 s)\n" in text
+    assert "    the run reached the scenario's max_duration (10 s of simulated time); raise it" in text
+
+
+def test_tick_guard_leaves_a_run_that_ends_alone(sim_defs):
+    from coordinator.testing import TreeTest
+
+    test = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
+    ticks = test.run().result.ticks
+    guard = TickGuard(max_ticks=ticks, max_ticks_per_instant=ticks)  # the last tick ends the run
+    assert test.run(observers=[guard]).succeeded and guard.hit == ""
+    guard = TickGuard(max_ticks=ticks - 1)
+    run = test.run(observers=[guard])
+    assert run.failed and run.result.ticks == ticks - 1 and "stopped after %d ticks (max_ticks)" % (ticks - 1) in guard.hit
+
+
+# the whole file is checked before anything runs ---------------------------------------------------------
+def test_an_empty_scenario_list_and_a_missing_tree_are_errors(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: nosuch.yaml\nscenarios: []\n")
+    assert bmtree(["test", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "%s:1:7: tree %s: no such file" % (f, tmp_path / "nosuch.yaml") in err
+    assert "%s:2:12: scenarios is empty: write at least one scenario" % f in err
+    f.write_text("tree: nosuch.yaml\nscenarios:\n  - name: x\n")
+    assert bmtree(["test", str(f)]) == 2
+    assert "%s:1:7: tree %s: no such file" % (f, tmp_path / "nosuch.yaml") in capsys.readouterr().err
+
+
+def test_an_invalid_tree_is_reported_even_without_scenarios(tmp_path, capsys):
+    (tmp_path / "bad.yaml").write_text("format: 1\nroot:\n  call: speech.sya\n")
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: bad.yaml\nscenarios: []\n")
+    assert bmtree(["test", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml:3:9: module 'speech' has no function 'sya'" in err and "scenarios is empty" in err
+
+
+def test_every_scenario_is_checked_before_the_first_runs(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n"
+                 "  - name: fine\n"
+                 "  - name: typo\n    inputs: {objet: book}\n"
+                 "  - name: not a mapping\n    expect: success\n"
+                 "  - name: bad status\n    expect: {status: sucess}\n"
+                 "  - name: bad calls\n    expect: {calls: [speech.say, {a.b: 1}]}\n"
+                 "  - name: limit\n    max_ticks: 0\n" % os.path.join(TREES, "find_apple.yaml"))
+    assert bmtree(["test", str(f)]) == 2
+    captured = capsys.readouterr()
+    assert "PASS" not in captured.out and "FAIL" not in captured.out
+    assert captured.err.splitlines() == [
+        "%s:5:14: the tree declares no input 'objet' (did you mean 'object'?) (its inputs: object, rooms)" % f,
+        "%s:7:13: expect is a mapping with status, calls, blackboard" % f,
+        "%s:9:22: status is success or failure, got 'sucess'" % f,
+        "%s:11:21: calls is a list of module.function or {module.function: {input: value}}" % f,
+        "%s:13:16: max_ticks must be a whole number >= 1, got 0" % f]
+
+
+def test_a_required_input_a_scenario_does_not_give(tmp_path, capsys):
+    (tmp_path / "t.yaml").write_text("format: 1\ninputs:\n  who: {}\nroot:\n  call: speech.say\n"
+                                     "  inputs: {text: $who}\n")
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: t.yaml\nscenarios:\n  - name: x\n  - name: y\n    inputs: {who: Ana}\n")
+    assert bmtree(["test", str(f)]) == 2
+    assert capsys.readouterr().err.strip() == "%s:3:5: the tree needs the input who: give it in 'inputs'" % f
+
+
+def test_the_format_page_shows_the_shipped_file_and_every_key(tmp_path):
+    from coordinator.testing import scenario
+
+    with open(os.path.join(ROOT, "docs", "scenarios.md"), encoding="utf-8") as fh:
+        doc = fh.read()
+    blocks = re.findall(r"```yaml\n(.*?)```", doc, re.S)
+    with open(SCENARIOS, encoding="utf-8") as fh:
+        assert blocks[0] == fh.read()
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n%s" % (os.path.join(TREES, "find_apple.yaml"), blocks[1]))
+    out = io.StringIO()
+    assert run_scenario_file(str(f), out=out) == [True], out.getvalue()
+    for key in scenario._SCENARIO_KEYS + scenario._EXPECT_KEYS + ("tree", "scenarios", "event", "at", "params",
+                                                                  "succeed", "fail", "reject", "hang", "delay"):
+        assert "| `%s` |" % key in doc, key
+    for default in (scenario.DEFAULT_MAX_DURATION, scenario.DEFAULT_MAX_TICKS, scenario.DEFAULT_MAX_TICKS_PER_INSTANT):
+        assert "| `%g` |" % default in doc
