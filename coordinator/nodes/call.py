@@ -138,6 +138,8 @@ class CallKind(NodeKind):
         for q in fn.inputs:
             if q.name not in inputs_raw:
                 p.err(raw.key_pos.get("inputs", at), "%s needs input %r (%s)" % (value, q.name, q.rostype))
+            elif inputs_raw[q.name] is None:  # no message type takes null: the call could never be built
+                p.err(inputs_raw.val_pos[q.name], "input %r: null is not a %s value" % (q.name, q.rostype))
             elif spec.inputs[q.name] is not None and not refs_in(spec.inputs[q.name]):
                 try:  # converted here, once: the call leaf sends these messages as they are
                     spec.static[q.name] = q.convert(spec.inputs[q.name])

@@ -95,6 +95,13 @@ def test_parallel_of_two_non_concurrent_functions_of_one_module_warns(capsys):
     assert bmtree(["check", "--strict", os.path.join(TREES, "find_apple.yaml")]) == 0
 
 
+def test_a_null_input_is_refused_when_the_tree_loads(tmp_path, capsys):
+    path = tmp_path / "null.yaml"
+    path.write_text("format: 1\nroot:\n  call: speech.say\n  inputs: {text: null}\n")
+    assert bmtree(["check", str(path)]) == 2
+    assert capsys.readouterr().err == "%s:4:18: input 'text': null is not a std_msgs/String value\n" % path
+
+
 def test_references_parsed_once_for_values_and_expressions():
     assert parse_ref("$pos.position.x") == Ref("pos", ("position", "x"))
     assert parse_ref("$people[0].name") == Ref("people", (0, "name"))
