@@ -308,6 +308,16 @@ def parse_definition(data: Any, source: str = "<definition>") -> ModuleDefinitio
 _MAX_FILE = 4 << 20
 
 
+def _no_duplicate_keys(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
+    """A JSON object; a key written twice is an error (JSON would silently keep the last)."""
+    out: Dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError("key %r appears twice in one object" % key)
+        out[key] = value
+    return out
+
+
 def load_definition(path: str) -> ModuleDefinition:
     """Load and validate one definition file."""
     try:
@@ -321,7 +331,7 @@ def load_definition(path: str) -> ModuleDefinition:
         raise DefinitionError(["%s: larger than %d characters: not a module definition" % (path, _MAX_FILE)])
     try:
         check_depth(text)
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_no_duplicate_keys)
     except json.JSONDecodeError as exc:
         raise DefinitionError(["%s:%d:%d: invalid JSON: %s" % (path, exc.lineno, exc.colno, exc.msg)])
     except (ProtocolError, ValueError, RecursionError) as exc:

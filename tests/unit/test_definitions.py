@@ -88,3 +88,12 @@ def test_result_validation_against_definition():
     with pytest.raises(ProtocolError, match="missing output 'final_pos'"):
         fn.check_result(FunctionResult(["success"], [Bool(True)]))
     fn.check_result(FunctionResult([], [], status="failed", error="x"))  # failures carry no outputs
+
+
+def test_a_key_written_twice_in_a_definition_is_an_error_not_the_last_one_silently(tmp_path):
+    path = tmp_path / "dup.json"
+    path.write_text('{"Basic Module": "g", "Brief Description": "", "Hardware Required": [], "Functions": '
+                    '[{"Name": "open", "Name": "close", "Description": "", "Input-params": [], "Output-params": []}]}')
+    with pytest.raises(DefinitionError) as info:
+        load_definition(str(path))
+    assert str(info.value) == "%s: invalid JSON: key 'Name' appears twice in one object" % path
