@@ -36,8 +36,9 @@ class PackageExport:
     paths: List[str]
 
 
-def _read_manifest(path: str) -> Optional[ET.Element]:
-    """A package.xml's root element, or None if it is not a sane manifest.
+def _read_manifest(path: str, problems: List[str]) -> Optional[ET.Element]:
+    """A package.xml's root element, or None if it is not a sane manifest (a problem when it
+    mentions bmtree: its definitions would disappear without a word).
 
     No DTDs (so no entity expansion of any kind) and a size bound: ElementTree is then safe.
     """
@@ -48,16 +49,21 @@ def _read_manifest(path: str) -> Optional[ET.Element]:
             data = fh.read(MAX_MANIFEST_BYTES + 1)
     except OSError:
         return None
+    why = ""
     if b"<!DOCTYPE" in data or b"<!ENTITY" in data:
-        return None
-    try:
-        return ET.fromstring(data)
-    except ET.ParseError:
-        return None
+        why = "it declares a DTD or entities, which bmtree does not read"
+    else:
+        try:
+            return ET.fromstring(data)
+        except ET.ParseError as exc:
+            why = "not well-formed XML: %s" % exc
+    if b"bmtree" in data:
+        problems.append("%s: %s; its bmtree export is not used" % (path, why))
+    return None
 
 
 def _export_of(manifest: str, problems: List[str]) -> Optional[PackageExport]:
-    root = _read_manifest(manifest)
+    root = _read_manifest(manifest, problems)
     if root is None or root.tag != "package":
         return None
     name = (root.findtext("name") or "").strip() or os.path.basename(os.path.dirname(manifest))

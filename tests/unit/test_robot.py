@@ -200,11 +200,20 @@ def test_package_search_is_bounded_and_careful(tmp_path):
     bomb.write_text('<?xml version="1.0"?>\n<!DOCTYPE package [<!ENTITY lol "definitions">]>\n'
                     + bomb.read_text().split("\n", 1)[1])
     _package(src, "missing", export='<export><bmtree definitions="nowhere"/></export>')
+    _package(src, "broken", export='<export><bmtree definitions="definitions"/></export>')
+    broken = src / "broken" / "package.xml"
+    broken.write_text(broken.read_text().replace("</package>", ""))
+    _package(src, "unrelated")  # broken too, but not ours to judge: it does not mention bmtree
+    (src / "unrelated" / "package.xml").write_text("<package><name>unrelated</name>")
     (src / "linked").symlink_to(src / "plain")
     problems = []
     found = package_exports(str(src), problems)
     assert [e.package for e in found] == ["plain"]
-    assert len(problems) == 1 and "package missing exports definitions" in problems[0]
+    assert sorted(problems) == sorted([
+        "%s: it declares a DTD or entities, which bmtree does not read; its bmtree export is not used" % bomb,
+        "%s: not well-formed XML: no element found: line %d, column 0; its bmtree export is not used" % (
+            broken, broken.read_text().count("\n") + 1),
+        next(p for p in problems if "package missing exports definitions" in p)])
 
 
 # a module's class at start-up -----------------------------------------------------------------
