@@ -8,6 +8,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
+from comm.errors import did_you_mean
 from modules.outcome import Outcome, OutcomeError, OutcomeKind, outcome_from_dict
 
 __all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault"]
@@ -23,6 +24,17 @@ def _crash(text: str) -> Any:
     def crash(**inputs: Any) -> Any:
         raise RuntimeError(text)
     return crash
+
+
+_WORLD_KEYS = ("rooms", "places", "objects", "people", "start", "speed", "faults")
+
+
+def _sim_functions() -> List[str]:
+    """``module.function`` of every simulated module (the keys ``faults`` may have)."""
+    from modules.definition import load_definitions
+
+    defs = load_definitions([os.path.dirname(os.path.abspath(__file__))])
+    return sorted(fn.qualified for d in defs.values() for fn in d.functions.values())
 
 
 @dataclass
@@ -117,6 +129,14 @@ class World:
     def from_dict(cls, data: Any, source: str = "<world>") -> World:
         if not isinstance(data, dict):
             raise WorldError("%s: the world must be a mapping" % source)
+        for key in data:  # a misspelt key would silently leave its part of the world out
+            if key not in _WORLD_KEYS:
+                raise WorldError("%s: unknown key %r%s (a world has %s)" % (
+                    source, key, did_you_mean(str(key), _WORLD_KEYS), ", ".join(_WORLD_KEYS)))
+        for key in data.get("faults") or {}:
+            if str(key) not in _sim_functions():
+                raise WorldError("%s: faults.%s: not a function of the simulated robot%s" % (
+                    source, key, did_you_mean(str(key), _sim_functions())))
         try:
             rooms = {n: (float(r["x"]), float(r["y"])) for n, r in (data.get("rooms") or {}).items()}
 

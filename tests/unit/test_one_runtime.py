@@ -237,5 +237,5 @@ def test_sim_faults_are_outcomes():
     assert f["speech.say"].outcome.kind == "respond" and f["speech.say"].outcome.delay == 0.5
     assert f["speech.listen"].outcome.kind == "respond" and f["speech.listen"].outcome.fn is None
     assert f["vision.find_object"].outcome.kind == "hang"
-    with pytest.raises(WorldError, match="faults.x.y: an outcome has one of"):
-        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"x.y": {"fail": "a", "hang": True}}})
+    with pytest.raises(WorldError, match="faults.speech.say: an outcome has one of"):
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"speech.say": {"fail": "a", "hang": True}}})

@@ -139,7 +139,11 @@ def test_sim_faults_and_world_errors(sim_defs):
     with pytest.raises(WorldError, match="unknown room 'garage'"):
         World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "objects": {"car": {"room": "garage", "x": 0, "y": 0}}})
     with pytest.raises(WorldError, match="unknown keys explode"):
-        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"x.y": {"explode": True}}})
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"speech.say": {"explode": True}}})
+    with pytest.raises(WorldError, match=r"<world>: unknown key 'fautls' \(did you mean 'faults'\?\)"):
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "fautls": {}})
+    with pytest.raises(WorldError, match=r"faults.navigation.fly: not a function of the simulated robot \(did you"):
+        World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "faults": {"navigation.fly": {"fail": "x"}}})
 
 
 def test_recognition_only_sees_the_current_room(sim_defs):
