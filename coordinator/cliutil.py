@@ -5,9 +5,8 @@ import os
 import sys
 from typing import Any, Dict, List, Optional
 
-import yaml
-
-from coordinator.errors import EnvironmentProblem, UsageError
+from coordinator.errors import EnvironmentProblem, TreeErrors, UsageError
+from coordinator.yamlsrc import load_value
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
@@ -31,15 +30,18 @@ def definitions_from(paths: Optional[List[str]]) -> Dict[str, ModuleDefinition]:
 
 
 def set_values(pairs: Optional[List[str]]) -> Dict[str, Any]:
+    """``--set KEY=VALUE``: YAML values read with the tree files' limits (size, depth, nodes, aliases)."""
     out = {}
     for pair in pairs or []:
         key, sep, value = pair.partition("=")
         if not sep or not key.isidentifier():
             raise UsageError("--set takes KEY=VALUE, got %r" % pair)
         try:
-            out[key] = yaml.safe_load(value) if value else ""
-        except (yaml.YAMLError, RecursionError) as exc:
-            raise UsageError("--set %s: not a plain YAML value: %s" % (key, str(exc).splitlines()[0]))
+            out[key] = load_value(value, "--set " + key) if value else ""
+        except TreeErrors as exc:
+            e = exc.errors[0]
+            where = "column %d" % e.pos.column if e.pos.line == 1 else "line %d, column %d" % e.pos[1:]
+            raise UsageError("--set %s: not a plain YAML value (%s): %s" % (key, where, e.message))
     return out
 
 

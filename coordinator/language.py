@@ -26,12 +26,17 @@ from coordinator.treeast import (
     walk,
 )
 from coordinator.values import literal, loose_dollars
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
+from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 
 __all__ = ["FORMAT", "Parser", "load_tree", "used_modules", "walk"]
 
 FORMAT = 1
+# Parsing, the checks, the builder and py_trees (tick, visitors, display) recurse per level of the tree,
+# includes expanded: at most 5 frames a level (parsing) keeps 100 levels far below Python's 1,000.
+MAX_TREE_DEPTH = 100
+MAX_INCLUDE_DEPTH = 32       # files in a chain of includes
+MAX_REPEATED_NODES = 100000  # nodes that includes of an already-read file add (each include is a copy)
 _TOP_KEYS = ("format", "name", "description", "inputs", "root")
 _INPUT_KEYS = ("default", "description")
 _COMMON = ("name",)
@@ -56,6 +61,9 @@ class Parser:
         self.warnings: List[TreeError] = []
         self.files: Dict[str, TreeFile] = {}
         self.stack: Tuple[str, ...] = ()
+        self.depth = 0   # of the node being parsed, in the tree with its includes expanded
+        self.repeated = 0
+        self._sizes: Dict[TreeNode, Tuple[int, int]] = {}   # see _measure
 
     def err(self, pos: Pos, message: str) -> None:
         self.errors.append(TreeError(pos, message))
@@ -71,8 +79,13 @@ class Parser:
             chain = " -> ".join(os.path.basename(p) for p in stack + (path,))
             self.err(at or Pos(path, 1, 1), "include cycle: %s" % chain)
             return None
+        if len(stack) >= MAX_INCLUDE_DEPTH and at is not None:
+            chain = [os.path.basename(p) for p in stack + (path,)]
+            self.err(at, "includes nest deeper than %d files: this one makes a chain of %d (%s)" % (
+                MAX_INCLUDE_DEPTH, len(chain), " -> ".join(chain[:2] + ["…"] + chain[-2:])))
+            return None
         if path in self.files:
-            return self.files[path]
+            return self._repeat(self.files[path], at)
         rel = os.path.relpath(path)
         shown = rel if not rel.startswith("..") else path
         try:
@@ -80,8 +93,10 @@ class Parser:
         except OSError as exc:
             self.err(at or Pos(shown, 1, 1), "cannot read %s: %s" % (shown, exc.strerror or exc))
             return None
-        except UnicodeDecodeError as exc:
-            self.err(at or Pos(shown, 1, 1), "cannot read %s: not UTF-8 text (byte %d)" % (shown, exc.start))
+        except UnicodeDecodeError as exc:   # where it is, if the loader decoded the whole file at once
+            data = exc.object
+            self.err(Pos(shown, *text_pos(data, exc.start)), "not UTF-8 text: byte 0x%02x" % data[exc.start]
+                     if isinstance(data, bytes) else "cannot read %s: not UTF-8 text" % shown)
             return None
         try:
             data = load_yaml(text, shown)
@@ -95,7 +110,10 @@ class Parser:
         for k in data:
             if k not in _TOP_KEYS:
                 self.err(data.key_pos[k], "unknown top-level key %r%s" % (k, did_you_mean(k, _TOP_KEYS)))
-        if data.get("format") != FORMAT:
+        for key in ("name", "description"):
+            if key in data and not isinstance(data[key], str):
+                self.err(data.val_pos[key], "'%s' must be a string" % key)
+        if data.get("format") != FORMAT or isinstance(data.get("format"), bool):  # True == 1 in Python
             where = data.val_pos.get("format", top)
             self.err(where, "missing or unsupported 'format' (this bmtree reads format: %d)" % FORMAT
                      if "format" in data else "missing 'format: %d' (the tree language version)" % FORMAT)
@@ -117,6 +135,40 @@ class Parser:
             return None
         tree.root = root
         return tree
+
+    def _repeat(self, tree: TreeFile, at: Optional[Pos]) -> Optional[TreeFile]:
+        """A file read before, included again here: its copy must fit the depth and size limits too."""
+        height, size = self._measure(tree.root)
+        if self.depth + height > MAX_TREE_DEPTH:
+            self.err(at or tree.root.pos, "the tree nests deeper than %d levels: %s adds %d levels below level %d"
+                     % (MAX_TREE_DEPTH, os.path.basename(tree.path), height, self.depth))
+            return None
+        self.repeated += size
+        if self.repeated > MAX_REPEATED_NODES:
+            if self.repeated - size <= MAX_REPEATED_NODES:   # said once
+                self.err(at or tree.root.pos, "includes of files already included expand the tree by more "
+                                              "than %d nodes" % MAX_REPEATED_NODES)
+            return None
+        return tree
+
+    def _measure(self, root: TreeNode) -> Tuple[int, int]:
+        """Height and node count of a parsed subtree, includes expanded (iterative, each node once)."""
+        sizes = self._sizes
+        todo = [root]
+        while todo:
+            n = todo[-1]
+            if n in sizes:
+                todo.pop()
+                continue
+            nk = n.nodekind
+            below = nk.expand(n) if nk.own_expand else n.children
+            missing = [c for c in below if c not in sizes]
+            if missing:
+                todo.extend(missing)
+                continue
+            todo.pop()
+            sizes[n] = (1 + max([sizes[c][0] for c in below] or [0]), 1 + sum(sizes[c][1] for c in below))
+        return sizes[root]
 
     def include(self, relpath: str, at: Pos) -> Optional[TreeFile]:
         """A file named relative to the file being parsed."""
@@ -159,6 +211,11 @@ class Parser:
         return self._node(raw)
 
     def _node(self, raw: LMap) -> Optional[TreeNode]:
+        depth = self.depth + 1
+        if depth > MAX_TREE_DEPTH:
+            self.err(raw.pos, "the tree nests deeper than %d levels%s" % (
+                MAX_TREE_DEPTH, " (counting the files that include this one)" if len(self.stack) > 1 else ""))
+            return None
         kind = None
         for k in raw:   # a node has few keys, one of them its kind
             if k in _KINDS:
@@ -188,7 +245,11 @@ class Parser:
         # positions as the loader stores them: each becomes a Pos only if it is read (see yamlsrc.settle)
         file, value_at = raw._file, raw._vp[kind]
         node = TreeNode(kind, name or "", raw._kp[kind], None, None, nk, value_at, file)
-        node.spec = nk.parse(self, node, raw, raw[kind], None if nk.parse_without_pos else node.value_pos)
+        self.depth = depth
+        try:
+            node.spec = nk.parse(self, node, raw, raw[kind], None if nk.parse_without_pos else node.value_pos)
+        finally:
+            self.depth = depth - 1
         if not node.name:
             node.name = nk.default_name(node)
         return node
@@ -357,11 +418,7 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         given: tree inputs the caller will set (e.g. from the command line).
     """
 
-    def read(p: str) -> str:
-        with open(p, encoding="utf-8") as fh:
-            return fh.read()
-
-    parser = Parser(definitions, loader or read)
+    parser = Parser(definitions, loader or read_text)
     with gc_paused():
         tree = parser.load_file(path, None)
         errors = list(parser.errors)

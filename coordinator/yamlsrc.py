@@ -1,14 +1,18 @@
 """YAML with positions: safe loading that remembers where every key and value came from."""
 from __future__ import annotations
 
+import errno
 import operator
+import os
+import stat
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "OnDemandPos", "load_yaml", "pos_of", "settle"]
+__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_value", "load_yaml", "pos_of", "read_text", "settle",
+           "text_pos"]
 
 
 class OnDemandPos:
@@ -99,8 +103,9 @@ class LList(list, OnDemandPos):
 # libyaml's parser when PyYAML was built with it (Debian's is): the same events, ~10x faster.
 _Builder = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
-MAX_NODES = 200000
+MAX_NODES = 200000          # every scalar, container and alias expansion counts
 MAX_DEPTH = 400
+MAX_BYTES = 16 * 1024 * 1024   # a tree file; generous (a 1,000-node tree is ~50 KB)
 _STR = "tag:yaml.org,2002:str"
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 _MERGE = object()        # the '<<' key
@@ -138,6 +143,13 @@ def file_of(loader: Any) -> str:
 
 def _fail(file: str, mark: Any, message: str) -> TreeErrors:
     return TreeErrors([TreeError(_pos(file, mark), message)])
+
+
+def _too_many(file: str, mark: Any, written: int) -> TreeErrors:
+    """The node limit crossed: by the nodes written, or by what aliases repeat (only then blamed)."""
+    if written > MAX_NODES:
+        return _fail(file, mark, "the document has more than %d YAML nodes" % MAX_NODES)
+    return _fail(file, mark, "the document expands to more than %d YAML nodes through its aliases" % MAX_NODES)
 
 
 _PLAIN: Dict[str, str] = {}   # plain scalar text -> its resolved tag (keys and common words repeat a lot)
@@ -216,6 +228,8 @@ def _build(loader: Any, file: str) -> Any:
     anchor: Any = None
     start = 0
     count = 0
+    aliased = 0   # of count, the nodes that aliases repeat
+    max_nodes = MAX_NODES
     depth = 0
     while True:
         event = get()
@@ -232,18 +246,16 @@ def _build(loader: Any, file: str) -> Any:
                     value = _scalar(loader, event)
                 at = event
             count += 1
+            if count > max_nodes:
+                raise _too_many(file, event.start_mark, count - aliased)
             if event.anchor is not None:
                 anchors[event.anchor] = (value, 1)
-                if count > MAX_NODES:
-                    raise _fail(file, event.start_mark, "the document expands to more than %d YAML nodes "
-                                                        "(recursive or repeated aliases?)" % MAX_NODES)
         elif cls is MappingStart or cls is SequenceStart:
             count += 1
             depth += 1
             mark = event.start_mark
-            if count > MAX_NODES:
-                raise _fail(file, mark, "the document expands to more than %d YAML nodes "
-                                        "(recursive or repeated aliases?)" % MAX_NODES)
+            if count > max_nodes:
+                raise _too_many(file, mark, count - aliased)
             if depth > MAX_DEPTH:
                 raise _fail(file, mark, "the document is nested too deeply (more than %d levels)" % MAX_DEPTH)
             if event.tag is not None and event.tag not in _PLAIN_TAGS and not event.implicit:
@@ -274,14 +286,14 @@ def _build(loader: Any, file: str) -> Any:
                 anchors[anchor] = (value, count - start + 1)
             container, item_pos, key_pos, val_pos, key, key_at, merges, anchor, start = stack.pop()
         elif cls is Alias:
-            if event.anchor not in anchors:
+            if event.anchor not in anchors:   # also inside its own anchor: a recursive value
                 raise _fail(file, event.start_mark, "found undefined alias %r" % event.anchor)
             value, size = anchors[event.anchor]
             count += size
+            aliased += size
             at = event.start_mark
-            if count > MAX_NODES:
-                raise _fail(file, event.start_mark, "the document expands to more than %d YAML nodes "
-                                                    "(recursive or repeated aliases?)" % MAX_NODES)
+            if count > max_nodes:
+                raise _too_many(file, event.start_mark, count - aliased)
         else:
             raise _fail(file, event.start_mark, "unexpected YAML event %s" % cls.__name__)
         if container is None:
@@ -311,9 +323,53 @@ def _build(loader: Any, file: str) -> Any:
     return value
 
 
+def text_pos(text: Any, index: int) -> Tuple[int, int]:
+    """Line and column (from 1, in characters) of ``text[index]``; for bytes, of the character at byte ``index``."""
+    nl = b"\n" if isinstance(text, bytes) else "\n"
+    start = text.rfind(nl, 0, index) + 1
+    head = text[start:index]
+    column = len(head.decode("utf-8", "replace") if isinstance(head, bytes) else head) + 1
+    return text.count(nl, 0, index) + 1, column
+
+
+def _unencodable(text: str, index: int) -> str:
+    """What a lone surrogate in a text stands for: an undecodable byte (Python decodes command-line
+    arguments with ``surrogateescape``), or itself."""
+    c = ord(text[index])
+    return "not UTF-8 text: byte 0x%02x" % (c - 0xDC00) if 0xDC80 <= c <= 0xDCFF else \
+        "YAML error: unacceptable character #x%04x" % c
+
+
+def _first_line(exc: Exception) -> str:
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+
+
+def read_text(path: str, limit: Optional[int] = None) -> str:
+    """A text file of at most ``limit`` bytes (MAX_BYTES), read no further than that (``/dev/zero`` or a
+    huge file must not fill the memory); devices are refused (a terminal would wait for input). Raises
+    OSError, and UnicodeDecodeError over the whole bytes (see :func:`text_pos`)."""
+    limit = MAX_BYTES if limit is None else limit
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO without a writer: no wait at open
+    with os.fdopen(fd, "rb") as fh:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) or stat.S_ISSOCK(mode):
+            raise OSError(errno.EINVAL, "not a regular file")
+        os.set_blocking(fd, True)   # a pipe (bash's <(...)) is read as a file
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise OSError(errno.EFBIG, "larger than %d MiB" % (limit >> 20) if limit >= 1 << 20
+                      else "larger than %d bytes" % limit)
+    return data.decode("utf-8")
+
+
 def load_yaml(text: str, file: str) -> Any:
     """Parse one YAML document (safe loader only); syntax errors become TreeErrors."""
-    loader = _Builder(text)
+    if len(text) > MAX_BYTES:   # a file read otherwise than with read_text (characters: at least as many bytes)
+        raise TreeErrors([TreeError(Pos(file, 1, 1), "the document is larger than %d MiB" % (MAX_BYTES >> 20))])
+    try:
+        loader = _Builder(text)
+    except UnicodeEncodeError as exc:   # libyaml reads UTF-8: lone surrogates cannot be given to it
+        raise TreeErrors([TreeError(Pos(file, *text_pos(text, exc.start)), _unencodable(text, exc.start))])
     loader.bmtree_file = file  # for errors raised while constructing scalars
     try:
         return _build(loader, file)
@@ -322,11 +378,46 @@ def load_yaml(text: str, file: str) -> Any:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        raise TreeErrors([TreeError(Pos(file, line, col), "YAML syntax error: %s" % (exc.problem or exc))])
+        raise TreeErrors([TreeError(Pos(file, line, col), "YAML syntax error: %s" % (
+            exc.problem or _first_line(exc)))])
+    except yaml.reader.ReaderError as exc:   # libyaml's position counts bytes: the first such character is it
+        char = exc.character if isinstance(exc.character, int) else 0
+        at = text.find(chr(char))
+        raise TreeErrors([TreeError(Pos(file, *text_pos(text, at if at >= 0 else min(exc.position, len(text)))),
+                                    "YAML error: unacceptable character #x%04x: %s" % (char, exc.reason))])
     except yaml.YAMLError as exc:
-        raise TreeErrors([TreeError(Pos(file, 1, 1), "YAML error: %s" % exc)])
+        raise TreeErrors([TreeError(Pos(file, 1, 1), "YAML error: %s" % _first_line(exc))])
     finally:
         loader.dispose()
+
+
+def _plain(value: Any) -> Any:
+    """A loaded value as plain dicts and lists (iterative: values nest up to MAX_DEPTH levels)."""
+    if not isinstance(value, (dict, list)):
+        return value
+    made: Dict[int, Any] = {}   # by id: a shared (aliased) value stays one object
+    out = {} if isinstance(value, dict) else []
+    made[id(value)] = out
+    todo = [(value, out)]
+    while todo:
+        src, dst = todo.pop()
+        for k, v in (src.items() if isinstance(src, dict) else enumerate(src)):
+            if isinstance(v, (dict, list)):
+                copy = made.get(id(v))
+                if copy is None:
+                    copy = made[id(v)] = {} if isinstance(v, dict) else []
+                    todo.append((v, copy))
+                v = copy
+            if isinstance(dst, dict):
+                dst[k] = v
+            else:
+                dst.append(v)
+    return out
+
+
+def load_value(text: str, name: str) -> Any:
+    """One value given outside a file (``--set``): the limits of tree files, plain dicts and lists."""
+    return _plain(load_yaml(text, name))
 
 
 def pos_of(container: Any, key: Any = None, default: Any = None) -> Pos:

@@ -41,7 +41,7 @@ from coordinator.language import load_tree
 from coordinator.runevents import RunObserver
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
+from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
@@ -259,9 +259,15 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
 
 def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None) -> List[_Scenario]:
     """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file."""
-    with open(path, encoding="utf-8") as fh:
-        data = load_yaml(fh.read(), path)
     top = Pos(path, 1, 1)
+    try:  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
+        text = read_text(path)
+    except OSError as exc:
+        raise TreeErrors([TreeError(top, "cannot read %s: %s" % (path, exc.strerror or exc))])
+    except UnicodeDecodeError as exc:
+        raise TreeErrors([TreeError(Pos(path, *text_pos(exc.object, exc.start)),
+                                    "not UTF-8 text: byte 0x%02x" % exc.object[exc.start])])
+    data = load_yaml(text, path)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     _check_keys(data, ("tree", "scenarios"), "top-level")

@@ -9,7 +9,15 @@ import pytest
 from coordinator.cli import main as bmtree
 from coordinator.errors import TreeErrors
 from coordinator.expr import Expr, ExprError
-from coordinator.language import load_tree, used_modules, walk
+from coordinator.language import (
+    MAX_INCLUDE_DEPTH,
+    MAX_REPEATED_NODES,
+    MAX_TREE_DEPTH,
+    load_tree,
+    used_modules,
+    walk,
+)
+from coordinator.yamlsrc import MAX_BYTES
 from tests.conftest import DATA, TREES
 
 BAD = os.path.join(DATA, "trees_bad")
@@ -171,3 +179,118 @@ def test_run_refuses_missing_required_inputs_before_starting_anything(capsys):
     env_tree = os.path.join(TREES, "search_room.yaml")
     assert bmtree(["run", "--sim", env_tree]) == 2
     assert "needs the input room: give them with --set KEY=VALUE" in capsys.readouterr().err
+
+
+SAY = "{call: speech.say, inputs: {text: hi}}"
+
+
+def _chain_file(path, levels, inner=SAY, name="t"):
+    """A tree file whose root nests ``levels`` inverters around ``inner``."""
+    path.write_text("format: 1\nname: %s\nroot: %s%s%s\n" % (name, "{inverter: " * levels, inner, "}" * levels))
+    return str(path)
+
+
+def test_a_tree_deeper_than_the_limit_is_an_error_at_the_node_that_crosses_it(tmp_path, sim_defs, capsys):
+    deep = _chain_file(tmp_path / "d.yaml", 250)   # crashed the parser with RecursionError
+    with pytest.raises(TreeErrors) as info:
+        load_tree(deep, sim_defs)
+    column = len("root: ") + 1 + MAX_TREE_DEPTH * len("{inverter: ")
+    assert [str(e) for e in info.value.errors] == [
+        "%s:3:%d: the tree nests deeper than %d levels" % (deep, column, MAX_TREE_DEPTH)]
+    assert bmtree(["check", deep]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_tree_at_the_depth_limit_builds_runs_and_displays(tmp_path):
+    """py_trees ticks, visits, stops and displays recursively, one level at a time: the limit must fit."""
+    import py_trees
+
+    from coordinator.cli import offline_tree
+    from coordinator.testing.kit import TreeTest
+
+    kinds = ["{inverter: %s}", "{sequence: [%s]}", "{force_failure: %s}", "{timeout: 50, child: %s}",
+             "{selector: [%s]}", "{force_success: %s}", "{parallel: [%s]}", "{repeat: 1, child: %s}"]
+    body = SAY
+    for i in range(MAX_TREE_DEPTH - 1):
+        body = kinds[i % len(kinds)] % body
+    path = tmp_path / "limit.yaml"
+    path.write_text("format: 1\nname: at the limit\nroot: %s\n" % body)
+    test = TreeTest(str(path))
+    run = test.run()
+    assert run.said() == ["hi"] and run.status in (py_trees.common.Status.SUCCESS, py_trees.common.Status.FAILURE)
+    _, root = offline_tree(str(path), test.definitions)
+    depth, b = 1, root
+    while b.children:
+        depth, b = depth + 1, b.children[0]
+    assert depth == MAX_TREE_DEPTH
+    assert py_trees.display.unicode_tree(root).count("\n") >= MAX_TREE_DEPTH - 1
+    assert py_trees.display.dot_tree(root, collapse_decorators=False).to_string()
+
+
+def test_includes_count_toward_the_depth_limit(tmp_path, sim_defs):
+    sub = _chain_file(tmp_path / "sub.yaml", 59, name="sub")   # 60 levels
+    # read first at level 2 (fits), then included again below 50 inverters: 52 + 60 levels
+    top = tmp_path / "top.yaml"
+    top.write_text("format: 1\nname: top\nroot:\n  sequence:\n    - include: sub.yaml\n    - %s{include: sub.yaml}%s\n"
+                   % ("{inverter: " * 50, "}" * 50))
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(top), sim_defs)
+    assert [str(e) for e in info.value.errors] == [
+        "%s:6:%d: the tree nests deeper than %d levels: sub.yaml adds 60 levels below level 52"
+        % (top, 7 + 50 * len("{inverter: ") + len("{include: "), MAX_TREE_DEPTH)]
+    # read first where it does not fit: the node that crosses is in sub.yaml
+    top.write_text("format: 1\nname: top\nroot: %s{include: sub.yaml}%s\n" % ("{inverter: " * 50, "}" * 50))
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(top), sim_defs)
+    assert [str(e) for e in info.value.errors] == [
+        "%s:3:%d: the tree nests deeper than %d levels (counting the files that include this one)"
+        % (sub, 7 + 49 * len("{inverter: "), MAX_TREE_DEPTH)]
+
+
+def test_a_long_include_chain_is_an_error_at_the_include_that_crosses_the_limit(tmp_path, sim_defs, capsys):
+    for i in range(200):   # 200 files, each including the next: a RecursionError before
+        inner = "{include: c%d.yaml}" % (i + 1) if i < 199 else SAY
+        (tmp_path / ("c%d.yaml" % i)).write_text("format: 1\nname: c%d\nroot: %s\n" % (i, inner))
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(tmp_path / "c0.yaml"), sim_defs)
+    last = MAX_INCLUDE_DEPTH - 1
+    assert [str(e) for e in info.value.errors] == [
+        "%s:3:17: includes nest deeper than %d files: this one makes a chain of %d "
+        "(c0.yaml -> c1.yaml -> … -> c%d.yaml -> c%d.yaml)" % (tmp_path / ("c%d.yaml" % last), MAX_INCLUDE_DEPTH,
+                                                              MAX_INCLUDE_DEPTH + 1, last, last + 1)]
+    assert load_tree(str(tmp_path / ("c%d.yaml" % (200 - MAX_INCLUDE_DEPTH))), sim_defs).root.kind == "include"
+    assert bmtree(["check", str(tmp_path / "c0.yaml")]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_repeated_includes_cannot_blow_the_tree_up(tmp_path, sim_defs):
+    for i in range(7):   # each file includes the next ten times: 10^6 copies of the last one's leaf
+        root = "{sequence: [%s]}" % ", ".join(["{include: f%d.yaml}" % (i + 1)] * 10) if i < 6 else SAY
+        (tmp_path / ("f%d.yaml" % i)).write_text("format: 1\nname: f%d\nroot: %s\n" % (i, root))
+    with pytest.raises(TreeErrors, match="includes of files already included expand the tree by more than %d "
+                                         "nodes" % MAX_REPEATED_NODES) as info:
+        load_tree(str(tmp_path / "f0.yaml"), sim_defs)
+    assert len(info.value.errors) == 1
+
+
+def test_file_size_cap_devices_and_bad_characters_are_one_line_positioned_errors(tmp_path, sim_defs):
+    big = tmp_path / "big.yaml"
+    big.write_bytes(b"format: 1\nroot: {wait: 0}\n#" + b"x" * MAX_BYTES)
+    for path, message in ((str(big), "%s:1:1: cannot read %s: larger than 16 MiB" % (big, big)),
+                          ("/dev/zero", "/dev/zero:1:1: cannot read /dev/zero: not a regular file")):
+        with pytest.raises(TreeErrors) as info:
+            load_tree(path, sim_defs)
+        assert str(info.value) == message
+    ctl = tmp_path / "ctl.yaml"
+    ctl.write_bytes(b'format: 1\nname: x\nroot: {call: speech.say, inputs: {text: "a\x01b"}}\n')
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(ctl), sim_defs)
+    assert str(info.value) == ("%s:3:43: YAML error: unacceptable character #x0001: control characters are not "
+                               "allowed" % ctl)
+    sub = tmp_path / "sub.yaml"   # in an included file: where it is in that file
+    sub.write_bytes(b"format: 1\nname: sub\n\n# \xc3\xa9\xc3\xa9\nroot: {call: speech.say, inputs: {text: \"\xe9\"}}\n")
+    top = tmp_path / "top.yaml"
+    top.write_text("format: 1\nname: top\nroot: {include: sub.yaml}\n")
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(top), sim_defs)
+    assert str(info.value) == "%s:5:42: not UTF-8 text: byte 0xe9" % sub

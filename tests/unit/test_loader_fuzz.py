@@ -9,6 +9,8 @@ import random
 import shutil
 import time
 
+import pytest
+
 from coordinator.cli import main
 from tests.conftest import ROOT, TREES
 
@@ -109,3 +111,50 @@ def test_mutated_files_exit_0_or_2_without_traceback(tmp_path):
           % (count, codes[0], codes[2], slowest))
     if FULL:
         assert slowest < 10.0
+
+
+def test_hostile_files_are_one_line_errors_with_exit_2(tmp_path):
+    """The audit's files: each is exit 2 with one positioned line, no traceback."""
+    n = 250
+    cases = {
+        "deep.yaml": ("format: 1\nname: d\nroot: " + "{inverter: " * n + "{call: speech.say, inputs: {text: hi}}"
+                      + "}" * n + "\n", ":3:1107: the tree nests deeper than 100 levels"),
+        "ctl.yaml": ('format: 1\nname: x\nroot: {call: speech.say, inputs: {text: "a\x01b"}}\n',
+                     ":3:43: YAML error: unacceptable character #x0001"),
+        "nul.yaml": ("format: 1\nname: x\n\nroot: {wait: 0}\x00\n", ":4:16: YAML error: unacceptable character #x0000"),
+        "many.yaml": ("format: 1\nname: x\ninputs: {a: {default: [" + "1," * 250000 + "1]}}\nroot: {wait: 0}\n",
+                      ":3:4000"),   # the item that crosses the limit: column 400,00x
+    }
+    messages = {"many.yaml": "the document has more than 200000 YAML nodes\n"}   # not blaming aliases
+    for name, (text, wanted) in cases.items():
+        (tmp_path / name).write_bytes(text.encode("utf-8"))
+        code, err = _run(["check", str(tmp_path / name)])
+        assert code == 2 and err.startswith(str(tmp_path / name) + wanted), (name, err)
+        assert err.endswith(messages.get(name, "\n")) and err.count("\n") == 1, (name, err)
+    code, err = _run(["check", "/dev/zero"])   # read without end before
+    assert (code, err) == (2, "/dev/zero:1:1: cannot read /dev/zero: not a regular file\n")
+
+
+def test_set_values_are_loaded_with_the_tree_files_limits(capsys):
+    from coordinator.cliutil import set_values
+    from coordinator.errors import UsageError
+
+    assert set_values(["a=1", "b={x: [1, two]}", "c="]) == {"a": 1, "b": {"x": [1, "two"]}, "c": ""}
+    bomb = "[&a0 [x,x,x,x,x,x,x,x,x,x], " + ", ".join(
+        "&a%d [%s]" % (i, ",".join(["*a%d" % (i - 1)] * 10)) for i in range(1, 8)) + "]"
+    for value, message in (("&a [*a]", "--set object: not a plain YAML value (column 5): found undefined alias 'a'"),
+                           (bomb, "more than 200000 YAML nodes through its aliases"),
+                           ("[" * 500 + "]" * 500, "nested too deeply"),
+                           ("[" + "1," * 250000 + "1]", "--set object: not a plain YAML value (column 400000): the "
+                                                        "document has more than 200000 YAML nodes"),
+                           ("a\nb: [1", "(line 2, column 2): YAML syntax error"),
+                           ("x\udcff", "(column 2): not UTF-8 text: byte 0xff")):
+        t0 = time.monotonic()
+        with pytest.raises(UsageError) as info:
+            set_values(["object=" + value])
+        assert message in str(info.value) and "\n" not in str(info.value)
+        assert time.monotonic() - t0 < 5
+    # exit 2 before anything starts (no simulated robot)
+    assert main(["run", "--sim", os.path.join(TREES, "find_apple.yaml"), "--set", "object=&a [*a]"]) == 2
+    out = capsys.readouterr()
+    assert "found undefined alias 'a'" in out.err and "starting" not in out.out

@@ -219,3 +219,15 @@ def test_the_format_page_shows_the_shipped_file_and_every_key(tmp_path):
         assert "| `%s` |" % key in doc, key
     for default in (scenario.DEFAULT_MAX_DURATION, scenario.DEFAULT_MAX_TICKS, scenario.DEFAULT_MAX_TICKS_PER_INSTANT):
         assert "| `%g` |" % default in doc
+
+
+def test_a_scenario_file_is_read_with_the_tree_files_limits(tmp_path, capsys):
+    from coordinator.cli import main
+
+    bad = tmp_path / "bad.scenarios.yaml"
+    bad.write_bytes(b"tree: x.yaml\nscenarios:\n  - name: a\n    inputs: {s: \"\xff\"}\n")
+    assert main(["test", "/dev/zero"]) == 2  # a device: refused, not read for ever
+    assert main(["test", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "/dev/zero:1:1: cannot read /dev/zero: not a regular file" in err
+    assert "%s:4:18: not UTF-8 text: byte 0xff" % bad in err

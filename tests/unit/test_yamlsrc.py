@@ -4,8 +4,9 @@ from __future__ import annotations
 import pytest
 import yaml
 
+from coordinator import yamlsrc
 from coordinator.errors import TreeErrors
-from coordinator.yamlsrc import load_yaml
+from coordinator.yamlsrc import MAX_NODES, load_value, load_yaml, read_text, text_pos
 
 TEXT = """
 base: &b {x: 1.0, y: -2, ok: yes, none: ~, when: 2024-01-02}
@@ -59,3 +60,61 @@ def test_positions_of_keys_values_items_and_quoted_scalars():
 def test_bad_yaml_is_a_positioned_error(text, message):
     with pytest.raises(TreeErrors, match=message.replace("[", r"\[")):
         load_yaml(text, "t.yaml")
+
+
+def test_every_scalar_counts_toward_the_node_limit_and_only_aliases_are_blamed_for_aliases():
+    flat = "[" + "1," * MAX_NODES + "1]"   # plain scalars alone: no alias to blame
+    with pytest.raises(TreeErrors) as info:
+        load_yaml(flat, "t.yaml")
+    (error,) = info.value.errors
+    assert error.message == "the document has more than %d YAML nodes" % MAX_NODES
+    assert error.pos == ("t.yaml", 1, 2 * MAX_NODES)   # the list and 200,000 scalars: the last one crosses it
+    bomb = "".join("a%d: &a%d [%s]\n" % (i, i, ", ".join(["*a%d" % (i - 1) if i else "x"] * 10)) for i in range(8))
+    with pytest.raises(TreeErrors, match="expands to more than %d YAML nodes through its aliases" % MAX_NODES):
+        load_yaml(bomb, "t.yaml")
+
+
+@pytest.mark.parametrize("text,where,message", [
+    ('format: 1\nname: x\nroot: {call: speech.say, inputs: {text: "a\x01b"}}\n', "t.yaml:3:43",
+     "YAML error: unacceptable character #x0001: control characters are not allowed"),
+    ("é: ü\n# ok\nb: c\x00d\n", "t.yaml:3:5", "YAML error: unacceptable character #x0000: control characters "
+                                             "are not allowed"),
+    ("a: 1\nb: x\udcff\n", "t.yaml:2:5", "not UTF-8 text: byte 0xff"),   # an undecodable command-line byte
+])
+def test_bad_characters_are_one_line_at_their_line_and_column(text, where, message):
+    with pytest.raises(TreeErrors) as info:
+        load_yaml(text, "t.yaml")
+    assert str(info.value) == "%s: %s" % (where, message)
+
+
+def test_text_over_the_size_cap_is_refused_before_parsing(monkeypatch):
+    monkeypatch.setattr(yamlsrc, "MAX_BYTES", 100)
+    with pytest.raises(TreeErrors, match="t.yaml:1:1: the document is larger than"):
+        load_yaml("a: [" + "1, " * 50 + "]", "t.yaml")
+
+
+def test_read_text_reads_no_more_than_the_cap_and_refuses_devices(tmp_path):
+    small = tmp_path / "t.yaml"
+    small.write_bytes(b"a" * 100)
+    assert read_text(str(small), limit=100) == "a" * 100
+    with pytest.raises(OSError, match="larger than 99 bytes"):
+        read_text(str(small), limit=99)
+    with pytest.raises(OSError, match="not a regular file"):
+        read_text("/dev/zero")
+    small.write_bytes(b"a: 1\nb: \xc3\x28\n")
+    with pytest.raises(UnicodeDecodeError) as info:
+        read_text(str(small))
+    assert text_pos(info.value.object, info.value.start) == (2, 4)
+
+
+def test_load_value_gives_plain_containers_with_the_same_limits():
+    value = load_value("{a: &x [1, {b: 2}], c: *x}", "--set v")
+    assert value == {"a": [1, {"b": 2}], "c": [1, {"b": 2}]}
+    assert type(value) is dict and type(value["a"]) is list and type(value["a"][1]) is dict
+    assert value["c"] is value["a"]   # aliases share, as with yaml.safe_load
+    deep = load_value("[" * 300 + "]" * 300, "--set v")
+    for _ in range(299):
+        deep = deep[0]
+    assert deep == []
+    with pytest.raises(TreeErrors, match="nested too deeply"):
+        load_value("[" * 500 + "]" * 500, "--set v")
