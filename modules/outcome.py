@@ -92,8 +92,8 @@ def outcome_from_dict(raw: Any) -> Outcome:
         delay = float(raw.get("delay", 0.0))
     except (TypeError, ValueError):
         raise OutcomeError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
-    if delay < 0:
-        raise OutcomeError("delay must not be negative, got %r" % (raw.get("delay"),))
+    if not delay >= 0 or delay == float("inf"):  # NaN fails the first test
+        raise OutcomeError("delay must be a finite number of seconds, 0 or more, got %r" % (raw.get("delay"),))
     if kind == "succeed":
         outputs = raw["succeed"] or {}
         if not isinstance(outputs, dict):

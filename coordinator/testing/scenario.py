@@ -76,7 +76,7 @@ def _check_keys(m: LMap, allowed: Any, what: str) -> None:
 def _number(m: LMap, key: str, default: float, at: Pos) -> float:
     """``m[key]`` as a non-negative number of seconds, else a positioned error."""
     value = m.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < float("inf"):  # NaN too
         raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))])
     return float(value)
 
@@ -230,6 +230,11 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
         raise TreeErrors(errs)
     for target, outcomes in mocks.items():
         t_at = mocks.key_pos.get(target, at) if isinstance(mocks, LMap) else at
+        if not isinstance(target, str):
+            raise TreeErrors([TreeError(t_at, "mocks: %r is not a module.function" % (target,))])
+        if isinstance(outcomes, list) and not outcomes:
+            raise TreeErrors([TreeError(pos_of(mocks, target, at), "mocks.%s: an empty list of outcomes (leave the "
+                                                                  "function out for the mock's default)" % target)])
         if isinstance(outcomes, LList):
             outcomes_list, positions = list(outcomes), outcomes.item_pos
         else:
@@ -247,12 +252,14 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
             raise TreeErrors([TreeError(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")])
         _check_keys(ev, ("at", "event", "params"), "event")
         params = ev.get("params") or {}
-        if not isinstance(params, dict):
+        if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
             raise TreeErrors([TreeError(pos_of(ev, "params", ev_at), "params is a mapping of name: value")])
         try:
             test.mocks.event(_number(ev, "at", 0.0, ev_at), str(ev["event"]), **dict(params))
         except MockError as exc:
             raise TreeErrors([TreeError(ev_at, str(exc))])
+    if not isinstance(sc.get("name", ""), str):
+        raise TreeErrors([TreeError(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))])
     return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
                      {k for k in _LIMITS if k in sc})
 

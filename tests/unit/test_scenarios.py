@@ -7,6 +7,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from coordinator.cli import main as bmtree
 from coordinator.testing.scenario import (
     DEFAULT_MAX_TICKS,
@@ -231,3 +233,25 @@ def test_a_scenario_file_is_read_with_the_tree_files_limits(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "/dev/zero:1:1: cannot read /dev/zero: not a regular file" in err
     assert "%s:4:18: not UTF-8 text: byte 0xff" % bad in err
+
+
+@pytest.mark.parametrize("scenario, says", [
+    ("  - name: a\n    events: [{event: vision.personSeen, at: .nan}]\n",
+     "4:45: at must be a number of seconds >= 0, got nan"),
+    ("  - name: a\n    events: [{event: vision.personSeen, at: .inf}]\n",
+     "4:45: at must be a number of seconds >= 0, got inf"),
+    ("  - name: a\n    events: [{event: vision.personSeen, params: {5: 1}}]\n",
+     "4:50: params is a mapping of name: value"),
+    ("  - name: a\n    mocks: {5: {succeed: {}}}\n", "4:13: mocks: 5 is not a module.function"),
+    ("  - name: {a: 1}\n", "3:11: name must be text, got {'a': 1}"),
+    ("  - name: a\n    mocks: {speech.say: []}\n",
+     "4:25: mocks.speech.say: an empty list of outcomes (leave the function out for the mock's default)"),
+    ("  - name: a\n    mocks: {speech.say: {succeed: {}, delay: .nan}}\n",
+     "4:25: delay must be a finite number of seconds, 0 or more, got nan"),
+])
+def test_a_scenario_value_of_the_wrong_kind_is_a_positioned_error(tmp_path, capsys, scenario, says):
+    path = tmp_path / "s.scenarios.yaml"
+    path.write_text("tree: %s\nscenarios:\n%s" % (os.path.join(TREES, "find_apple.yaml"), scenario))
+    assert bmtree(["test", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "%s:%s" % (path, says) in err and "Traceback" not in err, err
