@@ -241,7 +241,7 @@ def test_a_scenario_file_is_read_with_the_tree_files_limits(tmp_path, capsys):
     ("  - name: a\n    events: [{event: vision.personSeen, at: .inf}]\n",
      "4:45: at must be a number of seconds >= 0, got inf"),
     ("  - name: a\n    events: [{event: vision.personSeen, params: {5: 1}}]\n",
-     "4:50: params is a mapping of name: value"),
+     "4:49: params is a mapping of name: value"),
     ("  - name: a\n    mocks: {5: {succeed: {}}}\n", "4:13: mocks: 5 is not a module.function"),
     ("  - name: {a: 1}\n", "3:11: name must be text, got {'a': 1}"),
     ("  - name: a\n    mocks: {speech.say: []}\n",
