@@ -73,7 +73,7 @@ class StopSignals:
         """``rospy.init_node`` without rospy's signal handlers; False when a stop signal came first."""
         import rospy
 
-        if self.requested:
+        if self.requested or not self._master_for_private_params():
             return False
         # without a master, init_node retries its registrations for ever, holding rospy's topic
         # lock, which rospy's own shutdown needs too: a stop then ends the process (below)
@@ -87,6 +87,26 @@ class StopSignals:
         rospy.on_shutdown(self._wake)
         rospy.core.add_shutdown_hook(_wake_registration_thread())  # hooks that run once is_shutdown()
         return not self.requested
+
+    def _master_for_private_params(self) -> bool:
+        """Wait for the master when the command line has ``_name:=value`` parameters: ``init_node``
+        sets them on the master at once and raises if it is not there yet, where a node without
+        them waits for it. False if a stop signal came first."""
+        import rosgraph
+
+        if not any(a.startswith("_") and not a.startswith("__") and ":=" in a for a in sys.argv[1:]):
+            return True
+        said = False
+        while not self._stopped:
+            if rosgraph.is_master_online():
+                return True
+            if not said:
+                sys.stderr.write("waiting for the ROS master at %s (this node's _name:=value parameters go "
+                                 "there) ...\n" % rosgraph.get_master_uri())
+                sys.stderr.flush()
+                said = True
+            select.select([self._read_fd], [], [], 0.5)
+        return False
 
     def _stop_start_up(self, started: threading.Event, grace: float = 1.0) -> None:
         """While ``init_node`` runs: after a stop signal it has ``grace`` seconds to return (it
