@@ -358,18 +358,19 @@ def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Op
     out = out or sys.stdout
     defs = default_definitions(modules or ())
     results: List[bool] = []
-    invalid = False
+    invalid = 0  # files
     for path in paths:
         try:
             results.extend(run_scenario_file(path, defs, out))
         except TreeErrors as exc:
             sys.stderr.write(str(exc) + "\n")
-            invalid = True
+            invalid += 1
         except OSError as exc:
             sys.stderr.write("%s: cannot read: %s\n" % (path, exc.strerror or exc))
-            invalid = True
+            invalid += 1
     passed = sum(results)
-    out.write("%d passed, %d failed\n" % (passed, len(results) - passed))
+    out.write("%d passed, %d failed%s\n" % (passed, len(results) - passed, ", %d scenario file%s not valid (above)" % (
+        invalid, " is" if invalid == 1 else "s are") if invalid else ""))
     if invalid:
         return 2
     return 0 if passed == len(results) else 1

@@ -229,8 +229,10 @@ def test_a_scenario_file_is_read_with_the_tree_files_limits(tmp_path, capsys):
     bad = tmp_path / "bad.scenarios.yaml"
     bad.write_bytes(b"tree: x.yaml\nscenarios:\n  - name: a\n    inputs: {s: \"\xff\"}\n")
     assert main(["test", "/dev/zero"]) == 2  # a device: refused, not read for ever
-    assert main(["test", str(bad)]) == 2
-    err = capsys.readouterr().err
+    assert main(["test", str(bad), "/dev/zero"]) == 2
+    out = capsys.readouterr()
+    assert out.out.splitlines()[-1] == "0 passed, 0 failed, 2 scenario files are not valid (above)"
+    err = out.err
     assert "/dev/zero:1:1: cannot read /dev/zero: not a regular file" in err
     assert "%s:4:18: not UTF-8 text: byte 0xff" % bad in err
 
