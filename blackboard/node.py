@@ -10,6 +10,7 @@ module, function and call (:mod:`blackboard.attribution`). Private parameters: `
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Any, List, Optional
 
@@ -61,7 +62,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not stop.init_node("blackboard"):
         return 0
     log_to_rosout()
-    path = args.db or rospy.get_param("~db", "") or default_db_path()
+    path = os.path.expanduser(args.db or rospy.get_param("~db", "") or default_db_path())  # ~/ from a launch file
     keep = args.keep if args.keep is not None else DEFAULT_KEEP
     max_bytes = args.max_bytes if args.max_bytes is not None else DEFAULT_MAX_BYTES
     try:

@@ -77,6 +77,10 @@ def _needs_live_definitions(exc: TreeErrors) -> bool:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    for attr in ("tree", "world", "record"):  # a launch file passes ~/ as written
+        if getattr(args, attr, None):
+            setattr(args, attr, os.path.expanduser(getattr(args, attr)))
+    args.modules = [os.path.expanduser(m) for m in args.modules] if args.modules else args.modules
     from coordinator.builder import build_tree
     from coordinator.clock import RealClock
     from coordinator.context import RunContext

@@ -21,7 +21,7 @@ from comm.errors import InvalidInput
 from coordinator.runstream import Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
-           "new_log_path", "prune", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
+           "new_log_path", "prune", "empty_file", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
 
 DEFAULT_KEEP = 50
 MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
@@ -130,13 +130,18 @@ def plan_run_files(tree_path: str, record: Optional[str], no_record: bool, keep:
     name = os.path.splitext(os.path.basename(tree_path))[0]
     default = new_log_path(directory, run_id, name)
     log_path = None if no_record else (os.path.abspath(record) if record else default)
-    if record and not no_record and os.path.lexists(log_path):
+    if record and not no_record and os.path.lexists(log_path) and not empty_file(log_path):
         if not _is_run_log(log_path):  # the tree itself, or any file of the user's: never appended to
             raise RunLogError("--record %s: the file exists and is not a bmtree run log; bmtree does not write "
                               "into it (choose a new name)" % record)
         os.remove(log_path)  # an earlier run's log: this run's replaces it
     prune(directory, keep - 1)
     return RunFiles(run_id, log_path, default[:-len(_SUFFIX)] + ".sim")
+
+
+def empty_file(path: str) -> bool:
+    """A regular file with nothing in it (``mktemp``'s): nothing of the user's to lose."""
+    return os.path.isfile(path) and os.path.getsize(path) == 0
 
 
 def _is_run_log(path: str) -> bool:

@@ -14,7 +14,7 @@ from typing import Any, Dict, List
 
 import yaml
 
-from coordinator.runlog import RunLog, RunLogError
+from coordinator.runlog import RunLog, RunLogError, empty_file
 
 __all__ = ["scenario_from_log", "write_scenario"]
 
@@ -74,7 +74,7 @@ _HEADER_START = "# Written by 'bmtree replay"
 def write_scenario(log: RunLog, out_path: str) -> None:
     """Write the scenario of ``log`` to ``out_path``: a new file, or one this wrote before (a
     tree or anything else of the user's there is refused, RunLogError, never overwritten)."""
-    if os.path.lexists(out_path):
+    if os.path.lexists(out_path) and not empty_file(out_path):
         try:
             with open(out_path, encoding="utf-8") as fh:
                 ours = fh.read(len(_HEADER_START)) == _HEADER_START

@@ -333,8 +333,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         parser.error("--definition and --class are required (or the private parameters ~definition, ~class)")
 
     try:
-        definition = load_definition(args.definition)
-        factory = load_class(args.cls)
+        definition = load_definition(os.path.expanduser(args.definition))  # a launch file passes ~/ as written
+        factory = load_class(os.path.expanduser(args.cls))
         impl = factory()
     except DefinitionError as exc:
         sys.stderr.write("%s\n" % exc)

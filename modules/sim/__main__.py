@@ -5,6 +5,7 @@ Under roslaunch the private parameters ``~module`` and ``~world`` stand for the 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import List, Optional
 
@@ -27,7 +28,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not args.module:
         parser.error("which module? one of %s (or the private parameter ~module)" % ", ".join(sorted(SIM_CLASSES)))
     try:
-        world = World.load(args.world)
+        world = World.load(os.path.expanduser(args.world))  # a launch file passes ~/ as written
     except WorldError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2

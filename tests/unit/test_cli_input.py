@@ -104,3 +104,14 @@ def test_node_number_options_are_checked_before_the_node_starts(no_master, tmp_p
                              env=dict(os.environ, ROS_HOME=str(tmp_path)))
         assert out.returncode == 2, out.stderr
         assert says in out.stderr and "Traceback" not in out.stderr
+
+
+def test_home_relative_paths_from_a_launch_file_are_expanded(no_master, monkeypatch, tmp_path, capsys):
+    """roslaunch passes world:=~/w.yaml on as written (no shell expands it)."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    (tmp_path / "w.yaml").write_text("rooms: [\n")
+    assert main(["run", "--sim", "--world", "~/w.yaml", FIND_APPLE]) == 2
+    assert capsys.readouterr().err.startswith("error: --world %s:2:1: not valid YAML" % (tmp_path / "w.yaml"))
+    out = subprocess.run([sys.executable, "-m", "modules.sim", "vision", "--world", "~/w.yaml"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=60, env=dict(os.environ, HOME=str(tmp_path)))
+    assert out.returncode == 2 and out.stderr.startswith("error: %s:2:1: not valid YAML" % (tmp_path / "w.yaml"))

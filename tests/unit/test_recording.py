@@ -287,6 +287,13 @@ def test_record_and_scenario_never_write_into_a_users_file(sim_defs, tmp_path, m
     write_scenario(read_log(log_path), str(out))
     write_scenario(read_log(log_path), str(out))  # its own earlier scenario is rewritten
     assert out.read_text().startswith("# Written by 'bmtree replay")
+    empty = tmp_path / "from-mktemp.yaml"  # a file made empty beforehand (mktemp) is the user's choice of name
+    empty.write_text("")
+    write_scenario(read_log(log_path), str(empty))
+    assert empty.read_text().startswith("# Written by 'bmtree replay")
+    empty_log = tmp_path / "from-mktemp.jsonl"
+    empty_log.write_text("")
+    assert plan_run_files(str(tree), str(empty_log), False, 3).log_path == str(empty_log)
 
 
 def test_a_damaged_run_log_is_an_error_that_says_where_and_runs_lists_the_others(sim_defs, tmp_path, capsys):
