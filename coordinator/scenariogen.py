@@ -41,6 +41,14 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     end = log.end
     if end is None:
         raise RunLogError("%s: the run has no end record (it was killed?); a scenario needs its result" % log.path)
+    steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
+    if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
+        first = steered[0]
+        raise RunLogError("%s: the run was steered (%d forced outcome%s or blackboard write%s, the first at %.3fs: %s "
+                          "%s); a scenario replays what the modules did, so it could not end the same way" % (
+                              log.path, len(steered), "s" if len(steered) > 1 else "", "s" if len(steered) > 1 else "",
+                              float(first.get("t") or 0.0), first.get("command"),
+                              " ".join(str(v) for v in (first.get("args") or {}).values())))
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))

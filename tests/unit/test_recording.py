@@ -470,3 +470,24 @@ def test_a_timeout_says_what_was_still_running(sim_defs, tmp_path):
     t.mocks["navigation.go_to"].hang()
     run = t.run()
     assert run.reason == "reach the kitchen in time: timed out after 5s while 'drive' was running"
+
+
+def test_a_scenario_is_refused_for_a_run_whose_outcome_a_person_forced(sim_defs, tmp_path):
+    log_path, _run = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    lines = open(log_path).read().splitlines()
+    run_id = json.loads(lines[0])["run"]
+
+    def control(command, args):
+        return json.dumps({"v": 1, "type": "control", "run": run_id, "t": 0.5, "command": command, "args": args,
+                           "ok": True, "answer": "ok"})
+
+    paused = tmp_path / "paused.jsonl"
+    paused.write_text("\n".join(lines[:-1] + [control("pause", {}), lines[-1]]) + "\n")
+    write_scenario(read_log(str(paused)), str(tmp_path / "paused.yaml"))  # pausing changes no outcome
+    forced = tmp_path / "forced.jsonl"
+    forced.write_text("\n".join(lines[:-1] + [control("force", {"node": "go to the kitchen", "outcome": "FAILURE"}),
+                                              lines[-1]]) + "\n")
+    with pytest.raises(RunLogError, match=r"the run was steered \(1 forced outcome or blackboard write, the first at "
+                                          r"0.500s: force go to the kitchen FAILURE\); a scenario replays"):
+        write_scenario(read_log(str(forced)), str(tmp_path / "forced.yaml"))
+    assert not (tmp_path / "forced.yaml").exists()
