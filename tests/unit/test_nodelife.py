@@ -101,9 +101,8 @@ def test_the_shutdown_hook_wakes_rospys_registration_thread(monkeypatch):
     assert woken.wait(10), "the registration thread was not woken"
 
 
-def test_a_stop_while_no_master_answers_the_start_up_ends_the_node(tmp_path):
-    """rospy.init_node retries its registrations for ever without a master, holding the lock its
-    own shutdown needs: the node must still end, with 0, soon after SIGTERM."""
+def _stopped_without_a_master(tmp_path, *args: str) -> subprocess.CompletedProcess:
+    """A node started with no master (``args``: its command-line arguments), SIGTERM 1.5 s later."""
     import signal
     import time
 
@@ -112,10 +111,10 @@ def test_a_stop_while_no_master_answers_the_start_up_ends_the_node(tmp_path):
 
         stop = StopSignals()
         print("init_node returned", stop.init_node("no_master_yet"), flush=True)
-    """)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    """), *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/", ROS_HOME=str(tmp_path)))
     try:
-        time.sleep(1.5)  # in init_node's registration loop by now
+        time.sleep(1.5)  # in init_node (or waiting for the master) by now
         assert proc.poll() is None, proc.stderr.read()
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=10)
@@ -123,32 +122,22 @@ def test_a_stop_while_no_master_answers_the_start_up_ends_the_node(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 0, err
-    assert "stopped during start-up: no ROS master answered at http://127.0.0.1:9/" in err
+    return subprocess.CompletedProcess(args, proc.returncode, out, err)
+
+
+def test_a_stop_while_no_master_answers_the_start_up_ends_the_node(tmp_path):
+    """rospy.init_node retries its registrations for ever without a master, holding the lock its
+    own shutdown needs: the node must still end, with 0, soon after SIGTERM."""
+    done = _stopped_without_a_master(tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "stopped during start-up: no ROS master answered at http://127.0.0.1:9/" in done.stderr
 
 
 def test_private_parameters_on_the_command_line_wait_for_the_master_and_a_stop_ends_the_wait(tmp_path):
     """rospy sets _name:=value parameters on the master in init_node and raises (a traceback) when
     there is none yet; the node waits for it instead, as one without them does."""
-    import signal
-    import time
-
-    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
-        from comm.nodelife import StopSignals
-
-        stop = StopSignals()
-        print("init_node returned", stop.init_node("no_master_yet"), flush=True)
-    """), "_speed:=2"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/", ROS_HOME=str(tmp_path)))
-    try:
-        time.sleep(1.5)
-        assert proc.poll() is None, proc.stderr.read()
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 0 and "init_node returned False" in out, err
-    assert "waiting for the ROS master at http://127.0.0.1:9/ (this node's _name:=value parameters go there)" in err
-    assert "Traceback" not in err
+    done = _stopped_without_a_master(tmp_path, "_speed:=2")
+    assert done.returncode == 0 and "init_node returned False" in done.stdout, done.stderr
+    assert ("waiting for the ROS master at http://127.0.0.1:9/ (this node's _name:=value parameters go there)"
+            in done.stderr)
+    assert "Traceback" not in done.stderr
