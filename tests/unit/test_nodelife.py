@@ -102,7 +102,8 @@ def test_the_shutdown_hook_wakes_rospys_registration_thread(monkeypatch):
 
 
 def _stopped_without_a_master(tmp_path, *args: str) -> subprocess.CompletedProcess:
-    """A node started with no master (``args``: its command-line arguments), SIGTERM 1.5 s later."""
+    """A node started with no master (``args``: its command-line arguments), SIGTERM 1 s into its start-up."""
+    import select
     import signal
     import time
 
@@ -110,11 +111,14 @@ def _stopped_without_a_master(tmp_path, *args: str) -> subprocess.CompletedProce
         from comm.nodelife import StopSignals
 
         stop = StopSignals()
+        print("handlers installed", flush=True)
         print("init_node returned", stop.init_node("no_master_yet"), flush=True)
     """), *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, ROS_MASTER_URI="http://127.0.0.1:9/", ROS_HOME=str(tmp_path)))
     try:
-        time.sleep(1.5)  # in init_node (or waiting for the master) by now
+        ready, _, _ = select.select([proc.stdout], [], [], 30)  # however slow the machine is to start Python
+        assert ready and proc.stdout.readline() == "handlers installed\n", proc.stderr.read()
+        time.sleep(1.0)  # in init_node (or waiting for the master) by now
         assert proc.poll() is None, proc.stderr.read()
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=10)
