@@ -94,7 +94,9 @@ class StopSignals:
         them waits for it. False if a stop signal came first."""
         import rosgraph
 
-        if not any(a.startswith("_") and not a.startswith("__") and ":=" in a for a in sys.argv[1:]):
+        from comm.nodeopts import node_params
+
+        if not node_params(sys.argv[1:], None):  # None: the arguments only, the master is not asked
             return True
         said = False
         while not self._stopped:

@@ -149,11 +149,17 @@ def _is_run_log(path: str) -> bool:
     if not os.path.isfile(path):
         return False
     try:
-        with open(path, "rb") as fh:
-            head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
+        return _head(path) is not None
     except (OSError, ValueError, RecursionError):
         return False
-    return isinstance(head, dict) and head.get("type") == "tree"
+
+
+def _head(path: str) -> Optional[Dict[str, Any]]:
+    """The first record of ``path`` if it is a run log's ``tree`` record (OSError, ValueError for an
+    unreadable or non-JSON first line)."""
+    with open(path, "rb") as fh:
+        head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
+    return head if isinstance(head, dict) and head.get("type") == "tree" else None
 
 
 class RunLogWriter(Sink):
@@ -309,11 +315,10 @@ def list_runs(directory: str) -> List[RunSummary]:
     out = []
     for path in _logs_in(directory):
         try:
-            with open(path, "rb") as fh:
-                head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
-            tail = _tail_record(path)
-            if not isinstance(head, dict) or head.get("type") != "tree":
+            head = _head(path)
+            if head is None:
                 continue
+            tail = _tail_record(path)
             end = tail if tail is not None and tail.get("type") == "end" else None
             last_t = tail.get("t") if isinstance(tail, dict) else None
             duration = end.get("t") if end else last_t

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, TextIO, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -165,7 +165,9 @@ class TreeRunner:
         if self._visited is not None and self.ctx.observers:
             notify(self.ctx.observers, "on_tick", self.root, self._watcher.changes(visited), self.ctx.clock.now())
 
-    def run(self, max_duration: Optional[float] = None) -> RunResult:
+    def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None) -> RunResult:
+        """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()``
+        gives a reason (asked after each tick; the test kit's tick limits); stopped is FAILURE."""
         ctx = self.ctx
         ctx.transport.connect(ctx.inbox.put)
         self.tree.setup()
@@ -180,9 +182,12 @@ class TreeRunner:
                 if self.root.status in (Status.SUCCESS, Status.FAILURE):
                     break
                 if max_duration is not None and ctx.clock.now() - start >= max_duration:
+                    reason = "stopped after %g s" % max_duration
+                elif stop_when is not None:
+                    reason = stop_when()
+                if reason:
                     self.root.stop(Status.INVALID)
                     self._tell([])
-                    reason = "stopped after %g s" % max_duration
                     break
                 wait = self.period
                 if max_duration is not None:  # wake at the limit, not at the next period after it

@@ -9,7 +9,7 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Set
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Set
 
 import py_trees
 from py_trees.common import Status
@@ -146,9 +146,10 @@ class TreeTest:
             coverage.add_tree(self.tree)
 
     def run(self, max_duration: float = 3600.0, default_timeout: float = 30.0,
-            observers: Sequence[Any] = ()) -> TreeRun:
-        """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds); ``observers`` are
-        :class:`~coordinator.runevents.RunObserver` (e.g. a RunStream writing a run log)."""
+            observers: Sequence[Any] = (), stop_when: Optional[Callable[[], str]] = None) -> TreeRun:
+        """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds, or until ``stop_when()``
+        gives a reason); ``observers`` are :class:`~coordinator.runevents.RunObserver` (e.g. a
+        RunStream writing a run log)."""
         clock = SimClock()
         transport = InProcessTransport(self.mocks, clock)
         ctx = RunContext(transport, clock, self.definitions, default_timeout=default_timeout)
@@ -156,7 +157,7 @@ class TreeTest:
         visitors = [self.coverage.visitor()] if self.coverage is not None else []
         del self.mocks.errors[:]
         result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=observers,
-                            tree=self.tree).run(max_duration)
+                            tree=self.tree).run(max_duration, stop_when)
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
         return TreeRun(result, transport)

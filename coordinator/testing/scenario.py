@@ -166,8 +166,9 @@ class _Scenario:
 
 
 class TickGuard(RunObserver):
-    """Ends a run that ticks ``max_ticks`` times in all, or ``max_ticks_per_instant`` times without the
-    simulated clock moving (loops restarting one another at once: a livelock). ``hit`` says which."""
+    """Counts the ticks of a run; as the runner's ``stop_when`` it ends a run that ticks ``max_ticks``
+    times in all, or ``max_ticks_per_instant`` times without the simulated clock moving (loops
+    restarting one another at once: a livelock). ``hit`` says which."""
 
     def __init__(self, max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT):
         self.max_ticks, self.max_ticks_per_instant = max_ticks, max_ticks_per_instant
@@ -191,11 +192,10 @@ class TickGuard(RunObserver):
             self.hit = ("stopped after %d ticks at simulated time %g s without the clock advancing "
                         "(max_ticks_per_instant): a livelock, loops restarting at once? Raise the scenario key "
                         "'max_ticks_per_instant' if this tree needs more" % (self._same, now))
-        else:
-            return
-        # the runner ends the run after a tick that leaves the root done: halt everything, then FAILURE
-        root.stop(Status.INVALID)
-        root.status = Status.FAILURE
+
+    def __call__(self) -> str:
+        """The runner's ``stop_when``: why to stop, or nothing."""
+        return self.hit
 
 
 def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition]) -> _Scenario:
@@ -311,7 +311,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     """Run one scenario; its problems (none: PASS)."""
     limits = s.limits
     guard = TickGuard(limits["max_ticks"], limits["max_ticks_per_instant"])
-    run = s.test.run(max_duration=limits["max_duration"], observers=[guard])
+    run = s.test.run(max_duration=limits["max_duration"], observers=[guard], stop_when=guard)
     if guard.hit:
         return run, [guard.hit]
     stopped = run.reason == "stopped after %g s" % limits["max_duration"]

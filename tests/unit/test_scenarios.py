@@ -147,9 +147,9 @@ def test_tick_guard_leaves_a_run_that_ends_alone(sim_defs):
     test = TreeTest(os.path.join(TREES, "find_apple.yaml"), definitions=sim_defs)
     ticks = test.run().result.ticks
     guard = TickGuard(max_ticks=ticks, max_ticks_per_instant=ticks)  # the last tick ends the run
-    assert test.run(observers=[guard]).succeeded and guard.hit == ""
+    assert test.run(observers=[guard], stop_when=guard).succeeded and guard.hit == ""
     guard = TickGuard(max_ticks=ticks - 1)
-    run = test.run(observers=[guard])
+    run = test.run(observers=[guard], stop_when=guard)
     assert run.failed and run.result.ticks == ticks - 1 and "stopped after %d ticks (max_ticks)" % (ticks - 1) in guard.hit
 
 
