@@ -6,17 +6,23 @@ halted, still running at the end) hangs; events come at their recorded times. Th
 expectations are the recorded result and the calls in order with their inputs, so
 ``bmtree test`` reproduces the same path on simulated time, and a changed tree
 shows which calls changed.
+
+A run whose log has no end (the coordinator was killed, the robot lost power) becomes a
+scenario of what the tree saw until its last recorded tick: it stops there
+(``max_duration``, so its status is ``failure``) after the same calls; answers and events
+the tree had not ticked on yet are left out, so those calls hang.
 """
 from __future__ import annotations
 
+import math
 import os
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
 from coordinator.runlog import RunLog, RunLogError, empty_file
 
-__all__ = ["scenario_from_log", "write_scenario"]
+__all__ = ["scenario_from_log", "seen_until", "write_scenario"]
 
 
 def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
@@ -35,12 +41,25 @@ def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
     return out
 
 
+def seen_until(log: RunLog) -> Tuple[List[Dict[str, Any]], float]:
+    """A killed run's records up to its last tick, and that tick's time (seconds, rounded up
+    to the microsecond): what the tree had acted on when the log stopped."""
+    last = max((i for i, r in enumerate(log.records) if r.get("type") == "tick"), default=None)
+    if last is None:
+        raise RunLogError("%s: the run has no end record and no tick (it was killed before its first tick); "
+                          "there is nothing to replay" % log.path)
+    t = float(log.records[last].get("t") or 0.0)
+    return log.records[:last + 1], math.ceil(t * 1e6) / 1e6
+
+
 def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     """The scenario file's content for ``log``, with the tree path relative to ``out_path``."""
     tree = log.tree
     end = log.end
+    records = log.records
+    stop_at: Optional[float] = None
     if end is None:
-        raise RunLogError("%s: the run has no end record (it was killed?); a scenario needs its result" % log.path)
+        records, stop_at = seen_until(log)
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
         first = steered[0]
@@ -52,16 +71,19 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
-    ends = {r.get("call_id"): r for r in log.of_type("call_end")}
+    def of_type(kind: str) -> List[Dict[str, Any]]:
+        return [r for r in records if r.get("type") == kind]
+
+    ends = {r.get("call_id"): r for r in of_type("call_end")}
     mocks: Dict[str, List[Dict[str, Any]]] = {}
     calls: List[Dict[str, Any]] = []
-    for start in log.of_type("call_start"):
+    for start in of_type("call_start"):
         target = str(start.get("target"))
         finished = ends.get(start.get("call_id"))
         mocks.setdefault(target, []).append(_outcome(finished) if finished else {"hang": True})
         calls.append({target: dict(start.get("inputs") or {})})
     events = [{"at": r.get("t"), "event": "%s.%s" % (r.get("module"), r.get("event")),
-               "params": dict(r.get("params") or {})} for r in log.of_type("event")]
+               "params": dict(r.get("params") or {})} for r in of_type("event")]
     scenario: Dict[str, Any] = {}
     scenario["name"] = "as recorded in run %s" % tree.get("run")
     if tree.get("inputs"):
@@ -69,9 +91,12 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     scenario["mocks"] = mocks
     if events:
         scenario["events"] = events
-    if tree.get("max_duration") is not None:
+    if stop_at is not None:
+        scenario["max_duration"] = stop_at
+    elif tree.get("max_duration") is not None:
         scenario["max_duration"] = tree["max_duration"]
-    scenario["expect"] = {"status": str(end.get("status", "")).lower(), "calls": calls}
+    status = "failure" if end is None else str(end.get("status", "")).lower()
+    scenario["expect"] = {"status": status, "calls": calls}
     rel = os.path.relpath(os.path.abspath(path), os.path.dirname(os.path.abspath(out_path)))
     return {"tree": rel, "scenarios": [scenario]}
 
@@ -92,10 +117,15 @@ def write_scenario(log: RunLog, out_path: str) -> None:
             raise RunLogError("--scenario %s: the file exists and was not written by 'bmtree replay --scenario'; "
                               "bmtree does not overwrite it (choose a new name)" % out_path)
     data = scenario_from_log(log, out_path)
-    end = log.end or {}
-    header = (_HEADER_START + " %s --scenario': the modules answer as they did in that run,\n"
-              "# and the run must end the same way (%s%s) with the same calls.\n" % (
-                  os.path.basename(log.path), end.get("status"), ": %s" % end.get("reason") if end.get("reason") else ""))
+    end = log.end
+    if end is None:
+        how = ("# The run has no end (it was killed): this stops at its last recorded tick, %gs, after the\n"
+               "# same calls; the calls still running then hang.\n" % data["scenarios"][0]["max_duration"])
+    else:
+        how = "# and the run must end the same way (%s%s) with the same calls.\n" % (
+            end.get("status"), ": %s" % end.get("reason") if end.get("reason") else "")
+    header = (_HEADER_START + " %s --scenario': the modules answer as they did in that run,\n" % (
+        os.path.basename(log.path)) + how)
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=110)
     with open(out_path, "w", encoding="utf-8") as fh:
         fh.write(header + text)

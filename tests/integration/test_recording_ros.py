@@ -150,3 +150,10 @@ def test_a_run_killed_with_kill_9_leaves_a_readable_log(ros_graph, tmp_path):
     shown = bmtree("replay", str(log), env=env)
     assert shown.returncode == 0 and "without the run's end" in shown.stdout, shown.stdout + shown.stderr
     assert "RUNNING   go to the kitchen" in shown.stdout
+    # the killed run as a test: the same calls until its last tick, the navigation still running
+    scenario = str(tmp_path / "killed.yaml")
+    made = bmtree("replay", str(log), "--scenario", scenario, env=env)
+    assert made.returncode == 0, made.stdout + made.stderr
+    assert "it was killed" in open(scenario).read()
+    passed = bmtree("test", scenario, env=env)
+    assert passed.returncode == 0 and "1 passed, 0 failed" in passed.stdout, passed.stdout + passed.stderr

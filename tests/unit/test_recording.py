@@ -9,6 +9,7 @@ import types
 
 import py_trees
 import pytest
+import yaml
 from py_trees.common import Status
 
 from coordinator import cli
@@ -444,13 +445,35 @@ def test_scenario_from_a_run_passes_and_a_changed_tree_shows_the_changed_calls(s
                     '+ navigation.go_to {"place": "kitchen"}', '+ navigation.go_to {"place": "kitchen"}']
 
 
-def test_scenario_needs_the_end_of_the_run(sim_defs, tmp_path):
-    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
-    lines = open(log_path).read().splitlines()
-    cut = tmp_path / "cut.jsonl"
-    cut.write_text("\n".join(lines[:-1]) + "\n")
-    with pytest.raises(RunLogError, match="no end record"):
-        write_scenario(read_log(str(cut)), str(tmp_path / "s.yaml"))
+def test_a_killed_run_becomes_a_scenario_of_what_the_tree_saw_until_its_last_tick(sim_defs, tmp_path):
+    def slow_navigation(m):
+        m["navigation.go_to"].script(succeed(room="kitchen", delay=4.0))
+
+    log_path, _ = recorded(GO, sim_defs, tmp_path, slow_navigation)
+    records = [json.loads(line) for line in open(log_path).read().splitlines()]
+    nav = next(i for i, r in enumerate(records) if r["type"] == "call_start" and r["target"] == "navigation.go_to")
+    tick = next(i for i in range(nav, len(records)) if records[i]["type"] == "tick")
+    # killed two seconds into the navigation: the log ends with the records of a later tick,
+    # and an answer that came after it, which the tree never ticked on
+    later = dict(records[tick], t=records[tick]["t"] + 2.0, n=records[tick]["n"] + 1, changes=[])
+    answer = next(r for r in records if r["type"] == "call_end" and r["target"] == "navigation.go_to")
+    cut = tmp_path / "killed.jsonl"
+    cut.write_text("\n".join(json.dumps(r) for r in records[:tick + 1] + [later, answer]) + "\n")
+    out_path = str(tmp_path / "killed.yaml")
+    write_scenario(read_log(str(cut)), out_path)
+    text = open(out_path).read()
+    assert "it was killed" in text and "hang: true" in text, text
+    scenario = yaml.safe_load(text)["scenarios"][0]
+    assert scenario["max_duration"] == pytest.approx(later["t"], abs=1e-6)
+    assert scenario["expect"]["status"] == "failure"
+    assert [list(c) for c in scenario["expect"]["calls"]] == [["speech.say"], ["navigation.go_to"]]
+    out = io.StringIO()
+    assert run_scenario_file(out_path, sim_defs, out) == [True], out.getvalue()
+
+    before_any_tick = tmp_path / "early.jsonl"
+    before_any_tick.write_text(json.dumps(records[0]) + "\n")
+    with pytest.raises(RunLogError, match="no end record and no tick"):
+        write_scenario(read_log(str(before_any_tick)), str(tmp_path / "s.yaml"))
 
 
 def test_a_malformed_record_is_a_clear_error(sim_defs, tmp_path, capsys):
