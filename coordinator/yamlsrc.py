@@ -286,8 +286,12 @@ def _build(loader: Any, file: str) -> Any:
                 anchors[anchor] = (value, count - start + 1)
             container, item_pos, key_pos, val_pos, key, key_at, merges, anchor, start = stack.pop()
         elif cls is Alias:
-            if event.anchor not in anchors:   # also inside its own anchor: a recursive value
-                raise _fail(file, event.start_mark, "found undefined alias %r" % event.anchor)
+            if event.anchor not in anchors:
+                if event.anchor == anchor or any(entry[7] == event.anchor for entry in stack):
+                    raise _fail(file, event.start_mark, "alias *%s is inside the node anchored &%s: a value cannot "
+                                                        "contain itself" % (event.anchor, event.anchor))
+                raise _fail(file, event.start_mark, "found undefined alias %r (an alias *NAME must come after "
+                                                    "its anchor &NAME)" % event.anchor)
             value, size = anchors[event.anchor]
             count += size
             aliased += size

@@ -11,7 +11,7 @@ import glob
 import math
 import os
 import random
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import pytest
 import yaml
@@ -34,6 +34,7 @@ def _reference(text: str, file: str) -> Any:
     """One document as ``load_yaml`` must read it (without its size and depth limits)."""
     loader = yaml.CSafeLoader(text)
     anchors: Dict[str, Any] = {}
+    open_anchors: List[Any] = []  # of the collections being read, innermost last
 
     def pos(mark: Any, quoted: bool = False) -> Pos:
         return Pos(file, mark.line + 1, mark.column + 1 + quoted)
@@ -41,7 +42,11 @@ def _reference(text: str, file: str) -> Any:
     def node(event: Any) -> Tuple[Any, Pos]:
         if isinstance(event, yaml.AliasEvent):
             if event.anchor not in anchors:
-                raise _Refused(pos(event.start_mark), "found undefined alias %r" % event.anchor)
+                if event.anchor in open_anchors:
+                    raise _Refused(pos(event.start_mark), "alias *%s is inside the node anchored &%s: a value "
+                                                          "cannot contain itself" % (event.anchor, event.anchor))
+                raise _Refused(pos(event.start_mark), "found undefined alias %r (an alias *NAME must come after "
+                                                      "its anchor &NAME)" % event.anchor)
             return anchors[event.anchor], pos(event.start_mark)
         if isinstance(event, yaml.ScalarEvent):
             value: Any = event.value
@@ -61,13 +66,17 @@ def _reference(text: str, file: str) -> Any:
         elif isinstance(event, yaml.SequenceStartEvent):
             value, value_at = LList(), pos(event.start_mark)
             value.pos, value.item_pos = value_at, []
+            open_anchors.append(event.anchor)
             while not loader.check_event(yaml.SequenceEndEvent):
                 item, item_at = node(loader.get_event())
                 value.append(item)
                 value.item_pos.append(item_at)
             loader.get_event()
+            open_anchors.pop()
         elif isinstance(event, yaml.MappingStartEvent):
+            open_anchors.append(event.anchor)
             value = mapping(event)
+            open_anchors.pop()
             value_at = value.pos
         else:
             raise AssertionError("unexpected event %r" % event)
