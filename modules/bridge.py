@@ -116,6 +116,10 @@ class CppBridge(BasicModule):
         self._out_sub: Any = None
         self._String: Any = None
         self._self_name = ""
+        #: a call that timed out while the C++ node still ran it: (function, the node's URI, when its
+        #: late BM_output came or 0.0). Until it answers, the node is busy: a new call would be given
+        #: that answer.
+        self._owed: Optional[Tuple[str, str, float]] = None
 
     # -- set-up ----------------------------------------------------------------------
     def setup(self, node: Any) -> None:
@@ -241,6 +245,11 @@ class CppBridge(BasicModule):
             out = {"status": "failed", "error": "malformed BM_output from %s: %s" % (self.cpp_node, exc)}
         with self._cond:
             call = self._call
+            if call is None and self._owed is not None and not self._owed[2]:
+                log.info("the C++ node %s answered %s after the call had timed out; it takes calls again",
+                         self.cpp_node, self._owed[0])
+                self._owed = (self._owed[0], self._owed[1], time.monotonic())
+                return
             if call is None or call.output is not None:
                 log.warning("ignored a BM_output from %s with no call outstanding", self.cpp_node)
                 return
@@ -258,10 +267,13 @@ class CppBridge(BasicModule):
             if missing:
                 raise Rejected("the C++ node of module %r is not connected: %s" % (self.definition.name,
                                                                                    "; ".join(missing)))
+        self._settle_owed()
         module = self.definition.name
         in_topics = [data_topic(module, p.rostype) for p in fn.inputs]
         call = _Call(fn, sorted({data_topic(module, p.rostype) for p in fn.outputs}))
         with self._cond:
+            if self._call is not None:  # the runtime's busy rule should have refused it
+                raise Rejected("busy: the C++ node %s runs %s" % (self.cpp_node, self._call.fn.qualified))
             self._call = call
         try:
             for p, topic in zip(fn.inputs, in_topics):
@@ -293,6 +305,7 @@ class CppBridge(BasicModule):
                     continue
                 if self.call_timeout and now - start >= self.call_timeout:
                     self._ready = False
+                    self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
                     raise Failure("no BM_output from the C++ node %s within %gs: it hangs or crashed" % (
                         self.cpp_node, self.call_timeout))
                 left = self.call_timeout - (now - start) if self.call_timeout else _POLL
@@ -303,6 +316,27 @@ class CppBridge(BasicModule):
             if self._gone():
                 self._ready = False
                 raise Failure("the C++ node %s exited during the call (no BM_output)" % self.cpp_node)
+
+    def _settle_owed(self) -> None:
+        """Before a call: refuse it while the C++ node still runs a call that timed out (its
+        BM_output would be taken for this call's), unless that node is gone or was restarted; once
+        the late BM_output came, wait ``output_wait`` for its output values, then forget them."""
+        with self._cond:
+            owed = self._owed
+        if owed is None:
+            return
+        function, uri, answered = owed
+        if uri != self.cpp_uri or self._gone():
+            self._owed = None
+            return
+        if not answered:
+            raise Rejected("busy: the C++ node %s still runs %s, which got no BM_output within %gs (the bridge's "
+                           "--call-timeout); it takes calls again when it answers or is restarted" % (
+                               self.cpp_node, function, self.call_timeout))
+        left = answered + self.output_wait - time.monotonic()
+        if left > 0:
+            time.sleep(left)
+        self._owed = None
 
     def _lacking(self, call: _Call) -> List[str]:
         """Output values listed in BM_output that have not arrived yet, in words."""
@@ -366,6 +400,11 @@ def _method(name: str) -> Any:
 def make_bridge(definition: ModuleDefinition, **options: Any) -> CppBridge:
     """A bridge object with one method per function of ``definition`` (what the runtime binds)."""
     data_topics(definition)
+    concurrent = sorted(f.name for f in definition.functions.values() if f.concurrent)
+    if concurrent:  # one BM_input/BM_output pair: the node answers one call after another
+        raise BindingError("%s: a C++ module runs one function at a time (the C++ protocol has one BM_input and "
+                           "one BM_output), so its functions cannot be Concurrent: remove \"Concurrent\": true from "
+                           "%s" % (definition.source or definition.name, ", ".join(concurrent)))
     cls = type("CppBridge_%s" % definition.name, (CppBridge,), {n: _method(n) for n in definition.functions})
     return cls(**options)
 

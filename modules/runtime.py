@@ -410,7 +410,14 @@ class ModuleServer:
                 if self._exclusive is call:
                     self._exclusive = None
         if first:
-            self._publish_result(result.encode())
+            text = result.encode()
+            size = len(text) if text.isascii() else len(text.encode("utf-8"))
+            if size > self.max_bytes:  # the coordinator would drop it: the call would end as a timeout
+                log.error("%s: the answer to call %s is %d bytes, over the limit of %d; it fails instead",
+                          call.fn.qualified, call.ctx.call_id, size, self.max_bytes)
+                text = self._result(call, CallStatus.FAILED, "the outputs are %d bytes encoded, over the limit of %d "
+                                    "bytes (max_bytes) that a coordinator accepts" % (size, self.max_bytes)).encode()
+            self._publish_result(text)
 
     def _cancelled(self, call: _Call) -> FunctionResult:
         return self._result(call, CallStatus.CANCELLED, CANCELLED_TEXT)

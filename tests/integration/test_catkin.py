@@ -193,11 +193,11 @@ def test_roslaunch_sim_modules_and_trees(shell, workspace):
 CPP_TREE = """format: 1
 root:
   sequence:
-    - call: gripper.set_fingers
+    - call: right_gripper.set_fingers
       inputs: {left: 0.01, right: 0.05}
       outputs: {opening: gap}
     - check: 'gap > 0.039'
-    - call: gripper.reach
+    - call: right_gripper.reach
       inputs: {target: {x: 0.3, y: 0.4, z: 0.0}}
       outputs: {distance: far}
     - check: 'far > 0.49'
@@ -205,15 +205,17 @@ root:
 
 
 def test_roslaunch_a_cpp_module_behind_the_bridge(shell, workspace):
-    """module.launch's C++ branch: the bridge and the workspace's C++ example, started together."""
+    """module.launch's C++ branch: the bridge and the workspace's C++ example, started together,
+    under a new module name (``module:=`` renames the bridge's module and the C++ node's topics)."""
     definition = workspace / "src" / "bmtree" / "modules" / "cpp" / "example" / "gripper.json"
-    launch = shell.start("roslaunch -p %d bmtree module.launch module:=gripper definition:=%s cpp_pkg:=bmtree "
+    launch = shell.start("roslaunch -p %d bmtree module.launch module:=right_gripper definition:=%s cpp_pkg:=bmtree "
                          "cpp_type:=gripper" % (shell.port, definition), "cpp")
-    shell.wait_modules("gripper")
+    shell.wait_modules("right_gripper")
     tree = workspace / ("cpp-%d.yaml" % shell.port)
     tree.write_text(CPP_TREE)
-    # --modules: the C++ gripper's definition replaces the team package's Python gripper of the same name
-    out = shell.run("rosrun bmtree bmtree run -q --modules %s %s" % (definition, tree))
+    out = shell.run("rosrun bmtree bmtree run -q %s" % tree)
     assert out.returncode == 0, out.stdout + out.stderr + open(launch.log_path).read()[-3000:]
-    assert "gripper.set_fingers" in out.stdout and "gripper.reach" in out.stdout
+    assert "right_gripper.set_fingers" in out.stdout and "right_gripper.reach" in out.stdout
+    topics = shell.run("rostopic list").stdout.split()
+    assert "/right_gripper/BM_input" in topics and "/gripper/BM_input" not in topics, topics
     assert launch.poll() is None

@@ -15,6 +15,8 @@ from tests.integration.conftest import NODES, bmtree_cmd, wait_announced
 
 CPP = os.path.join(ROOT, "modules", "cpp")
 GRIPPER_JSON = os.path.join(CPP, "example", "gripper.json")
+ODDITIES_CPP = os.path.join(ROOT, "tests", "data", "cpp", "oddities.cpp")
+ODDITIES_JSON = os.path.join(ROOT, "tests", "data", "cpp", "oddities.json")
 SANITIZERS = "-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all"
 
 
@@ -32,7 +34,7 @@ def _build(build_dir, *options):
 @pytest.fixture(scope="session")
 def gripper_exe():
     """The example module, -O2, -Wall -Wextra -Wpedantic -Werror."""
-    return _build(os.path.join(ROOT, "build", "cpp"), "-DCMAKE_BUILD_TYPE=Release")
+    return _build(os.path.join(ROOT, "build", "cpp"), "-DCMAKE_BUILD_TYPE=Release", "-DBMTREE_TEST_MODULE=" + ODDITIES_CPP)
 
 
 @pytest.fixture(scope="session")
@@ -211,6 +213,90 @@ root:
     assert "timeout" in lines[0] or "halted" in lines[0], lines
     assert "rejected" in lines[1] and "busy with call" in lines[1], lines
     assert "succeeded" in lines[-1] and all("squeeze" in line for line in lines[2:]), lines
+
+
+def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe,
+                                                                                       tmp_path):
+    """The bridge gives up on a call (--call-timeout) while the C++ node still runs it: the node
+    stays busy until its late BM_output, which no later call is given."""
+    ros_graph.start_node([gripper_exe], "/gripper")
+    ros_graph.start_node(["-m", "modules.bridge", "--definition", GRIPPER_JSON, "--call-timeout", "0.5"],
+                         "/gripper_bridge")
+    wait_announced("gripper")
+    tree = tmp_path / "stale.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: gripper.squeeze
+        name: first
+        inputs: {seconds: 1.5, label: first}
+        timeout: 10
+    - retry: 100
+      child:
+        sequence:
+          - wait: 0.1
+          - call: gripper.squeeze
+            name: second
+            inputs: {seconds: 0.1, label: second}
+            outputs: {label: got, closed_for: secs}
+    - check: 'got == "second" and secs == 0.1'
+""")
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "failed" in lines[0] and "no BM_output from the C++ node /gripper within 0.5s" in lines[0], lines
+    assert "rejected" in lines[1] and "still runs gripper.squeeze" in lines[1], lines
+    assert "succeeded" in lines[-1], lines
+
+
+def test_a_concurrent_function_in_a_cpp_definition_is_refused(tmp_path):
+    with open(GRIPPER_JSON) as fh:
+        data = json.load(fh)
+    data["Functions"][0]["Concurrent"] = True
+    bad = tmp_path / "gripper.json"
+    bad.write_text(json.dumps(data))
+    out = subprocess.run([sys.executable, "-m", "modules.bridge", "--definition", str(bad)], capture_output=True,
+                         text=True, timeout=60, cwd=ROOT, stdin=subprocess.DEVNULL)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "cannot be Concurrent" in out.stderr and data["Functions"][0]["Name"] in out.stderr, out.stderr
+
+
+def test_a_cpp_function_that_throws_anything_fails_and_the_node_lives_on(ros_graph, gripper_exe, tmp_path):
+    exe = os.path.join(os.path.dirname(gripper_exe), "test_module")
+    ros_graph.start_node([exe], "/oddities")
+    ros_graph.start_node(["-m", "modules.bridge", "--definition", ODDITIES_JSON], "/oddities_bridge")
+    wait_announced("oddities")
+    tree = tmp_path / "odd.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - force_success:\n        call: oddities.vendor\n"
+                    "    - call: oddities.ok\n")
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "failed" in lines[0] and "an exception that is not a std::exception" in lines[0], lines
+    assert "succeeded" in lines[1], lines
+
+
+def test_output_names_that_do_not_match_the_outputs_stop_the_cpp_node_at_start(ros_graph, gripper_exe):
+    exe = os.path.join(os.path.dirname(gripper_exe), "test_module")
+    out = subprocess.run([exe, "--bad-names", "__name:=odd_names"], capture_output=True, text=True, timeout=60,
+                         env=ros_graph.env, stdin=subprocess.DEVNULL)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert 'provide("two"): the function returns 2 outputs, so it needs 2 non-empty output names' in (
+        out.stdout + out.stderr), out.stdout + out.stderr
+
+
+def test_basic_mod_renames_the_cpp_node_too(ros_graph, gripper_exe):
+    """Two copies of one C++ module, told apart by _basic_mod:= alone, both stay up."""
+    import rosgraph
+
+    left = ros_graph.start_node([gripper_exe, "_basic_mod:=left_gripper"], "/left_gripper")
+    right = ros_graph.start_node([gripper_exe, "_basic_mod:=right_gripper"], "/right_gripper")
+    pubs, subs, _ = rosgraph.Master("/test").getSystemState()
+    inputs = {t: n for t, n in subs if t.endswith("/BM_input")}
+    assert inputs.get("/left_gripper/BM_input") == ["/left_gripper"], inputs
+    assert inputs.get("/right_gripper/BM_input") == ["/right_gripper"], inputs
+    assert left.poll() is None and right.poll() is None
 
 
 def test_original_cpp_module_runs_unchanged_behind_the_bridge(ros_graph, tmp_path):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
@@ -87,6 +88,29 @@ def test_calls_rejections_failures_and_exceptions(sim_defs):
     s.server.handle_call("garbage")
     assert s.result(s.call("say", text="still here")).status == "succeeded"
     assert len(s.results) == n + 1
+
+
+def test_an_answer_over_the_size_limit_fails_with_its_size_instead_of_never_arriving(sim_defs):
+    class Chatty(BasicModule):
+        def say(self, text):
+            return {"success": True}
+
+        def listen(self, seconds):
+            return {"success": True, "text": "é" * int(seconds.data)}
+
+    results = []
+    server = ModuleServer(sim_defs["speech"], Chatty(), lambda t: results.append(FunctionResult.decode(t, 1 << 20)),
+                          print, max_bytes=4096)
+    fn = server.definition.function("listen")
+    for seconds in (100.0, 3000.0):  # 3,000 two-byte characters: over 4 KiB only as UTF-8
+        n = len(results)
+        server.handle_call(fn.build_call({"seconds": seconds}).encode())
+        deadline = time.monotonic() + 5
+        while len(results) == n and time.monotonic() < deadline:
+            time.sleep(0.01)
+    small, big = results
+    assert small.status == "succeeded" and small.values["text"].data == "é" * 100
+    assert big.status == "failed" and "over the limit of 4096 bytes" in big.error, big.error
 
 
 def test_legacy_positional_call_is_served(sim_defs):

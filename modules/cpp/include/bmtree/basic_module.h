@@ -168,6 +168,13 @@ class BasicModule {
     f.input_topics = {topicFor<In>()...};
     std::vector<std::string> output_topics = {topicFor<Out>()...};
     std::vector<std::string> names(output_names.begin(), output_names.end());
+    for (const auto& n : names) {  // {"width"} for two outputs compiles: the missing name is ""
+      if (n.empty()) {
+        throw std::logic_error("provide(\"" + name + "\"): the function returns " + std::to_string(sizeof...(Out)) +
+                               " outputs, so it needs " + std::to_string(sizeof...(Out)) +
+                               " non-empty output names");
+      }
+    }
     f.run = [this, self, fn, names, output_topics](const std::vector<std::size_t>& occurrence) {
       std::tuple<Out...> out = invoke(self, fn, occurrence, std::index_sequence_for<In...>());
       publishAll(out, std::index_sequence_for<Out...>());
@@ -307,6 +314,8 @@ class BasicModule {
         reply = failure("failed", e.what());
       } catch (const std::exception& e) {
         reply = failure("failed", std::string("exception: ") + e.what());
+      } catch (...) {  // a vendor library may throw anything: the node must answer and live on
+        reply = failure("failed", "exception: an exception that is not a std::exception");
       }
     }
     std_msgs::String out;
@@ -338,11 +347,27 @@ class BasicModule {
   std::deque<Pending> pending_;
 };
 
-/// ros::init (the node is named `module`, as the original modules were), construct the
-/// module, spin until shutdown. Returns the process exit code.
+/// The node's name: `module`, or the new module name of a `_basic_mod:=NAME` argument, so that
+/// two copies of one module renamed that way do not knock each other off the master (an
+/// explicit `__name:=` still wins, in ros::init).
+inline std::string nodeNameFor(int argc, char** argv, const std::string& module) {
+  const std::string key = "_basic_mod:=";
+  std::string name = module;
+  for (int i = 1; i < argc; ++i) {
+    std::string arg(argv[i]);
+    if (arg.compare(0, key.size(), key) == 0 && arg.size() > key.size()) name = arg.substr(key.size());
+  }
+  // a node name is a ROS name: a letter, then letters, digits and '_' (else ros::init would throw)
+  bool valid = !name.empty() && std::isalpha(static_cast<unsigned char>(name[0]));
+  for (char c : name) valid = valid && (std::isalnum(static_cast<unsigned char>(c)) || c == '_');
+  return valid ? name : module;
+}
+
+/// ros::init (the node is named `module`, as the original modules were, or after
+/// `_basic_mod:=NAME`), construct the module, spin until shutdown. Returns the process exit code.
 template <class Module>
 int run(int argc, char** argv, const std::string& module) {
-  ros::init(argc, argv, module);
+  ros::init(argc, argv, nodeNameFor(argc, argv, module));
   ros::NodeHandle nh;
   try {
     Module m(nh);
