@@ -97,6 +97,7 @@ class RunContext:
         self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
         self.dropped: List[FunctionResult] = []
+        self._ended: typing.OrderedDict[str, CallRecord] = OrderedDict()  # calls that ended without an answer
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()  # in C: a cheap hand-off from the receiving threads
         self.unstored: List[str] = []  # calls whose results the next recall must see stored
 
@@ -137,7 +138,10 @@ class RunContext:
         rec.ended = self.clock.now()
         rec.status = RecordStatus(status)
         rec.error = error
-        self.pending.pop(rec.call_id, None)
+        if self.pending.pop(rec.call_id, None) is not None and rec.result is None and rec.call_id:
+            self._ended[rec.call_id] = rec  # ended unanswered: an answer may still come
+            while len(self._ended) > 10000:
+                self._ended.popitem(last=False)
         if self.observers:
             notify(self.observers, "on_call_end", rec)
 
@@ -164,9 +168,14 @@ class RunContext:
             rec = self.correlate(item)
             if rec is None:
                 self.dropped.append(item)
+                ended = self._ended.get(item.call_id or "")
+                if ended is not None:  # expected: the answer to a cancel, or one that came too late
+                    log.debug("a late answer (%s) to call %s of %s, which had ended %s", item.status, item.call_id,
+                              ended.target, ended.status)
+                    return
                 log.warning("dropped a result that matches no pending call (call_id %s, module %s, function %s, "
                             "outputs %s, from node %s)", item.call_id, item.basic_mod, item.function,
-                            ", ".join(item.names), item.publisher)
+                            ", ".join(item.names), item.publisher or "unknown")
                 return
             self.pending.pop(rec.call_id, None)
             rec.result = item

@@ -1,6 +1,8 @@
 """The engine with the in-process transport and a simulated clock (no ROS master)."""
 from __future__ import annotations
 
+import logging
+
 import pytest
 from geometry_msgs.msg import Point
 from py_trees.common import Status
@@ -244,6 +246,15 @@ root:
     assert len(ctx.dropped) == 4                                        # a late answer matches nothing
 
 
+class _Records(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.DEBUG)
+        self.records = []
+
+    def emit(self, record):
+        self.records.append(record)
+
+
 def test_late_result_of_timed_out_call_is_not_taken(tmp_path, sim_defs):
     ctx, root, mocks = _ctx_with_tree(tmp_path, sim_defs, """
 root:
@@ -267,12 +278,22 @@ root:
                                          basic_mod="navigation", function="go_to"))
 
     ctx.transport.send_call = spy
-    result = root_runner.run()
+    caplog = _Records()
+    logging.getLogger("bmtree").addHandler(caplog)
+    try:
+        result = root_runner.run()
+        ctx.dispatch(FunctionResult(["success"], [Bool(True)], call_id="never-sent"))
+    finally:
+        logging.getLogger("bmtree").removeHandler(caplog)
     assert result.status == Status.SUCCESS
     assert result.blackboard["room"].data == "bedroom"
     # the cancelled answer and the late success of the first call both match nothing
-    assert [r.call_id for r in ctx.dropped] == [first_id[0]] * 2
-    assert [r.status for r in ctx.dropped] == ["cancelled", "succeeded"]
+    assert [r.call_id for r in ctx.dropped] == [first_id[0]] * 2 + ["never-sent"]
+    assert [r.status for r in ctx.dropped] == ["cancelled", "succeeded", "succeeded"]
+    # expected after a timeout, so no warning; an answer that matches no call of the run gets one
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == [
+        "dropped a result that matches no pending call (call_id never-sent, module None, function None, outputs "
+        "success, from node unknown)"]
 
 
 def test_event_driven_chain_needs_no_tick_periods(tmp_path):
