@@ -376,13 +376,16 @@ class Parser:
         mod_name, member = value.split(".")
         mod = self.definitions.get(mod_name)
         if mod is None:
-            self.err(at, "unknown module %r%s" % (mod_name, did_you_mean(mod_name, self.definitions)
-                                                  or " (known: %s)" % ", ".join(sorted(self.definitions))))
+            self.err(at, "unknown module %r%s" % (mod_name, did_you_mean(mod_name, self.definitions) or (
+                " (known: %s; give your module's definition with --modules FILE.json or a folder of them)"
+                % ", ".join(sorted(self.definitions)))))
             return None
         return mod, member
 
-    def key_map(self, node: TreeNode, raw: LMap, key: str, allowed: Dict[str, Any], what: str) -> Dict[str, str]:
-        """``outputs``: {output name: tree key}."""
+    def key_map(self, node: TreeNode, raw: LMap, key: str, allowed: Optional[Dict[str, Any]],
+                what: str) -> Dict[str, str]:
+        """``outputs``: {output name: tree key}; ``allowed`` None: names not known (an unknown
+        function, already an error), so its keys still count as written and nothing follows from it."""
         value = raw.get(key) or {}
         if not isinstance(value, LMap):
             if value:
@@ -391,7 +394,7 @@ class Parser:
         out = {}
         target = getattr(node.spec, "target", None) or raw.get(node.kind, node.kind)
         for name, key_ in value.items():
-            if name not in allowed:
+            if allowed is not None and name not in allowed:
                 self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, did_you_mean(name, allowed)))
             elif not isinstance(key_, str) or not key_.isidentifier():
                 self.err(value.val_pos[name], "tree key %r is not an identifier" % (key_,))

@@ -122,13 +122,15 @@ class CallKind(NodeKind):
         inputs_raw = p.mapping(raw, "inputs", at, "'inputs' must be a mapping of input name: value")
         spec.inputs = {k: p.literal_at(inputs_raw, k, at) for k in inputs_raw}
         spec.input_pos = {k: inputs_raw.val_pos[k] for k in inputs_raw}
-        if found is None:
-            return spec
-        mod, fname = found
-        fn = mod.functions.get(fname)
-        if fn is None:
-            p.err(at, "module %r has no function %r%s" % (mod.name, fname, did_you_mean(fname, mod.functions)
-                                                           or " (functions: %s)" % ", ".join(mod.functions)))
+        fn = None
+        if found is not None:
+            mod, fname = found
+            fn = mod.functions.get(fname)
+            if fn is None:
+                p.err(at, "module %r has no function %r%s" % (mod.name, fname, did_you_mean(fname, mod.functions)
+                                                               or " (functions: %s)" % ", ".join(mod.functions)))
+        if fn is None:  # its outputs still write their keys: no knock-on errors where they are read
+            spec.outputs = p.key_map(node, raw, "outputs", None, "output")
             return spec
         spec.function = fn
         params = {q.name: q for q in fn.inputs}

@@ -94,6 +94,19 @@ root:
 """
 
 
+def test_an_unknown_module_is_one_error_that_says_how_to_give_its_definition(tmp_path, sim_defs):
+    path = tmp_path / "grip.yaml"
+    path.write_text("format: 1\nroot:\n  sequence:\n    - call: gripper.open\n      outputs: {width: w}\n"
+                    "    - check: 'w > 0'\n    - call: speech.shout\n      outputs: {volume: v}\n"
+                    "    - check: 'v > 1'\n")
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(path), sim_defs)
+    assert [str(e) for e in info.value.errors] == [
+        "%s:4:13: unknown module 'gripper' (known: navigation, speech, vision; give your module's definition "
+        "with --modules FILE.json or a folder of them)" % path,
+        "%s:7:13: module 'speech' has no function 'shout' (functions: say, listen)" % path]
+
+
 def test_every_node_kind_and_option(tmp_path, sim_defs):
     path = tmp_path / "every.yaml"
     path.write_text(EVERY_KIND.replace("../trees/search_room.yaml", os.path.join(TREES, "search_room.yaml")))
