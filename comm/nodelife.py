@@ -34,7 +34,8 @@ _installed: Optional[StopSignals] = None
 
 
 class StopSignals:
-    """Remembers a SIGINT/SIGTERM; install it before ``rospy.init_node`` (main thread only)."""
+    """Remembers a SIGINT/SIGTERM (or SIGHUP, unless ignored as under nohup); install it before
+    ``rospy.init_node`` (main thread only)."""
 
     def __init__(self) -> None:
         global _installed
@@ -45,6 +46,8 @@ class StopSignals:
         self.signal: Optional[int] = None
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._on_signal)
+        if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal; nohup ignores it
+            signal.signal(signal.SIGHUP, self._on_signal)
         # the kernel may hand the signal to any thread; Python runs handlers in the main thread
         # only, so the C-level handler also writes to the pipe the main thread waits on
         signal.set_wakeup_fd(self._write_fd)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import threading
 from typing import Any, Callable, List, Optional, Tuple
@@ -204,6 +205,19 @@ def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Option
     return t
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _stop_on_term_and_hangup() -> None:
+    """``kill``, ``timeout`` or a closed terminal end a watch as Ctrl-C does: through the
+    ``finally`` that unregisters it (a dead subscriber stays registered with the master, and each
+    later run would wait for it)."""
+    signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+        signal.signal(signal.SIGHUP, _interrupt)
+
+
 def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
@@ -216,6 +230,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     state = WatchState()
     tty = sys.stdout.isatty() and not args.plain
     printer = None if tty or args.web else LinePrinter(sys.stdout)
+    _stop_on_term_and_hangup()
     rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
     watcher = RosWatcher(state, args.namespace, on_record=(lambda r: printer.record(r, state)) if printer else None)
     watcher.start()

@@ -42,3 +42,31 @@ def test_watch_without_a_run_says_so(ros_master, tmp_path):
     assert out.returncode == 3, out.stdout + out.stderr
     assert "no run on /nobody/run/tree" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_a_watch_ended_by_sigterm_or_sighup_leaves_the_master_as_ctrl_c_does(ros_master, tmp_path):
+    """``timeout``, ``kill`` or a closed terminal: the watch unregisters (a dead subscriber left on
+    the master would make every later run wait for it)."""
+    import os
+    import signal
+    import time
+
+    import rosgraph
+
+    env = dict(os.environ, ROS_MASTER_URI=ros_master, ROS_IP="127.0.0.1", ROS_HOME=str(tmp_path))
+    master = rosgraph.Master("/test", master_uri=ros_master)
+
+    def watchers():
+        _, subs, _ = master.getSystemState()
+        return sorted({n for t, nodes in subs if t.startswith("/bmtree/run/") for n in nodes})
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        watch = subprocess.Popen(bmtree_cmd("watch", "--plain", "--follow"), stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, env=env)
+        end = time.monotonic() + 60
+        while not watchers():
+            assert watch.poll() is None and time.monotonic() < end, watch.stdout.read()
+            time.sleep(0.05)
+        watch.send_signal(sig)
+        assert watch.wait(30) == 0
+        assert watchers() == [], (sig, watchers())
