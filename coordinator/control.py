@@ -177,8 +177,19 @@ class Controller(RunObserver):
             value = yaml.safe_load(text) if isinstance(text, str) else text
         except yaml.YAMLError as exc:
             return False, "the value is not YAML: %s" % str(exc).splitlines()[0]
-        if not _same_type(bb[key], value):
-            return False, "%s holds %s; %r is %s" % (key, type(bb[key]).__name__, value, type(value).__name__)
+        old = bb[key]
+        if hasattr(old, "_type") and hasattr(old, "__slots__"):  # a ROS message (a call's output)
+            from comm.errors import ProtocolError
+            from comm.rostypes import from_message, to_message
+
+            try:  # as a call input takes it: the message's fields, or its one field's value
+                value = to_message(old._type, value, allow_scalar=True)
+            except ProtocolError as exc:
+                return False, "%s holds a %s; %s" % (key, old._type, exc)
+            self.ctx.write(key, value)
+            return True, "%s = %s" % (key, json.dumps(from_message(value), ensure_ascii=False, default=str))
+        if not _same_type(old, value):
+            return False, "%s holds %s; %r is %s" % (key, type(old).__name__, value, type(value).__name__)
         self.ctx.write(key, value)
         return True, "%s = %s" % (key, json.dumps(value, ensure_ascii=False, default=str))
 

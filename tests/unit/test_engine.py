@@ -361,3 +361,25 @@ def test_display_on_a_terminal_and_as_lines(tmp_path):
         else:
             assert "\x1b[" not in text
             assert "SUCCESS   speech.say" in text and "FAILURE   impossible (false is false)" in text
+
+
+def test_control_set_takes_a_value_for_a_key_a_call_output_wrote(tmp_path):
+    """A call's output is a ROS message: `set` converts the value as a call input would."""
+    import types
+
+    from std_msgs.msg import Float64
+
+    from coordinator.control import Controller
+
+    replies = []
+    control = Controller(True, replies.append)
+    ctx = types.SimpleNamespace(blackboard={"weight": Float64(1.5), "label": "apple"}, observers=[],
+                                write=lambda k, v: ctx.blackboard.__setitem__(k, v))
+    control.ctx, control.root = ctx, object()
+    assert control._apply({"command": "set", "key": "weight", "value": "2"}) == (True, 'weight = {"data": 2}')
+    assert ctx.blackboard["weight"] == Float64(2.0)
+    assert control._apply({"command": "set", "key": "weight", "value": "{data: 2.5}"})[0]
+    assert ctx.blackboard["weight"] == Float64(2.5)
+    ok, answer = control._apply({"command": "set", "key": "weight", "value": "heavy"})
+    assert not ok and answer.startswith("weight holds a std_msgs/Float64; ") and ctx.blackboard["weight"] == Float64(2.5)
+    assert control._apply({"command": "set", "key": "label", "value": "5"}) == (False, "label holds str; 5 is int")
