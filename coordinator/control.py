@@ -178,14 +178,17 @@ class Controller(RunObserver):
         except yaml.YAMLError as exc:
             return False, "the value is not YAML: %s" % str(exc).splitlines()[0]
         old = bb[key]
-        if hasattr(old, "_type") and hasattr(old, "__slots__"):  # a ROS message (a call's output)
-            from comm.errors import ProtocolError
-            from comm.rostypes import from_message, to_message
+        import genpy
 
+        if isinstance(old, genpy.Message):  # a call's output
+            from comm.errors import ProtocolError
+            from comm.rostypes import from_message, rostype_of, to_message
+
+            rostype = rostype_of(old)
             try:  # as a call input takes it: the message's fields, or its one field's value
-                value = to_message(old._type, value, allow_scalar=True)
+                value = to_message(rostype, value, allow_scalar=True)
             except ProtocolError as exc:
-                return False, "%s holds a %s; %s" % (key, old._type, exc)
+                return False, "%s holds a %s; %s" % (key, rostype, exc)
             self.ctx.write(key, value)
             return True, "%s = %s" % (key, json.dumps(from_message(value), ensure_ascii=False, default=str))
         if not _same_type(old, value):

@@ -41,25 +41,25 @@ def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
     return out
 
 
-def seen_until(log: RunLog) -> Tuple[List[Dict[str, Any]], float]:
-    """A killed run's records up to its last tick, and that tick's time (seconds, rounded up
+def seen_until(log: RunLog) -> Tuple[RunLog, float]:
+    """A killed run's log cut after its last tick, and that tick's time (seconds, rounded up
     to the microsecond): what the tree had acted on when the log stopped."""
     last = max((i for i, r in enumerate(log.records) if r.get("type") == "tick"), default=None)
     if last is None:
         raise RunLogError("%s: the run has no end record and no tick (it was killed before its first tick); "
                           "there is nothing to replay" % log.path)
     t = float(log.records[last].get("t") or 0.0)
-    return log.records[:last + 1], math.ceil(t * 1e6) / 1e6
+    return RunLog(log.path, log.records[:last + 1], log.truncated), math.ceil(t * 1e6) / 1e6
 
 
 def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     """The scenario file's content for ``log``, with the tree path relative to ``out_path``."""
     tree = log.tree
     end = log.end
-    records = log.records
+    seen = log  # what the tree acted on
     stop_at: Optional[float] = None
     if end is None:
-        records, stop_at = seen_until(log)
+        seen, stop_at = seen_until(log)
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
         first = steered[0]
@@ -71,19 +71,16 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
-    def of_type(kind: str) -> List[Dict[str, Any]]:
-        return [r for r in records if r.get("type") == kind]
-
-    ends = {r.get("call_id"): r for r in of_type("call_end")}
+    ends = {r.get("call_id"): r for r in seen.of_type("call_end")}
     mocks: Dict[str, List[Dict[str, Any]]] = {}
     calls: List[Dict[str, Any]] = []
-    for start in of_type("call_start"):
+    for start in seen.of_type("call_start"):
         target = str(start.get("target"))
         finished = ends.get(start.get("call_id"))
         mocks.setdefault(target, []).append(_outcome(finished) if finished else {"hang": True})
         calls.append({target: dict(start.get("inputs") or {})})
     events = [{"at": r.get("t"), "event": "%s.%s" % (r.get("module"), r.get("event")),
-               "params": dict(r.get("params") or {})} for r in of_type("event")]
+               "params": dict(r.get("params") or {})} for r in seen.of_type("event")]
     scenario: Dict[str, Any] = {}
     scenario["name"] = "as recorded in run %s" % tree.get("run")
     if tree.get("inputs"):

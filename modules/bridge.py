@@ -272,8 +272,6 @@ class CppBridge(BasicModule):
         in_topics = [data_topic(module, p.rostype) for p in fn.inputs]
         call = _Call(fn, sorted({data_topic(module, p.rostype) for p in fn.outputs}))
         with self._cond:
-            if self._call is not None:  # the runtime's busy rule should have refused it
-                raise Rejected("busy: the C++ node %s runs %s" % (self.cpp_node, self._call.fn.qualified))
             self._call = call
         try:
             for p, topic in zip(fn.inputs, in_topics):
