@@ -13,6 +13,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from typing import Any, Callable, List, Optional, Tuple
 
 from comm.nodeopts import PORT, seconds
@@ -205,17 +206,21 @@ def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Option
     return t
 
 
-def _interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
+class _StopSignals:
+    """Ctrl-C, ``kill``, ``timeout`` or a closed terminal end a watch through the ``finally`` that
+    unregisters it (a dead subscriber stays registered with the master, and each later run would
+    wait for it). The handler only raises a flag that the waits poll: an exception thrown into
+    rospy while it registers a subscriber would leave that subscriber on the master."""
 
+    def __init__(self) -> None:
+        self.requested = False
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+        if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+            signal.signal(signal.SIGHUP, self._on_signal)
 
-def _stop_on_term_and_hangup() -> None:
-    """``kill``, ``timeout`` or a closed terminal end a watch as Ctrl-C does: through the
-    ``finally`` that unregisters it (a dead subscriber stays registered with the master, and each
-    later run would wait for it)."""
-    signal.signal(signal.SIGTERM, _interrupt)
-    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
-        signal.signal(signal.SIGHUP, _interrupt)
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.requested = True
 
 
 def cmd_watch(args: argparse.Namespace) -> int:
@@ -230,15 +235,28 @@ def cmd_watch(args: argparse.Namespace) -> int:
     state = WatchState()
     tty = sys.stdout.isatty() and not args.plain
     printer = None if tty or args.web else LinePrinter(sys.stdout)
-    _stop_on_term_and_hangup()
-    rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
-    watcher = RosWatcher(state, args.namespace, on_record=(lambda r: printer.record(r, state)) if printer else None)
-    watcher.start()
+    signals = _StopSignals()
+    watcher = None
     server = None
     view = None
     client = None
     stop = threading.Event()
+
+    def wait(predicate: Callable[[WatchState], bool], timeout: float) -> bool:
+        """``state.wait`` that a stop signal or the q key also ends (False)."""
+        end = time.monotonic() + timeout
+        while not (signals.requested or stop.is_set()):
+            if state.wait(predicate, min(0.3, max(0.0, end - time.monotonic()))):
+                return True
+            if time.monotonic() >= end:
+                return False
+        return False
+
     try:
+        rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
+        watcher = RosWatcher(state, args.namespace,
+                             on_record=(lambda r: printer.record(r, state)) if printer else None)
+        watcher.start()
         from coordinator.control import ControlClient
 
         client = ControlClient()
@@ -252,18 +270,16 @@ def cmd_watch(args: argparse.Namespace) -> int:
         elif tty:
             view = LiveView(state, footer=KEYS_HELP).start()
             _key_reader(Keys(view, client, stop).press, stop)
-        if not state.wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
+        if not wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
+            if signals.requested or stop.is_set():
+                return EXIT_OK
             if view is not None:
                 view.stop(final=False)
                 view = None
             err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
                 args.namespace, args.wait))
             return EXIT_ENV
-        while not stop.is_set():
-            if state.wait(lambda s: s.end is not None, 0.3) and not args.follow and not args.web:
-                break
-        return EXIT_OK
-    except KeyboardInterrupt:
+        wait(lambda s: s.end is not None and not args.follow and not args.web, 1e9)  # or a stop
         return EXIT_OK
     finally:
         stop.set()
@@ -273,7 +289,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
             server.close()
         if client is not None:
             client.close()
-        watcher.close()
+        if watcher is not None:
+            watcher.close()
         rospy.signal_shutdown("bmtree watch finished")
 
 
