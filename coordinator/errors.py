@@ -27,6 +27,7 @@ class Pos(NamedTuple):
 class TreeError:
     pos: Pos
     message: str
+    module: str = ""  # an unknown module with no close known name: perhaps one not started yet
 
     def __str__(self) -> str:
         return "%s: %s" % (self.pos, self.message)

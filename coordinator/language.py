@@ -65,8 +65,8 @@ class Parser:
         self.repeated = 0
         self._sizes: Dict[TreeNode, Tuple[int, int]] = {}   # see _measure
 
-    def err(self, pos: Pos, message: str) -> None:
-        self.errors.append(TreeError(pos, message))
+    def err(self, pos: Pos, message: str, module: str = "") -> None:
+        self.errors.append(TreeError(pos, message, module))
 
     def warn(self, pos: Pos, message: str) -> None:
         self.warnings.append(TreeError(pos, "warning: " + message))
@@ -376,9 +376,10 @@ class Parser:
         mod_name, member = value.split(".")
         mod = self.definitions.get(mod_name)
         if mod is None:
-            self.err(at, "unknown module %r%s" % (mod_name, did_you_mean(mod_name, self.definitions) or (
+            close = did_you_mean(mod_name, self.definitions)
+            self.err(at, "unknown module %r%s" % (mod_name, close or (
                 " (known: %s; give your module's definition with --modules FILE.json or a folder of them)"
-                % ", ".join(sorted(self.definitions)))))
+                % ", ".join(sorted(self.definitions)))), "" if close else mod_name)
             return None
         return mod, member
 

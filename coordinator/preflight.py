@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING, Any, Dict, Iterable, List, Mapping, Optional, Set, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
 from comm import TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_RESULT
 from comm.addressing import PING_FUNCTION
@@ -30,6 +30,7 @@ __all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNO
 PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
 ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
 PING_PATIENCE = 1.0  # seconds after which a module without its own topics may do with connections alone
+NOTIFY_AFTER = 1.0  # seconds of waiting after which the caller is told what is missing
 POLL = 0.01  # seconds between looks at the connections (connections to call topics and answers wake it sooner)
 
 
@@ -106,14 +107,15 @@ class _Preflight:
 
 def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
                definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
-               legacy: Optional[Mapping[str, str]] = None) -> None:
+               legacy: Optional[Mapping[str, str]] = None, notify: Optional[Callable[[str], None]] = None) -> None:
     """:meth:`RosTransport.wait_ready <coordinator.ros_transport.RosTransport.wait_ready>` (documented there)."""
     tr.open()
     wanted = sorted(set(modules))
     with tr._cond:  # a fresh proof each time: a module may have restarted since
         tr._ponged.difference_update(wanted)
     state = _Preflight(tr, definitions)
-    end = time.monotonic() + timeout
+    start = time.monotonic()
+    end = start + timeout
     given = {m: n for m, n in (legacy or {}).items() if m in wanted}
     announced: Dict[str, LiveModule] = {}
     originals: Dict[str, Tuple[str, str]] = {}
@@ -145,8 +147,9 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
                 found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
                          % (given[name], name, TOPIC_CALL)]
             else:
-                found = ["module %r is not running (no bmtree module announced it and no node named /%s "
-                         "listens on %s; name its node with --legacy %s=/node)" % (name, name, TOPIC_CALL, name)]
+                found = ["module %r is not running (no bmtree module announced it, and no node /%s listens on %s "
+                         "as an original module's would; an original module's node of another name: --legacy %s=/node)"
+                         % (name, name, TOPIC_CALL, name)]
             if found:
                 problems[name] = found
         if blackboard and (tr._pubs["request"].get_num_connections() < 1 or tr._subs[2].get_num_connections() < 1):
@@ -161,6 +164,10 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             tr.node_modules.update({node: n for n, (node, _uri) in originals.items()})
             _announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
             return
+        if notify is not None and time.monotonic() >= start + NOTIFY_AFTER:
+            notify("waiting up to %.3g s more (--wait): %s ..." % (
+                max(0.0, end - time.monotonic()), "; ".join(p for name in sorted(problems) for p in problems[name])))
+            notify = None
         if time.monotonic() >= end:
             from coordinator.ros_transport import address_problem
 

@@ -298,7 +298,8 @@ class RosTransport(Transport):
 
     def wait_ready(self, modules: Iterable[str], timeout: float,
                    definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
-                   legacy: Optional[Mapping[str, str]] = None) -> None:
+                   legacy: Optional[Mapping[str, str]] = None,
+                   notify: Optional[Callable[[str], None]] = None) -> None:
         """Wait (bounded) until a first call to every module would be taken and answered.
 
         All modules at once (:mod:`coordinator.preflight`): one master query for the
@@ -313,10 +314,13 @@ class RosTransport(Transport):
         (marked legacy), so ``bmtree modules --live`` and the Blackboard know their node; such
         an announcement is treated as an original module's (no ping) by later runs.
 
+        ``notify`` is told once what is still missing when the wait goes on past
+        :data:`~coordinator.preflight.NOTIFY_AFTER` seconds (a run started before its modules).
+
         Raises:
             EnvironmentProblem: what is missing or different, after ``timeout`` seconds.
         """
-        wait_ready(self, modules, timeout, definitions, blackboard, legacy)
+        wait_ready(self, modules, timeout, definitions, blackboard, legacy, notify)
 
     def _set_routes(self, lives: List[LiveModule]) -> None:
         """Publishers for the modules' own topics (once; all new ones registered with the

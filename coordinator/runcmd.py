@@ -5,7 +5,8 @@ import argparse
 import os
 import signal
 import sys
-from typing import Any, Dict
+import time
+from typing import Any, Dict, Set
 
 from comm.errors import did_you_mean
 from coordinator.cliutil import (
@@ -26,6 +27,8 @@ __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run"]
 
 PROJECT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMO_TREE = os.path.join(PROJECT, "trees", "find_apple.yaml")
+ANNOUNCED_EVERY = 0.2  # s between looks for the announcement of a module not given with --modules
+PREFLIGHT_AT_LEAST = 2.0  # s the preflight has even when the --wait before it is used up
 
 
 def _report(result: Any, tree_name: str) -> None:
@@ -76,6 +79,45 @@ def _needs_live_definitions(exc: TreeErrors) -> bool:
     return any(e.message.startswith("unknown module") for e in exc.errors)
 
 
+def _load_announced(path: str, defs: Dict[str, Any], given: Set[str], deadline: float) -> Any:
+    """The tree, with the definitions the live modules announce added to ``defs``.
+
+    A module the tree uses that is neither given (``--modules``) nor announced yet may be one
+    that is starting (a launch file starts it beside the run): wait for its announcement until
+    ``deadline``, saying so. None (after printing why) when it never came: the environment's
+    problem, exit 3. A name close to a known one is taken as a typo and any other error in the
+    tree as the tree's: TreeErrors at once, exit 2.
+    """
+    from coordinator.language import load_tree
+    from modules.discovery import announced_modules
+
+    told = False
+    while True:
+        for name, live in announced_modules().items():  # liveness: the preflight pings them
+            defs.setdefault(name, live.definition)
+        try:
+            return load_tree(path, defs, given=given)
+        except TreeErrors as exc:
+            missing = sorted({e.module for e in exc.errors if e.module})
+            if not missing or any(not e.module for e in exc.errors):
+                raise
+            master = os.environ.get("ROS_MASTER_URI", "http://localhost:11311/")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                for e in exc.errors:
+                    err("%s: module %r is not running: no bmtree module of that name announced itself on %s "
+                        "(--wait), and its definition was not given (start it, or give its definition with "
+                        "--modules FILE.json or a folder of them: an original module does not announce itself)"
+                        % (e.pos, e.module, master))
+                return None
+            if not told:
+                err("module%s %s not announced on %s yet, and no definition given with --modules; waiting up to "
+                    "%.3g s (--wait) ..." % ("s" if len(missing) > 1 else "", ", ".join(map(repr, missing)), master,
+                                             left))
+                told = True
+            time.sleep(min(ANNOUNCED_EVERY, left))
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     for attr in ("tree", "world", "record"):  # a launch file passes ~/ as written
         if getattr(args, attr, None):
@@ -124,17 +166,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, on_term)
     try:
+        deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
         if not args.sim:
             if not wait_master(args.wait):
                 err("error: no ROS master at %s after %g s (start one, or use --sim)" % (os.environ.get(
                     "ROS_MASTER_URI", "http://localhost:11311/"), args.wait))
                 return EXIT_ENV
             if tree is None:  # modules known only to the live graph
-                from modules.discovery import announced_modules
-
-                for name, live in announced_modules().items():  # liveness: the preflight pings them
-                    defs.setdefault(name, live.definition)
-                tree = load_tree(args.tree, defs, given=set(given))
+                tree = _load_announced(args.tree, defs, set(given), deadline)
+                if tree is None:
+                    return EXIT_ENV
                 _check_given(tree, given, args.tree)
         assert tree is not None
         legacy = legacy_option(getattr(args, "legacy", None), defs)
@@ -168,7 +209,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
         stream_sink = transport.stream_sink()
         try:
-            transport.wait_ready(mods, args.wait, defs, blackboard=recall, legacy=legacy)
+            left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
+            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=err)
         except OSError as exc:
             err("error: %s" % exc)
             return EXIT_ENV

@@ -59,3 +59,64 @@ def test_random_start_orders_lose_no_first_call(ros_graph, tmp_path):
             ros_graph.stop_node(procs[name])
     print("\nFIGURE start orders: %d random orders, %d lost first calls" % (len(orders), len(lost)))
     assert not lost, lost
+
+
+CALL_ONLY = "format: 1\nroot:\n  call: probe.echo\n  inputs: {tag: first}\n"
+
+
+def _run_first(tree, *args):
+    """``bmtree run`` started before its module: (process, path of its stderr)."""
+    err = str(tree) + ".err"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "-q", *args],
+                                env=dict(os.environ), stdout=subprocess.PIPE, stderr=fh, text=True)
+    return proc, err
+
+
+def _text(path):
+    with open(path) as fh:
+        return fh.read()
+
+
+def test_a_run_started_before_its_modules_says_what_it_waits_for_and_runs(ros_graph, tmp_path):
+    """A launch file starts the modules and the run together: the run waits (bounded by --wait) for
+    a module it only knows from its announcement, and for one whose definition it was given, and
+    says once what it waits for instead of waiting silently."""
+    from tests.conftest import until
+
+    tree = tmp_path / "first.yaml"
+    tree.write_text(CALL_ONLY)
+    for given in ([], ["--modules", PROBE_JSON]):
+        run, err = _run_first(tree, "--wait", "60", *given)
+        try:
+            notice = ("module 'probe' not announced on %s yet, and no definition given with --modules; waiting up to"
+                      % os.environ["ROS_MASTER_URI"]) if not given else "(--wait): module 'probe' is not running ("
+            until(lambda: notice in _text(err) or run.poll() is not None, 60)
+            assert run.poll() is None, _text(err)
+            module = ros_graph.start_node(["-m", "modules.node", "--definition", PROBE_JSON, "--class", PROBE_CLASS,
+                                           "__name:=bm_late"], "/bm_late", wait=False)
+            out, _ = run.communicate(timeout=120)
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait(10)
+        assert run.returncode == 0, out + _text(err)
+        assert _text(err).count(notice) == 1 and "probe.echo" in out and "succeeded" in out
+        ros_graph.stop_node(module)
+
+
+def test_a_module_that_never_comes_is_the_environment_and_a_close_name_is_a_typo(ros_graph, tmp_path):
+    tree = tmp_path / "never.yaml"
+    tree.write_text(CALL_ONLY)
+    run, err = _run_first(tree, "--wait", "1")
+    out, _ = run.communicate(timeout=60)
+    assert run.returncode == 3, out + _text(err)
+    assert "never.yaml:3:9: module 'probe' is not running: no bmtree module of that name announced itself on" \
+        in _text(err) and "Traceback" not in _text(err)
+    # a name close to one the run knows (given, or announced) is refused at once, as a typo
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(CALL_ONLY.replace("probe.echo", "prob.echo"))
+    run, err = _run_first(typo, "--wait", "60", "--modules", PROBE_JSON)
+    out, _ = run.communicate(timeout=30)
+    assert run.returncode == 2 and "typo.yaml:3:9: unknown module 'prob' (did you mean 'probe'?)" in _text(err), \
+        out + _text(err)
