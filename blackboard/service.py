@@ -325,5 +325,6 @@ class BlackboardService:
             types.append(v.rostype)
             texts.append(v.msg)
             sources.append(v.source)
+        unstored = [c for c in req.after if not self._all_stored([c])]
         self._publish_answer(BlackboardAnswer.encode_raw(names, types, texts, req.request_id, missing,
-                                                         "; ".join(errors), sources))
+                                                         "; ".join(errors), sources, unstored))

@@ -361,7 +361,10 @@ class BlackboardAnswer(_Values):
 
     Values are listed as in a result (``names``/``rostypes``/``msgs``), newest
     first when a history was asked for; ``sources`` says, per value, which
-    module, function and call produced it and when (``stamp``, seconds).
+    module, function and call produced it and when (``stamp``, seconds). ``unstored`` lists
+    the calls of the request's ``after`` whose results the Blackboard still had not stored when
+    it answered (a Blackboard restarted or disconnected while they ran): values they would have
+    written are older ones. Only sent when not empty.
     """
 
     names: List[str] = field(default_factory=list)
@@ -370,18 +373,22 @@ class BlackboardAnswer(_Values):
     missing: List[str] = field(default_factory=list)
     error: str = ""
     sources: List[Dict[str, Any]] = field(default_factory=list)
+    unstored: List[str] = field(default_factory=list)
 
     def encode(self) -> str:
         return self.encode_raw(self.names, self.rostypes, [json.dumps(from_message(m)) for m in self.msgs],
-                               self.request_id, self.missing, self.error, self.sources)
+                               self.request_id, self.missing, self.error, self.sources, self.unstored)
 
     @staticmethod
     def encode_raw(names: List[str], rostypes: List[str], texts: List[str], request_id: Optional[str],
-                   missing: List[str], error: str = "", sources: Optional[List[Dict[str, Any]]] = None) -> str:
+                   missing: List[str], error: str = "", sources: Optional[List[Dict[str, Any]]] = None,
+                   unstored: Optional[List[str]] = None) -> str:
         """The answer from values already encoded as JSON (the Blackboard stores them so)."""
-        return _dumps({"names": list(names), "rostypes": list(rostypes), "msgs": list(texts),
-                       "request_id": request_id, "missing": list(missing), "error": error,
-                       "sources": list(sources or [])})
+        out = {"names": list(names), "rostypes": list(rostypes), "msgs": list(texts),
+               "request_id": request_id, "missing": list(missing), "error": error, "sources": list(sources or [])}
+        if unstored:
+            out["unstored"] = list(unstored)
+        return _dumps(out)
 
     @classmethod
     def decode(cls, text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> BlackboardAnswer:
@@ -392,4 +399,5 @@ class BlackboardAnswer(_Values):
             raise ProtocolError("key 'sources' must be a list of objects")
         return cls(names=names or [], msgs=msgs, request_id=_get_str(d, "request_id", required=False),
                    missing=_get_str_list(d, "missing", required=False) or [],
-                   error=_get_str(d, "error", required=False) or "", sources=sources)
+                   error=_get_str(d, "error", required=False) or "", sources=sources,
+                   unstored=_get_str_list(d, "unstored", required=False) or [])

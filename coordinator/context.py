@@ -6,7 +6,7 @@ import queue
 import typing
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from comm.messages import (
     BlackboardAnswer,
@@ -99,7 +99,11 @@ class RunContext:
         self.dropped: List[FunctionResult] = []
         self._ended: typing.OrderedDict[str, CallRecord] = OrderedDict()  # calls that ended without an answer
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()  # in C: a cheap hand-off from the receiving threads
-        self.unstored: List[str] = []  # calls whose results the next recall must see stored
+        # calls whose results the next recall must see stored: call_id -> (module.function, the
+        # Blackboard names its values answer to); then, per request, the ones it asked about
+        self.unstored: typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]] = OrderedDict()
+        self._asked: Dict[str, typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]]] = {}
+        self.lost: Dict[str, Tuple[str, str]] = {}  # Blackboard name -> (module.function, call_id) it lost
 
     # values ------------------------------------------------------------------------
     def lookup(self, key: str) -> Any:
@@ -157,10 +161,39 @@ class RunContext:
     def request(self, names: List[str]) -> str:
         # The Blackboard answers only once the results received since the last request are
         # committed: they reach it on another connection than the request, maybe later.
-        req = BlackboardRequest(var_names=list(names), after=self.unstored)
-        self.unstored = []
+        req = BlackboardRequest(var_names=list(names), after=list(self.unstored))
+        if self.unstored and req.request_id:
+            self._asked[req.request_id] = self.unstored
+        self.unstored = OrderedDict()
         self.transport.send_request(req)
         return req.request_id or ""
+
+    def lost_value(self, name: str) -> str:
+        """Why the Blackboard's value of ``name`` is older than the run's (``''`` when it is not):
+        it did not store the result of a call that wrote it (restarted or cut off meanwhile)."""
+        lost = self.lost.get(name)
+        if lost is None:
+            return ""
+        return ("the Blackboard node did not store the result of %s (call %s) that wrote %s, so its value is an older "
+                "one (was the Blackboard node restarted, or cut off from the module, while the call ran?)"
+                % (lost[0], lost[1], name))
+
+    def _confirmed(self, answer: BlackboardAnswer) -> None:
+        """Which results the Blackboard stored, by the answer to a request that asked."""
+        asked = self._asked.pop(answer.request_id or "", None)
+        if asked is None:
+            return
+        if answer.error and not answer.names and not answer.missing:  # not answered: ask again next time
+            asked.update(self.unstored)
+            self.unstored = asked
+            return
+        unstored = set(answer.unstored)
+        for call_id, (target, names) in asked.items():  # in the order the results came
+            for name in names:
+                if call_id in unstored:
+                    self.lost[name] = (target, call_id)
+                else:
+                    self.lost.pop(name, None)
 
     # incoming ----------------------------------------------------------------------
     def dispatch(self, item: Any) -> None:
@@ -180,14 +213,19 @@ class RunContext:
             self.pending.pop(rec.call_id, None)
             rec.result = item
             if item.names and rec.call_id:  # an original module's result is stored under the call it answers
-                self.unstored.append(rec.call_id)
-                del self.unstored[:-1000]  # a long run without recalls: the old ones are stored by now
+                fn = rec.function
+                target = rec.target
+                prefix = "%s/%s/" % (fn.module, fn.name) if fn is not None else ""
+                self.unstored[rec.call_id] = (target, tuple(item.names) + tuple(prefix + n for n in item.names))
+                while len(self.unstored) > 1000:  # a long run without recalls: the old ones are stored by now
+                    self.unstored.popitem(last=False)
         elif isinstance(item, Event):
             self.events.append(item)
             if self.observers:
                 notify(self.observers, "on_event", item, self.clock.now())
         elif isinstance(item, BlackboardAnswer):
             if item.request_id:
+                self._confirmed(item)
                 self.answers[item.request_id] = item
         elif isinstance(item, ModuleLost):
             for call_id in item.call_ids:
@@ -196,8 +234,9 @@ class RunContext:
                     self.finish(rec, RecordStatus.MODULE_LOST, "module %s lost: %s" % (item.module, item.reason))
         elif isinstance(item, BlackboardLost):
             for request_id in item.request_ids:
-                self.answers.setdefault(request_id, BlackboardAnswer(
-                    request_id=request_id, error="Blackboard node lost: %s" % item.reason))
+                lost = BlackboardAnswer(request_id=request_id, error="Blackboard node lost: %s" % item.reason)
+                self._confirmed(lost)
+                self.answers.setdefault(request_id, lost)
 
     def correlate(self, result: FunctionResult) -> Optional[CallRecord]:
         """The pending call a result answers (DESIGN §2, README "Correlation").

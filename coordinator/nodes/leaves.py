@@ -50,6 +50,9 @@ class Recall(Leaf):
             return Status.RUNNING
         if ans.error and not ans.missing:
             return self._fail(ans.error)
+        stale = [why for why in map(self.ctx.lost_value, self.node.spec.names.values()) if why]
+        if stale:
+            return self._fail("; ".join(stale))
         if ans.missing or ans.error:
             return self._fail("the Blackboard has no %s%s" % (", ".join(ans.missing), "; " + ans.error if ans.error else ""))
         values = ans.values

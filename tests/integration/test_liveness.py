@@ -105,3 +105,42 @@ def test_a_run_reports_module_lost_long_before_the_call_timeout(ros_graph, tmp_p
             run.wait(10)
     assert run.returncode == 1, out
     assert "module_lost" in out and "module probe lost" in out, out
+
+
+def test_a_blackboard_restarted_while_a_result_came_makes_the_recall_fail_not_stale(ros_graph, tmp_path):
+    """The Blackboard node is down when a call's result comes and back (on its store) before the
+    tree recalls that output: its value is the one from before the call. The recall fails and
+    says so; it does not hand the tree the older value."""
+    db = str(tmp_path / "bb.sqlite")
+
+    def blackboard():
+        return ros_graph.start_node(["-m", "blackboard.node", "--db", db, "__name:=bb_restart"], "/bb_restart")
+
+    bb = blackboard()
+    start_probe(ros_graph)
+    tree = tmp_path / "restart.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n"
+                    "    - call: probe.echo\n      inputs: {tag: before}\n"
+                    "    - call: probe.work\n      inputs: {seconds: 2.0, tag: after}\n"
+                    "    - wait: 6\n"
+                    "    - recall: {said: tag}\n")
+    run = subprocess.Popen(bmtree_cmd("run", str(tree), "--modules", PROBE_JSON), stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    seen = []
+    try:
+        for line in run.stdout:
+            seen.append(line)
+            if "RUNNING" in line and "probe.work" in line:
+                ros_graph.kill_node(bb)
+            if "SUCCESS" in line and "probe.work" in line:  # answered while the Blackboard was down
+                bb = blackboard()
+                break
+        out, _ = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.send_signal(signal.SIGINT)
+            run.wait(10)
+    out = "".join(seen) + out
+    assert run.returncode == 1, out
+    assert "the Blackboard node did not store the result of probe.work (call" in out, out
+    assert "that wrote tag, so its value is an older one" in out, out

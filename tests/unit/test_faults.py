@@ -165,6 +165,9 @@ def test_a_request_waits_for_the_results_it_names(bb):
             break
         done.wait(0.01)
     assert json.loads(answers[-1])["request_id"] == "n"
+    # ... and says which of the results it was to wait for it does not have (its value is older)
+    assert BlackboardAnswer.decode(answers[-1]).unstored == ["never"]
+    assert BlackboardAnswer.decode(answers[0]).unstored == [] and "unstored" not in answers[0]
 
 
 # coordinator -------------------------------------------------------------------------------
@@ -219,6 +222,47 @@ def test_a_recall_names_the_results_it_must_see(probe):
     ctx.request(["tag"])
     ctx.request(["tag"])
     assert transport.sent[-2].after == ["id1"] and transport.sent[-1].after == []
+
+
+def test_a_value_whose_result_the_blackboard_did_not_store_is_not_recalled(probe, tmp_path):
+    """A Blackboard node restarted (or cut off) while a call ran answers with the value from
+    before the call: the recall fails and says why instead of handing it to the tree."""
+    from coordinator.builder import build_tree
+    from coordinator.language import load_tree
+
+    transport = _Sent()
+    ctx = RunContext(transport, SimClock(), {"probe": probe})
+    fn = probe.function("echo")
+    for call_id in ("id1", "id2"):
+        ctx.start_call(fn, fn.build_call({"tag": "x"}, call_id))
+        ctx.dispatch(fn.build_result({"tag": call_id}, call_id))
+    path = tmp_path / "recall.yaml"
+    path.write_text("format: 1\nroot:\n  recall: {said: tag, full: probe/echo/tag}\n")
+    tree = load_tree(str(path), {"probe": probe})
+    root = build_tree(tree, ctx, {})
+    root.tick_once()
+    req = transport.sent[-1]
+    assert req.after == ["id1", "id2"]
+    old = [String("before")] * 2
+    ctx.dispatch(BlackboardAnswer(names=["tag", "probe/echo/tag"], msgs=old, request_id=req.request_id, unstored=["id2"]))
+    root.tick_once()
+    assert root.status.value == "FAILURE"
+    assert ("the Blackboard node did not store the result of probe.echo (call id2) that wrote tag, so its value is "
+            "an older one") in root.feedback_message and "wrote probe/echo/tag" in root.feedback_message
+    # a later result of that output, stored, makes the Blackboard's value the run's again
+    ctx.start_call(fn, fn.build_call({"tag": "x"}, "id3"))
+    ctx.dispatch(fn.build_result({"tag": "id3"}, "id3"))
+    root.tick_once()
+    req = transport.sent[-1]
+    assert req.after == ["id3"]
+    ctx.dispatch(BlackboardAnswer(names=["tag", "probe/echo/tag"], msgs=[String("id3")] * 2, request_id=req.request_id))
+    root.tick_once()
+    assert root.status.value == "SUCCESS" and ctx.blackboard["said"].data == "id3"
+    # a request the Blackboard never answered asks about its results again
+    ctx.dispatch(fn.build_result({"tag": "id4"}, ctx.start_call(fn, fn.build_call({"tag": "x"}, "id4")).call_id))
+    rid = ctx.request(["tag"])
+    ctx.dispatch(BlackboardLost(node="/blackboard", reason="gone", request_ids=[rid]))
+    assert ctx.request(["tag"]) and transport.sent[-1].after == ["id4"]
 
 
 # loaders and arguments ---------------------------------------------------------------------
