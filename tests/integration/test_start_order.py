@@ -91,7 +91,7 @@ def test_a_run_started_before_its_modules_says_what_it_waits_for_and_runs(ros_gr
         try:
             notice = ("module 'probe' not announced on %s yet, and no definition given with --modules; waiting up to"
                       % os.environ["ROS_MASTER_URI"]) if not given else "(--wait): module 'probe' is not running ("
-            until(lambda: notice in _text(err) or run.poll() is not None, 60)
+            until(lambda n=notice, e=err, r=run: n in _text(e) or r.poll() is not None, 60)
             assert run.poll() is None, _text(err)
             module = ros_graph.start_node(["-m", "modules.node", "--definition", PROBE_JSON, "--class", PROBE_CLASS,
                                            "__name:=bm_late"], "/bm_late", wait=False)
