@@ -56,17 +56,20 @@ def test_a_watch_ended_by_sigterm_or_sighup_leaves_the_master_as_ctrl_c_does(ros
     env = dict(os.environ, ROS_MASTER_URI=ros_master, ROS_IP="127.0.0.1", ROS_HOME=str(tmp_path))
     master = rosgraph.Master("/test", master_uri=ros_master)
 
-    def watchers():
+    def watchers(pid):
+        """The topics of the run stream that the watch with this pid subscribes (other tests' watches
+        on this master are not this test's business)."""
         _, subs, _ = master.getSystemState()
-        return sorted({n for t, nodes in subs if t.startswith("/bmtree/run/") for n in nodes})
+        return sorted({t for t, nodes in subs if t.startswith("/bmtree/run/") for n in nodes
+                       if n.startswith("/bmtree_watch_%d_" % pid)})
 
     for sig in (signal.SIGTERM, signal.SIGHUP):
         watch = subprocess.Popen(bmtree_cmd("watch", "--plain", "--follow"), stdout=subprocess.PIPE,
                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, env=env)
         end = time.monotonic() + 60
-        while not watchers():
+        while not watchers(watch.pid):
             assert watch.poll() is None and time.monotonic() < end, watch.stdout.read()
             time.sleep(0.05)
         watch.send_signal(sig)
         assert watch.wait(30) == 0
-        assert watchers() == [], (sig, watchers())
+        assert watchers(watch.pid) == [], (sig, watchers(watch.pid))
