@@ -6,7 +6,7 @@ import os
 import signal
 import sys
 import time
-from typing import Any, Dict, Set
+from typing import Any, Dict, List, Set
 
 from comm.errors import did_you_mean
 from coordinator.cliutil import (
@@ -77,6 +77,31 @@ def _check_local_address(address: str) -> None:
 def _needs_live_definitions(exc: TreeErrors) -> bool:
     """True if the tree may still be valid once the live modules' definitions are known."""
     return any(e.message.startswith("unknown module") for e in exc.errors)
+
+
+def other_runs() -> List[str]:
+    """The live nodes, other than this one, that publish a run stream's tree on this master."""
+    import rosgraph
+    import rospy
+
+    from coordinator.watch import STREAM_NS
+    from modules.discovery import node_alive
+
+    master = rosgraph.Master(rospy.get_name())
+    try:
+        pubs, _, _ = master.getSystemState()
+    except (OSError, rosgraph.masterapi.MasterException):
+        return []
+    nodes = sorted({n for t, ns in pubs if t == STREAM_NS + "/tree" for n in ns if n != rospy.get_name()})
+    out = []
+    for node in nodes:
+        try:
+            alive = node_alive(master.lookupNode(node), 1.0)
+        except (OSError, rosgraph.masterapi.MasterException):
+            alive = False
+        if alive:  # not one killed outright, whose registration stays
+            out.append(node)
+    return out
 
 
 def _load_announced(path: str, defs: Dict[str, Any], given: Set[str], deadline: float) -> Any:
@@ -208,6 +233,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             err("warning: %s" % hint)
         transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
         stream_sink = transport.stream_sink()
+        from coordinator.watch import STREAM_NS
+
+        for other in other_runs():
+            err("warning: another bmtree run is running on this master (node %s): both publish the run stream on "
+                "%s (bmtree watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
         try:
             left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
             transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=err)

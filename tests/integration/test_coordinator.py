@@ -288,3 +288,29 @@ def test_closing_a_graph_stops_its_nodes_together_and_the_stop_last_ones_after(t
         graph.close()
     assert (tmp_path / "second").read_text() == "alive"  # asked while the first was still stopping
     assert (tmp_path / "last").read_text() == "gone gone"
+
+
+def test_a_second_run_on_the_master_is_told_of_the_first(ros_graph, tmp_path):
+    """Two runs on one master share the run stream and the control topics: the second one says so."""
+    from tests.integration.faultkit import PROBE_JSON, start_probe
+
+    start_probe(ros_graph)
+    slow, quick = tmp_path / "slow.yaml", tmp_path / "quick.yaml"
+    slow.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: 60.0, tag: x}\n  timeout: 100\n")
+    quick.write_text("format: 1\nroot:\n  call: probe.echo\n  inputs: {tag: y}\n")
+    first = subprocess.Popen(bmtree_cmd("run", str(slow), "--modules", PROBE_JSON), stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    try:
+        for line in first.stdout:
+            if "RUNNING" in line and "probe.work" in line:
+                break
+        out = run("run", str(quick), "--modules", PROBE_JSON, "-q")
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.wait(30)
+    alone = run("run", str(quick), "--modules", PROBE_JSON, "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "warning: another bmtree run is running on this master (node /bmtree_%d_" % first.pid in out.stderr, \
+        out.stderr
+    assert "both publish the run stream on /bmtree/run" in out.stderr
+    assert alone.returncode == 0 and "another bmtree run" not in alone.stderr, alone.stderr
