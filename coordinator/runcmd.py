@@ -252,7 +252,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         view, sinks = run_view(transport, args.quiet)
         display = None if args.quiet or view is not None else Display()
         print("running %s" % tree.name)
-        recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None)
+        recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
+                                  control=bool(getattr(args, "control", False)))
         from coordinator.control import ros_controller
 
         steer = ros_controller(getattr(args, "control", False))

@@ -91,11 +91,12 @@ class RunFiles:
         self.writer: Optional[RunLogWriter] = None
 
     def recorder(self, sinks: List[Sink], inputs: Dict[str, Any], max_duration: Optional[float],
-                 world: Optional[str]) -> Any:
-        """The run-stream observer writing to ``sinks`` and, unless ``--no-record``, the log."""
+                 world: Optional[str], control: bool = False) -> Any:
+        """The run-stream observer writing to ``sinks`` and, unless ``--no-record``, the log.
+        ``control``: the run takes control commands (``--control``), so viewers offer them."""
         from coordinator.runstream import RunStream
 
-        meta: Dict[str, Any] = {"inputs": inputs, "max_duration": max_duration}
+        meta: Dict[str, Any] = {"inputs": inputs, "max_duration": max_duration, "control": control}
         if world is not None or os.path.isdir(self.sim_dir):
             meta["sim"] = {"world": os.path.abspath(world) if world else None, "dir": self.sim_dir}
         all_sinks = list(sinks)

@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable, List, Optional, Tuple
+from typing import Any, Callable, List, Optional, Tuple, Union
 
 from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
@@ -69,7 +69,8 @@ class LiveView:
     """Redraws ``state`` in place on a terminal (rich.live, alternate screen) until stopped;
     ``keys`` maps a key to a callable returning a short answer shown in the footer."""
 
-    def __init__(self, state: WatchState, console: Any = None, footer: str = "", refresh: float = 0.2):
+    def __init__(self, state: WatchState, console: Any = None, footer: Union[str, Callable[[WatchState], str]] = "",
+                 refresh: float = 0.2):
         from rich.console import Console
 
         self.state = state
@@ -82,7 +83,8 @@ class LiveView:
 
     def _frame(self, anchor: List[float]) -> Any:
         size = self.console.size
-        foot = self.message or self.footer  # an answer replaces the help until the next key
+        help_ = self.footer(self.state) if callable(self.footer) else self.footer
+        foot = self.message or help_  # an answer replaces the help until the next key
         return render(self.state, size.width, size.height, foot.strip(), now_since(self.state, anchor))
 
     def _loop(self) -> None:
@@ -134,6 +136,12 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
 
 
 KEYS_HELP = "q quit  p pause/resume  s step  : command (break NODE, clear NODE, force NODE SUCCESS, set KEY VALUE)"
+NO_CONTROL_HELP = "q quit  (this run takes no commands: it was started without --control)"
+
+
+def keys_help(state: WatchState) -> str:
+    """The footer: the steering keys only for a run that takes them."""
+    return KEYS_HELP if state.steerable else NO_CONTROL_HELP
 
 
 class Keys:
@@ -268,7 +276,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
                 args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.url))
             sys.stdout.flush()
         elif tty:
-            view = LiveView(state, footer=KEYS_HELP).start()
+            view = LiveView(state, footer=keys_help).start()
             _key_reader(Keys(view, client, stop).press, stop)
         if not wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
             if signals.requested or stop.is_set():

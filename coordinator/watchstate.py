@@ -158,9 +158,15 @@ class WatchState:
         """Everything a view draws, as plain data (the web page's JSON)."""
         with self.lock:
             snap = self.snapshot(calls=KEEP, events=KEEP)
-            snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started")},
+            snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started", "control")},
                         nodes=self.nodes, version=self.version)
             return snap
+
+    @property
+    def steerable(self) -> bool:
+        """False when the run said it takes no control commands (started without ``--control``);
+        True when it takes them, or did not say (a run of an older bmtree)."""
+        return self.tree.get("control") is not False
 
     def label(self, i: int) -> str:
         """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED or '' (not ticked yet / reset)."""

@@ -109,7 +109,7 @@ class WebServer:
         since = int((q.get("since") or ["-1"])[0])
         self.state.wait(lambda s: s.version != since, 8.0)
         data = self.state.view()
-        data.update(mode="live", steer=self.control is not None)
+        data.update(mode="live", steer=self.control is not None and (data.get("tree") or {}).get("control") is not False)
         return data
 
     def close(self) -> None:

@@ -83,15 +83,37 @@ def test_each_command_steers_the_run_and_is_logged(tmp_path):
 
 
 def test_a_run_without_control_refuses_every_command(tmp_path):
+    """... and the viewers do not offer commands it would refuse: the terminal's footer says why,
+    the page has no control buttons."""
+    from tests.integration.test_watch_terminal import Tmux, _cmd
+    from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
+
+    driver = browser(tmp_path)
     run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=2.0))
+    term = web = None
     try:
         run.out.wait_for("RUNNING   go to the kitchen")
         assert "control is not enabled for this run" in refused(run, "pause")
+        term = Tmux(tmp_path, "nokeys", 100, 24, _cmd("watch", "--follow", "--wait", "60"), run.env)
+        term.wait_screen("go to the kitchen", "this run takes no commands: it was started without --control")
+        assert "p pause/resume" not in term.screen()
+        web, _out, url = start_web("watch", "--web", "--follow", "--wait", "60", env=run.env)
+        driver.get(url)
+        wait_until(driver, lambda d: "go to the kitchen" in str(d.execute_script(
+            "return [...document.querySelectorAll('#tree g.node title')].map(t=>t.textContent).join('|')")))
+        assert not driver.find_element("id", "controls").is_displayed()
         assert run.finish() == 0, run.out.text()  # it ran on, unpaused
+        wait_until(driver, lambda d: "result: SUCCESS" in text(d, "result"))
+        assert not driver.find_element("id", "controls").is_displayed()
         log_path = run.out.wait_for("run log: ").split(": ", 1)[1]
         controls = [r for r in read_log(log_path).records if r.get("type") == "control"]
         assert [(r["command"], r["ok"]) for r in controls] == [("pause", False)]
     finally:
+        driver.quit()
+        if web is not None:
+            stop(web)
+        if term is not None:
+            term.close()
         run.close()
 
 
@@ -105,7 +127,7 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
     try:
         run.out.wait_for("RUNNING   go to the kitchen")
         term = Tmux(tmp_path, "keys", 80, 24, _cmd("watch", "--wait", "60"), run.env)
-        term.wait_screen("go to the kitchen", "navigation.go_to")
+        term.wait_screen("go to the kitchen", "navigation.go_to", "q quit  p pause/resume  s step")
         term.tmux("send-keys", "-t", term.name, "p")
         term.wait_screen("PAUSED", "ok: paused")
         term.tmux("send-keys", "-t", term.name, ":force done FAILURE", "Enter")
