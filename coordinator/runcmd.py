@@ -79,7 +79,7 @@ def _needs_live_definitions(exc: TreeErrors) -> bool:
     return any(e.message.startswith("unknown module") for e in exc.errors)
 
 
-def other_runs() -> List[str]:
+def _other_runs() -> List[str]:
     """The live nodes, other than this one, that publish a run stream's tree on this master."""
     import rosgraph
     import rospy
@@ -235,12 +235,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         stream_sink = transport.stream_sink()
         from coordinator.watch import STREAM_NS
 
-        for other in other_runs():
+        for other in [] if args.sim else _other_runs():  # a private graph has no other run
             err("warning: another bmtree run is running on this master (node %s): both publish the run stream on "
                 "%s (bmtree watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
         try:
             left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
-            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=err)
+            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err)
         except OSError as exc:
             err("error: %s" % exc)
             return EXIT_ENV
