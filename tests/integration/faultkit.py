@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import os
 import queue
+import signal
 import statistics
+import subprocess
+import sys
 import time
 from typing import Any, Callable, List, Optional, Sequence
 
@@ -12,7 +15,7 @@ from modules.definition import load_definition
 from tests.integration.conftest import NODES, wait_announced
 
 __all__ = ["FULL", "scale", "PROBE_JSON", "PROBE_CLASS", "probe_def", "start_probe", "figure", "wait_item", "Publishers",
-           "log_problems"]
+           "log_problems", "slow_run", "stop_run"]
 
 FULL = os.environ.get("BMTREE_RELIABILITY") == "1"
 PROBE_JSON = os.path.join(NODES, "probe.json")
@@ -33,6 +36,26 @@ def start_probe(ros_graph: Any, node: str = "bm_probe", wait: bool = True) -> An
     if wait:
         wait_announced("probe")
     return proc
+
+
+def slow_run(tmp_path: Any, seconds: float = 100.0) -> subprocess.Popen[str]:
+    """``bmtree run`` of one ``probe.work`` call of ``seconds`` as a process, once that call runs."""
+    tree = tmp_path / "slow.yaml"
+    tree.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: %s, tag: x}\n  timeout: 100\n"
+                    % float(seconds))
+    run = subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "--modules", PROBE_JSON],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    for line in run.stdout or ():
+        if "RUNNING" in line and "probe.work" in line:
+            break
+    return run
+
+
+def stop_run(run: subprocess.Popen[str]) -> None:
+    """Ctrl-C to a run still going, and wait for it."""
+    if run.poll() is None:
+        run.send_signal(signal.SIGINT)
+        run.wait(30)
 
 
 def figure(name: str, values: List[float], unit: str = "s") -> str:

@@ -292,22 +292,16 @@ def test_closing_a_graph_stops_its_nodes_together_and_the_stop_last_ones_after(t
 
 def test_a_second_run_on_the_master_is_told_of_the_first(ros_graph, tmp_path):
     """Two runs on one master share the run stream and the control topics: the second one says so."""
-    from tests.integration.faultkit import PROBE_JSON, start_probe
+    from tests.integration.faultkit import PROBE_JSON, slow_run, start_probe, stop_run
 
     start_probe(ros_graph)
-    slow, quick = tmp_path / "slow.yaml", tmp_path / "quick.yaml"
-    slow.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: 60.0, tag: x}\n  timeout: 100\n")
+    quick = tmp_path / "quick.yaml"
     quick.write_text("format: 1\nroot:\n  call: probe.echo\n  inputs: {tag: y}\n")
-    first = subprocess.Popen(bmtree_cmd("run", str(slow), "--modules", PROBE_JSON), stdout=subprocess.PIPE,
-                             stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    first = slow_run(tmp_path, 60)
     try:
-        for line in first.stdout:
-            if "RUNNING" in line and "probe.work" in line:
-                break
         out = run("run", str(quick), "--modules", PROBE_JSON, "-q")
     finally:
-        first.send_signal(signal.SIGINT)
-        first.wait(30)
+        stop_run(first)
     alone = run("run", str(quick), "--modules", PROBE_JSON, "-q")
     assert out.returncode == 0, out.stdout + out.stderr
     assert "warning: another bmtree run is running on this master (node /bmtree_%d_" % first.pid in out.stderr, \

@@ -11,7 +11,17 @@ from comm import BlackboardRequest, FunctionResult
 from coordinator.liveness import BlackboardLost, ModuleLost
 from coordinator.ros_transport import RosTransport
 from tests.integration.conftest import bmtree_cmd
-from tests.integration.faultkit import FULL, PROBE_JSON, figure, probe_def, scale, start_probe, wait_item
+from tests.integration.faultkit import (
+    FULL,
+    PROBE_JSON,
+    figure,
+    probe_def,
+    scale,
+    slow_run,
+    start_probe,
+    stop_run,
+    wait_item,
+)
 
 
 def _transport():
@@ -89,20 +99,12 @@ def test_killed_blackboard_fails_an_open_request(ros_graph, tmp_path):
 
 def test_a_run_reports_module_lost_long_before_the_call_timeout(ros_graph, tmp_path):
     proc = start_probe(ros_graph)
-    tree = tmp_path / "slow.yaml"
-    tree.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: 100.0, tag: x}\n  timeout: 100\n")
-    run = subprocess.Popen(bmtree_cmd("run", str(tree), "--modules", PROBE_JSON), stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    run = slow_run(tmp_path)
     try:
-        for line in run.stdout:
-            if "RUNNING" in line and "probe.work" in line:
-                break
         ros_graph.kill_node(proc)
         out, _ = run.communicate(timeout=60)
     finally:
-        if run.poll() is None:
-            run.send_signal(signal.SIGINT)
-            run.wait(10)
+        stop_run(run)
     assert run.returncode == 1, out
     assert "module_lost" in out and "module probe lost" in out, out
 
