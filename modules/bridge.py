@@ -23,7 +23,7 @@ from urllib.parse import urlsplit
 
 from comm import sync_publisher
 from comm.errors import ProtocolError
-from comm.messages import load_payload
+from comm.messages import load_payload, new_id
 from comm.nodelife import stop_requested
 from comm.nodeopts import node_name, seconds
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
@@ -82,6 +82,8 @@ class _Call:
         self.fresh: Dict[str, List[Any]] = {t: [] for t in topics}
         self.output: Optional[Dict[str, Any]] = None
         self.output_at = 0.0
+        self.call_id = ""  # in BM_input and BM_cancel, for a node built with bmtree's library
+        self.cancel_sent = False
 
 
 class CppBridge(BasicModule):
@@ -107,12 +109,14 @@ class CppBridge(BasicModule):
         self.cpp_node = ""
         self.cpp_uri = ""
         self.library = False
+        self.cancellable = False  # the C++ node takes cancels (bmtree's library subscribes /<BM>/BM_cancel)
         self._cond = threading.Condition()
         self._call: Optional[_Call] = None
         self._ready = False
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._in_pub: Any = None
+        self._cancel_pub: Any = None
         self._out_sub: Any = None
         self._String: Any = None
         self._self_name = ""
@@ -139,6 +143,7 @@ class CppBridge(BasicModule):
             self._subs.append(rospy.Subscriber(topic, resolve_type(rostype), self._on_data, callback_args=topic,
                                                queue_size=1000, tcp_nodelay=True))
         self._in_pub = sync_publisher("/%s/BM_input" % name, String)
+        self._cancel_pub = sync_publisher("/%s/BM_cancel" % name, String)
         self._out_sub = rospy.Subscriber("/%s/BM_output" % name, String, self._on_output, queue_size=100,
                                          tcp_nodelay=True)
         missing = self._wait_connected(self.connect_timeout)
@@ -146,7 +151,8 @@ class CppBridge(BasicModule):
             raise BridgeError("the C++ node of module %r is not ready after %gs: %s" % (
                 name, self.connect_timeout, "; ".join(missing)))
         rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
-                      "bmtree library, no input gap" if self.library else "input gap %gs" % self._gap())
+                      ("bmtree library, no input gap, %s" % ("takes cancels" if self.cancellable else "no cancels"))
+                      if self.library else "input gap %gs, no cancels" % self._gap())
 
     def shutdown(self) -> None:
         for s in self._subs + [self._out_sub]:
@@ -180,6 +186,7 @@ class CppBridge(BasicModule):
             return None
         self.cpp_node = node
         self.library = node in next((n for t, n in pubs if t == "/%s/BM_info" % name), [])
+        self.cancellable = node in next((n for t, n in subs if t == "/%s/BM_cancel" % name), [])
         return node
 
     def _missing(self) -> List[str]:
@@ -189,7 +196,10 @@ class CppBridge(BasicModule):
         if node is None:
             return ["no node subscribes /%s/BM_input (is the C++ node running?)" % name]
         out = []
-        for topic, pub in [("/%s/BM_input" % name, self._in_pub)] + sorted(self._pubs.items()):
+        sync = [("/%s/BM_input" % name, self._in_pub)]
+        if self.cancellable:
+            sync.append(("/%s/BM_cancel" % name, self._cancel_pub))
+        for topic, pub in sync + sorted(self._pubs.items()):
             if not pub.impl.has_connection(node):
                 out.append("%s does not receive %s" % (node, topic))
         for sub in [self._out_sub] + self._subs:
@@ -271,6 +281,7 @@ class CppBridge(BasicModule):
         module = self.definition.name
         in_topics = [data_topic(module, p.rostype) for p in fn.inputs]
         call = _Call(fn, sorted({data_topic(module, p.rostype) for p in fn.outputs}))
+        call.call_id = self.context.call_id or new_id()
         with self._cond:
             self._call = call
         try:
@@ -279,7 +290,12 @@ class CppBridge(BasicModule):
             gap = self._gap()
             if gap > 0:
                 time.sleep(gap)
-            self._in_pub.publish(self._String(json.dumps({"function": name, "inparam_topics": in_topics})))
+            sync: Dict[str, Any] = {"function": name, "inparam_topics": in_topics}
+            if self.library:  # the original C++ utility knows no call ids
+                sync["call_id"] = call.call_id
+            self._in_pub.publish(self._String(json.dumps(sync)))
+            if self.cancellable:  # a halted tree stops the C++ function (it answers "cancelled")
+                self.context.on_cancel(lambda: self._send_cancel(call))
             self._wait_output(call)
         finally:
             with self._cond:
@@ -304,6 +320,7 @@ class CppBridge(BasicModule):
                 if self.call_timeout and now - start >= self.call_timeout:
                     self._ready = False
                     self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
+                    self._send_cancel(call)  # a node that takes cancels stops and answers soon
                     raise Failure("no BM_output from the C++ node %s within %gs: it hangs or crashed" % (
                         self.cpp_node, self.call_timeout))
                 left = self.call_timeout - (now - start) if self.call_timeout else _POLL
@@ -314,6 +331,16 @@ class CppBridge(BasicModule):
             if self._gone():
                 self._ready = False
                 raise Failure("the C++ node %s exited during the call (no BM_output)" % self.cpp_node)
+
+    def _send_cancel(self, call: _Call) -> None:
+        """Tell the C++ node to stop ``call`` (if it takes cancels; never raises)."""
+        if not self.cancellable or call.cancel_sent:
+            return
+        call.cancel_sent = True
+        try:
+            self._cancel_pub.publish(self._String(json.dumps({"call_id": call.call_id, "function": call.fn.name})))
+        except Exception as exc:  # shutting down, or the topic is gone
+            log.warning("could not send the cancel of %s to %s: %s", call.fn.qualified, self.cpp_node, exc)
 
     def _settle_owed(self) -> None:
         """Before a call: refuse it while the C++ node still runs a call that timed out (its

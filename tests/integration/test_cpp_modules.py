@@ -54,6 +54,16 @@ def gripper(ros_graph, gripper_exe):
     return start_gripper(ros_graph, gripper_exe)
 
 
+def start_oddities(ros_graph, gripper_exe, *bridge_options):
+    """The test module (tests/data/cpp/oddities.cpp) behind its bridge."""
+    exe = os.path.join(os.path.dirname(gripper_exe), "test_module")
+    cpp = ros_graph.start_node([exe], "/oddities")
+    bridge = ros_graph.start_node(["-m", "modules.bridge", "--definition", ODDITIES_JSON, *bridge_options],
+                                  "/oddities_bridge")
+    wait_announced("oddities")
+    return cpp, bridge
+
+
 def gripper_caller(caller_factory):
     """A Caller that the bridge answers (a connection the probe's publisher holds to an earlier
     test's node of the same name may swallow the first call)."""
@@ -63,6 +73,12 @@ def gripper_caller(caller_factory):
 def run(*args, timeout=120):
     return subprocess.run(bmtree_cmd(*args), capture_output=True, text=True, timeout=timeout,
                           env=dict(os.environ), stdin=subprocess.DEVNULL)
+
+
+def _node_log(ros_graph, node):
+    """What a node started by the graph printed so far."""
+    with open(os.path.join(ros_graph.ros_home, "%s.out" % node), errors="replace") as fh:
+        return fh.read()
 
 
 def call_lines(stdout):
@@ -182,66 +198,134 @@ def test_cpp_node_killed_mid_call_fails_within_the_call_timeout(ros_graph, gripp
     assert elapsed < 25  # answered by the bridge, not by the tree's 25 s timeout
 
 
-#: the end of a tree whose first squeeze was given up on while the C++ node still ran it
-THEN_A_SECOND_SQUEEZE_GETS_ITS_OWN_OUTPUTS = """    - retry: 100
+#: the end of a tree whose first stubborn call was given up on while the C++ node still ran it
+THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS = """    - retry: 100
       child:
         sequence:
           - wait: 0.1
-          - call: gripper.squeeze
+          - call: oddities.stubborn
             name: second
-            inputs: {seconds: 0.1, label: second}
-            outputs: {label: got, closed_for: secs}
-    - check: 'got == "second" and secs == 0.1'
+            inputs: {seconds: 0.1}
+            outputs: {slept: secs}
+    - check: 'secs == 0.1'
 """
 
 
-def test_a_halted_calls_late_answer_is_not_taken_for_the_next_call(gripper, tmp_path):
+def test_a_halted_calls_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe, tmp_path):
+    """A function that does not look at cancels runs on after its call was halted: the node is
+    busy until it answers, and that answer is never given to the next call."""
+    start_oddities(ros_graph, gripper_exe)
     tree = tmp_path / "late.yaml"
     tree.write_text("""format: 1
 root:
   sequence:
     - force_success:
-        call: gripper.squeeze
+        call: oddities.stubborn
         name: first
-        inputs: {seconds: 1.5, label: first}
-        outputs: {label: wrong}
+        inputs: {seconds: 1.5}
+        outputs: {slept: wrong}
         timeout: 0.3
     - force_success:
-        call: gripper.set_fingers
+        call: oddities.ok
         name: while busy
-        inputs: {left: 0.0, right: 0.01}
-""" + THEN_A_SECOND_SQUEEZE_GETS_ITS_OWN_OUTPUTS)
+""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
     out = run("run", str(tree), "-q")
     assert out.returncode == 0, out.stdout + out.stderr
     lines = call_lines(out.stdout)
     assert "timeout" in lines[0] or "halted" in lines[0], lines
     assert "rejected" in lines[1] and "busy with call" in lines[1], lines
-    assert "succeeded" in lines[-1] and all("squeeze" in line for line in lines[2:]), lines
+    assert "succeeded" in lines[-1] and all("stubborn" in line for line in lines[2:]), lines
 
 
-def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe,
-                                                                                       tmp_path):
-    """The bridge gives up on a call (--call-timeout) while the C++ node still runs it: the node
-    stays busy until its late BM_output, which no later call is given."""
-    ros_graph.start_node([gripper_exe], "/gripper")
-    ros_graph.start_node(["-m", "modules.bridge", "--definition", GRIPPER_JSON, "--call-timeout", "0.5"],
-                         "/gripper_bridge")
-    wait_announced("gripper")
-    tree = tmp_path / "stale.yaml"
+def test_a_halted_cpp_function_stops_at_once_and_the_module_takes_calls_again(gripper, tmp_path):
+    """The library's sleepFor() returns when the bridge forwards the cancel of a halted call, so
+    the 30 s squeeze ends just after the tree's 0.3 s timeout, and the module takes calls again
+    (a call sent within those milliseconds is still refused busy, as by any module whose
+    cancelled code has not returned yet)."""
+    tree = tmp_path / "halt.yaml"
     tree.write_text("""format: 1
 root:
   sequence:
     - force_success:
         call: gripper.squeeze
-        name: first
-        inputs: {seconds: 1.5, label: first}
-        timeout: 10
-""" + THEN_A_SECOND_SQUEEZE_GETS_ITS_OWN_OUTPUTS)
+        name: long
+        inputs: {seconds: 30.0, label: long}
+        timeout: 0.3
+    - retry: 100
+      child:
+        sequence:
+          - wait: 0.1
+          - call: gripper.set_fingers
+            name: next
+            inputs: {left: 0.0, right: 0.01}
+""")
+    t0 = time.monotonic()
     out = run("run", str(tree), "-q")
+    elapsed = time.monotonic() - t0
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "timeout" in lines[0] or "halted" in lines[0], lines
+    assert "succeeded" in lines[-1], lines
+    assert elapsed < 20, elapsed  # not after the squeeze's 30 s (the retries would have run out first)
+
+
+def test_the_bridges_call_timeout_cancels_the_cpp_function(ros_graph, gripper_exe, tmp_path):
+    """The bridge gives up on a call after --call-timeout and cancels it on the C++ node: a function
+    that takes cancels stops, and the module takes calls again without waiting out its 50 s."""
+    ros_graph.start_node([gripper_exe], "/gripper")
+    ros_graph.start_node(["-m", "modules.bridge", "--definition", GRIPPER_JSON, "--call-timeout", "0.5"],
+                         "/gripper_bridge")
+    wait_announced("gripper")
+    tree = tmp_path / "given_up.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: gripper.squeeze
+        name: long
+        inputs: {seconds: 50.0, label: long}
+        timeout: 60
+    - retry: 100
+      child:
+        sequence:
+          - wait: 0.1
+          - call: gripper.squeeze
+            name: next
+            inputs: {seconds: 0.1, label: next}
+            outputs: {label: got}
+    - check: 'got == "next"'
+""")
+    t0 = time.monotonic()
+    out = run("run", str(tree), "-q")
+    elapsed = time.monotonic() - t0
     assert out.returncode == 0, out.stdout + out.stderr
     lines = call_lines(out.stdout)
     assert "failed" in lines[0] and "no BM_output from the C++ node /gripper within 0.5s" in lines[0], lines
-    assert "rejected" in lines[1] and "still runs gripper.squeeze" in lines[1], lines
+    assert "succeeded" in lines[-1], lines
+    assert elapsed < 30, elapsed  # not after the first squeeze's 50 s
+
+
+def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe,
+                                                                                       tmp_path):
+    """The bridge gives up on a call (--call-timeout) while the C++ node still runs it (a function
+    that does not look at cancels): the node stays busy until its late BM_output, which no later
+    call is given."""
+    start_oddities(ros_graph, gripper_exe, "--call-timeout", "0.5")
+    tree = tmp_path / "stale.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: oddities.stubborn
+        name: first
+        inputs: {seconds: 1.5}
+        timeout: 10
+""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "failed" in lines[0] and "no BM_output from the C++ node /oddities within 0.5s" in lines[0], lines
+    assert "rejected" in lines[1] and "still runs oddities.stubborn" in lines[1], lines
     assert "succeeded" in lines[-1], lines
 
 
@@ -258,10 +342,7 @@ def test_a_concurrent_function_in_a_cpp_definition_is_refused(tmp_path):
 
 
 def test_a_cpp_function_that_throws_anything_fails_and_the_node_lives_on(ros_graph, gripper_exe, tmp_path):
-    exe = os.path.join(os.path.dirname(gripper_exe), "test_module")
-    ros_graph.start_node([exe], "/oddities")
-    ros_graph.start_node(["-m", "modules.bridge", "--definition", ODDITIES_JSON], "/oddities_bridge")
-    wait_announced("oddities")
+    start_oddities(ros_graph, gripper_exe)
     tree = tmp_path / "odd.yaml"
     tree.write_text("format: 1\nroot:\n  sequence:\n    - force_success:\n        call: oddities.vendor\n"
                     "    - call: oddities.ok\n")
@@ -344,14 +425,21 @@ def test_example_runs_clean_under_address_and_undefined_sanitizers(ros_graph, gr
                                  env={"ASAN_OPTIONS": "detect_leaks=1",
                                       "UBSAN_OPTIONS": "print_stacktrace=1"})
     tree = tmp_path / "all.yaml"
-    tree.write_text(ALL_FUNCTIONS)
+    tree.write_text(ALL_FUNCTIONS + """    - force_success:
+        call: gripper.squeeze
+        name: cancelled
+        inputs: {seconds: 30.0, label: cancelled}
+        timeout: 0.3
+""")
     out = run("run", str(tree), "-q")
     assert out.returncode == 0, out.stdout + out.stderr
+    assert "timeout" in call_lines(out.stdout)[-1], out.stdout
+    time.sleep(0.5)  # the cancel's way to the C++ node
     cpp.send_signal(signal.SIGINT)
     assert cpp.wait(30) == 0
     ros_graph.nodes.remove(cpp)
-    with open(os.path.join(ros_graph.ros_home, "gripper.out"), errors="replace") as fh:
-        log = fh.read()
+    log = _node_log(ros_graph, "gripper")
+    assert "squeeze cancelled, fingers stopped" in log, log[-4000:]  # the cancel thread ran, under ASan
     assert "AddressSanitizer" not in log and "runtime error" not in log, log[-4000:]
 
 

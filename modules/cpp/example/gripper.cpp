@@ -10,7 +10,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <thread>
 #include <tuple>
 
 class Gripper : public bmtree::BasicModule {
@@ -40,11 +39,17 @@ class Gripper : public bmtree::BasicModule {
   }
 
   // Stands for a slow motion: the spinner thread is busy meanwhile, as a real driver call would be.
+  // sleepFor() returns false as soon as the call is cancelled (the tree halted it): a real driver
+  // would stop the motors here and return.
   std::tuple<std_msgs::Float64, std_msgs::String> squeeze(const std_msgs::Float64& seconds,
                                                          const std_msgs::String& label) {
     if (seconds.data < 0 || seconds.data > 60) throw bmtree::Failure("seconds must be within 0..60");
-    std::this_thread::sleep_for(std::chrono::duration<double>(seconds.data));
-    return std::make_tuple(seconds, label);
+    auto start = std::chrono::steady_clock::now();
+    if (!sleepFor(seconds.data)) ROS_INFO("gripper: squeeze cancelled, fingers stopped");
+    std_msgs::Float64 closed_for;
+    closed_for.data = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (!cancelled()) closed_for.data = seconds.data;
+    return std::make_tuple(closed_for, label);
   }
 
   std::tuple<std_msgs::Bool> ping() {

@@ -3,9 +3,12 @@
 #include <bmtree/basic_module.h>
 
 #include <std_msgs/Bool.h>
+#include <std_msgs/Float64.h>
 #include <std_msgs/String.h>
 
+#include <chrono>
 #include <cstring>
+#include <thread>
 #include <tuple>
 
 class Oddities : public bmtree::BasicModule {
@@ -13,6 +16,7 @@ class Oddities : public bmtree::BasicModule {
   Oddities(ros::NodeHandle nh, bool bad_names) : BasicModule(nh, "oddities") {
     provide("vendor", &Oddities::vendor, {"success"});
     provide("ok", &Oddities::ok, {"success"});
+    provide("stubborn", &Oddities::stubborn, {"slept"});
     if (bad_names) provide("two", &Oddities::two, {"success"});  // two outputs, one name: a mistake
   }
 
@@ -24,6 +28,12 @@ class Oddities : public bmtree::BasicModule {
     std_msgs::Bool b;
     b.data = true;
     return std::make_tuple(b);
+  }
+
+  // Blocks its thread and never looks at cancelled(): a cancel cannot shorten it.
+  std::tuple<std_msgs::Float64> stubborn(const std_msgs::Float64& seconds) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds.data));
+    return std::make_tuple(seconds);
   }
 
   std::tuple<std_msgs::Bool, std_msgs::String> two() { return std::make_tuple(std_msgs::Bool(), std_msgs::String()); }

@@ -25,16 +25,30 @@
 // reports and the original bridge ignores; an unknown function is answered with an error
 // instead of silence; /<BM>/BM_info (latched) tells a bridge that this library is on the
 // other side, so it needs no gap between the inputs and BM_input.
+//
+// Cancels: a bridge that gives up on a call (the tree halted it, or its --call-timeout passed)
+// publishes {"call_id": ...} on /<BM>/BM_cancel. That topic is served by a thread of its own, so
+// a cancel arrives while the function runs: a long function polls cancelled() or waits with
+// sleepFor(seconds), stops the hardware and returns; its answer then says "cancelled" (the bridge
+// throws its outputs away) and the module takes calls again at once. A call cancelled before it
+// started is answered "cancelled" without running. The original bridge sends no cancels.
 #ifndef BMTREE_BASIC_MODULE_H
 #define BMTREE_BASIC_MODULE_H
 
 #include <ros/ros.h>
 #include <std_msgs/String.h>
 
+#include <ros/callback_queue.h>
+
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <cctype>
+#include <chrono>
+#include <condition_variable>
 #include <cstddef>
 #include <deque>
+#include <mutex>
 #include <functional>
 #include <map>
 #include <memory>
@@ -149,15 +163,37 @@ class BasicModule {
                             ros::TransportHints().tcpNoDelay());
     wait_timer_ = nh_.createWallTimer(ros::WallDuration(input_wait_ > 0 ? input_wait_ : 0.001),
                                       &BasicModule::onInputWaitOver, this, true, false);
+    // cancels must get through while a function blocks the node's spinner thread
+    ros::NodeHandle cancel_nh(nh_);
+    cancel_nh.setCallbackQueue(&cancel_queue_);
+    cancel_sub_ = cancel_nh.subscribe("/" + module_ + "/BM_cancel", 10, &BasicModule::onCancel, this,
+                                      ros::TransportHints().tcpNoDelay());
+    cancel_spinner_.reset(new ros::AsyncSpinner(1, &cancel_queue_));
+    cancel_spinner_->start();
     publishInfo();
   }
-  virtual ~BasicModule() = default;
+  virtual ~BasicModule() {
+    cancel_spinner_->stop();
+    cancel_sub_.shutdown();
+  }
   BasicModule(const BasicModule&) = delete;
   BasicModule& operator=(const BasicModule&) = delete;
 
   const std::string& moduleName() const { return module_; }
 
  protected:
+  /// True once the running call was cancelled: stop what the function does and return.
+  bool cancelled() const { return cancelled_.load(); }
+
+  /// Wait `seconds` unless the running call is cancelled first; true if the whole time passed.
+  /// Use it instead of sleeping, so that a halted tree stops the function at once.
+  bool sleepFor(double seconds) {
+    std::unique_lock<std::mutex> lock(cancel_mutex_);
+    if (!(seconds > 0)) return !cancelled_.load();  // also NaN: no wait
+    auto wait = std::chrono::duration<double>(std::min(seconds, 1e9));
+    return !cancel_cv_.wait_for(lock, wait, [this]() { return cancelled_.load(); });
+  }
+
   /// Register `fn` as the function `name`; its inputs are its parameters, in the definition's
   /// order; its outputs are the returned tuple's elements, named by `output_names`.
   template <class C, class... Out, class... In>
@@ -195,7 +231,8 @@ class BasicModule {
   struct Pending {
     std::string function;
     std::vector<std::string> topics;
-    std::string bridge;  // the node that sent BM_input: only its data messages are inputs
+    std::string bridge;   // the node that sent BM_input: only its data messages are inputs
+    std::string call_id;  // sent by bmtree-bridge (not by the original): what a cancel names
   };
 
   template <class M>
@@ -234,7 +271,7 @@ class BasicModule {
   void publishInfo() {
     nlohmann::json info;
     info["library"] = "bmtree";
-    info["protocol"] = 1;
+    info["protocol"] = 2;  // 2: takes cancels on /<BM>/BM_cancel
     std::vector<std::string> names;
     for (const auto& f : functions_) names.push_back(f.first);
     info["functions"] = names;
@@ -252,6 +289,8 @@ class BasicModule {
       nlohmann::json j = nlohmann::json::parse(msg.data);
       p.function = j.at("function").get<std::string>();
       p.topics = j.at("inparam_topics").get<std::vector<std::string>>();
+      auto id = j.find("call_id");
+      if (id != j.end() && id->is_string()) p.call_id = id->get<std::string>();
     } catch (const std::exception& e) {
       ROS_ERROR("bmtree: ignored a malformed BM_input message: %s", e.what());
       return;
@@ -261,6 +300,49 @@ class BasicModule {
   }
 
   void onData() { runReady(false); }
+
+  /// In the cancel thread: cancel the running call, or remember the id of one not started yet.
+  void onCancel(const ros::MessageEvent<std_msgs::String const>& event) {
+    std::string id;
+    try {
+      const std_msgs::String& msg = *event.getConstMessage();
+      if (msg.data.size() > kMaxPayload) throw std::runtime_error("payload too large");
+      id = nlohmann::json::parse(msg.data).at("call_id").get<std::string>();
+    } catch (const std::exception& e) {
+      ROS_ERROR("bmtree: ignored a malformed BM_cancel message: %s", e.what());
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(cancel_mutex_);
+      if (!running_.empty() && id == running_) {
+        cancelled_.store(true);
+      } else {
+        if (early_cancels_.size() >= kMaxEarlyCancels) early_cancels_.pop_front();
+        early_cancels_.push_back(id);  // it may overtake its BM_input (another connection)
+      }
+    }
+    cancel_cv_.notify_all();
+  }
+
+  /// Mark `call` running (cancels naming it now reach the function); true if it was cancelled
+  /// before it started.
+  bool startRunning(const Pending& call) {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    cancelled_.store(false);
+    running_ = call.call_id;
+    if (call.call_id.empty()) return false;
+    auto it = std::find(early_cancels_.begin(), early_cancels_.end(), call.call_id);
+    if (it == early_cancels_.end()) return false;
+    early_cancels_.erase(it);
+    return true;
+  }
+
+  /// The call has returned: true if it was cancelled meanwhile.
+  bool stopRunning() {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    running_.clear();
+    return cancelled_.exchange(false);
+  }
 
   void onInputWaitOver(const ros::WallTimerEvent&) { runReady(true); }
 
@@ -295,7 +377,13 @@ class BasicModule {
   void execute(const Pending& call, const std::map<std::string, std::size_t>& count) {
     nlohmann::json reply;
     auto f = functions_.find(call.function);
-    if (f == functions_.end()) {
+    if (startRunning(call)) {
+      for (const auto& c : count) {  // its inputs are spent all the same
+        auto ch = channels_.find(c.first);
+        if (ch != channels_.end()) ch->second->select(c.second, call.bridge);
+      }
+      reply = failure("cancelled", "cancelled before it started");
+    } else if (f == functions_.end()) {
       reply = failure("rejected", "module " + module_ + " has no function " + call.function);
     } else if (call.topics != f->second.input_topics) {
       reply = failure("rejected", "function " + call.function + " takes its inputs on " +
@@ -318,6 +406,10 @@ class BasicModule {
         reply = failure("failed", "exception: an exception that is not a std::exception");
       }
     }
+    if (stopRunning() && reply.value("status", "") != "cancelled") {
+      reply["status"] = "cancelled";  // whatever it returned: the bridge throws it away
+      reply["error"] = "cancelled while it ran";
+    }
     std_msgs::String out;
     out.data = reply.dump();
     out_pub_.publish(out);
@@ -333,6 +425,7 @@ class BasicModule {
   }
 
   static constexpr std::size_t kMaxPayload = 1 << 20;
+  static constexpr std::size_t kMaxEarlyCancels = 64;
   ros::NodeHandle nh_;
   std::string module_;
   double input_wait_ = 1.0;
@@ -345,6 +438,15 @@ class BasicModule {
   std::map<std::string, std::string> types_;
   std::map<std::string, Function> functions_;
   std::deque<Pending> pending_;
+  // the cancel thread's side (cancel_mutex_ guards running_ and early_cancels_)
+  ros::CallbackQueue cancel_queue_;
+  ros::Subscriber cancel_sub_;
+  std::unique_ptr<ros::AsyncSpinner> cancel_spinner_;
+  std::mutex cancel_mutex_;
+  std::condition_variable cancel_cv_;
+  std::atomic<bool> cancelled_{false};
+  std::string running_;
+  std::deque<std::string> early_cancels_;
 };
 
 /// The node's name: `module`, or the new module name of a `_basic_mod:=NAME` argument, so that
