@@ -26,6 +26,7 @@ from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
 from comm.nodelife import stop_requested
 from comm.nodeopts import node_name, seconds
+from modules.cppinfo import data_topic, data_topics, signature_problem
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -42,36 +43,6 @@ _POLL = 0.2  # how often a running call checks that the C++ node is still there 
 
 class BridgeError(EnvironmentError):
     """The C++ node is not there or not connected (the message names what is missing)."""
-
-
-def data_topic(module: str, rostype: str) -> str:
-    """``std_msgs/Float64`` in module ``gripper`` -> ``/gripper/float64`` (the original naming)."""
-    return "/%s/%s" % (module, rostype.rsplit("/", 1)[-1].lower())
-
-
-def data_topics(definition: ModuleDefinition) -> Tuple[Dict[str, str], Dict[str, str]]:
-    """(input topics, output topics) of a module, each ``topic -> ROS type``.
-
-    Raises:
-        DefinitionError: two types of the module would share one data topic.
-    """
-    ins: Dict[str, str] = {}
-    outs: Dict[str, str] = {}
-    problems = []
-    every: Dict[str, str] = {}
-    for fn in definition.functions.values():
-        for kind, params, table in (("Input", fn.inputs, ins), ("Output", fn.outputs, outs)):
-            for p in params:
-                topic = data_topic(definition.name, p.rostype)
-                other = every.setdefault(topic, p.rostype)
-                if other != p.rostype:
-                    problems.append("%s: %s.%s-params: %s: types %s and %s would share the data topic %s of the "
-                                    "C++ protocol" % (definition.source, fn.name, kind, p.name, other, p.rostype,
-                                                      topic))
-                table[topic] = p.rostype
-    if problems:
-        raise DefinitionError(sorted(set(problems)))
-    return ins, outs
 
 
 class _Call:
@@ -118,6 +89,8 @@ class CppBridge(BasicModule):
         self._in_pub: Any = None
         self._cancel_pub: Any = None
         self._out_sub: Any = None
+        self._info_sub: Any = None
+        self._info: Optional[Dict[str, Any]] = None  # the latest BM_info of the library's node
         self._String: Any = None
         self._self_name = ""
         #: a call that timed out while the C++ node still ran it: (function, the node's URI, when its
@@ -146,16 +119,18 @@ class CppBridge(BasicModule):
         self._cancel_pub = sync_publisher("/%s/BM_cancel" % name, String)
         self._out_sub = rospy.Subscriber("/%s/BM_output" % name, String, self._on_output, queue_size=100,
                                          tcp_nodelay=True)
+        self._info_sub = rospy.Subscriber("/%s/BM_info" % name, String, self._on_info, queue_size=1)
         missing = self._wait_connected(self.connect_timeout)
         if missing:
             raise BridgeError("the C++ node of module %r is not ready after %gs: %s" % (
                 name, self.connect_timeout, "; ".join(missing)))
+        self._check_signatures()
         rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
                       ("bmtree library, no input gap, %s" % ("takes cancels" if self.cancellable else "no cancels"))
                       if self.library else "input gap %gs, no cancels" % self._gap())
 
     def shutdown(self) -> None:
-        for s in self._subs + [self._out_sub]:
+        for s in self._subs + [self._out_sub, self._info_sub]:
             if s is not None:
                 s.unregister()
 
@@ -235,6 +210,43 @@ class CppBridge(BasicModule):
         except (OSError, ValueError):
             return False
 
+    # -- what the C++ node provides (BM_info of bmtree's library) ----------------------
+    def _on_info(self, msg: Any) -> None:
+        try:
+            info = load_payload(msg.data, self.max_bytes)
+        except ProtocolError as exc:
+            log.warning("ignored a malformed BM_info from %s: %s", msg._connection_header.get("callerid"), exc)
+            return
+        with self._cond:
+            self._info = info
+            self._cond.notify_all()
+
+    def _signature_problem(self, fn: FunctionDefinition, info: Dict[str, Any]) -> str:
+        return signature_problem(fn, self.definition.name, info, self.cpp_node)
+
+    def _check_signatures(self, wait: float = 2.0) -> None:
+        """At start: the definition's functions must be the C++ node's, with the same inputs and
+        outputs (BindingError naming every difference); skipped for nodes without bmtree's library."""
+        if not self.library:
+            return
+        end = time.monotonic() + wait
+        with self._cond:
+            while self._info is None and time.monotonic() < end:
+                self._cond.wait(end - time.monotonic())
+            info = self._info
+        if info is None:
+            log.warning("no BM_info from %s within %gs: its functions are not checked against %s", self.cpp_node,
+                        wait, self.definition.source or self.definition.name)
+            return
+        problems = [p for p in (self._signature_problem(fn, info) for fn in self.definition.functions.values()) if p]
+        if problems:
+            raise BindingError("%s does not match the C++ node: %s" % (
+                self.definition.source or self.definition.name, "; ".join(problems)))
+        extra = sorted(set(f for f in info.get("functions") or [] if isinstance(f, str)) - set(self.definition.functions))
+        if extra:
+            log.warning("the C++ node %s also provides %s, which %s does not list (not callable through the bridge)",
+                        self.cpp_node, ", ".join(extra), self.definition.source or self.definition.name)
+
     # -- ROS callbacks ---------------------------------------------------------------
     def _on_data(self, msg: Any, topic: str) -> None:
         if msg._connection_header.get("callerid") != self.cpp_node:
@@ -278,6 +290,11 @@ class CppBridge(BasicModule):
                 raise Rejected("the C++ node of module %r is not connected: %s" % (self.definition.name,
                                                                                    "; ".join(missing)))
         self._settle_owed()
+        with self._cond:
+            info = self._info if self.library else None
+        problem = self._signature_problem(fn, info) if info is not None else ""
+        if problem:  # the C++ node was rebuilt and restarted since the bridge started
+            raise Rejected(problem)
         module = self.definition.name
         in_topics = [data_topic(module, p.rostype) for p in fn.inputs]
         call = _Call(fn, sorted({data_topic(module, p.rostype) for p in fn.outputs}))

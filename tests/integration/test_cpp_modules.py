@@ -411,6 +411,33 @@ root:
     assert len([line for line in call_lines(out.stdout) if "succeeded" in line]) == 3
 
 
+def test_a_definition_that_does_not_match_the_cpp_node_stops_the_bridge_at_start(ros_graph, gripper_exe, tmp_path):
+    """The library's BM_info lists each function's input topics and output names: the bridge
+    compares them with its definition before it serves anything (exit 2, every difference named)."""
+    with open(GRIPPER_JSON) as fh:
+        data = json.load(fh)
+    reach = next(f for f in data["Functions"] if f["Name"] == "reach")
+    reach["Output-params"][1]["Name"] = "dist"
+    data["Functions"].append({"Name": "open", "Exec-condition": "", "Description": "Not in the C++ code.",
+                              "Input-params": [], "Output-params": []})
+    bad = tmp_path / "gripper.json"
+    bad.write_text(json.dumps(data))
+    ros_graph.start_node([gripper_exe], "/gripper")
+    out = subprocess.run(bmtree_cmd_of_bridge(str(bad)), capture_output=True, text=True, timeout=60,
+                         env=dict(os.environ), stdin=subprocess.DEVNULL)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "error: %s does not match the C++ node: " % bad in out.stderr, out.stderr
+    assert "function 'open' is not provided by the C++ node /gripper (it provides ping, reach, set_fingers, " \
+           "squeeze)" in out.stderr, out.stderr
+    assert "function 'reach' returns distance on /gripper/float64, final_pos on /gripper/point in the C++ node " \
+           "/gripper, but the definition's Output-params are dist on /gripper/float64" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def bmtree_cmd_of_bridge(definition, *options):
+    return [sys.executable, "-m", "modules.bridge", "--definition", definition, "--wait", "10", *options]
+
+
 def test_bridge_without_its_cpp_node_says_what_is_missing(ros_master):
     out = subprocess.run([sys.executable, "-m", "modules.bridge", "--definition", GRIPPER_JSON, "--wait", "0.5",
                           "__name:=lonely_bridge"], capture_output=True, text=True, timeout=60,

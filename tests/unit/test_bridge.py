@@ -9,7 +9,7 @@ from std_msgs.msg import Bool, Float64
 
 from modules.bridge import CppBridge, _Call, data_topic, data_topics, main, make_bridge
 from modules.definition import DefinitionError, load_definition
-from modules.runtime import Failure, ModuleServer, Rejected
+from modules.runtime import BindingError, Failure, ModuleServer, Rejected
 from tests.conftest import REFERENCE, ROOT
 
 GRIPPER = os.path.join(ROOT, "modules", "cpp", "example", "gripper.json")
@@ -85,3 +85,83 @@ def test_command_line_errors_exit_2_without_a_traceback(tmp_path, capsys):
     assert main(["bmtree-bridge", "--definition", GRIPPER, "--call-timeout", "-1"]) == 2
     assert "argument --call-timeout: expected a finite number of seconds of 0 or more (0: no limit), got '-1'" in \
         capsys.readouterr().err
+
+
+def _gripper_info():
+    """BM_info as the example C++ node publishes it (see basic_module.h publishInfo)."""
+    return {"library": "bmtree", "protocol": 2, "functions": ["ping", "reach", "set_fingers", "squeeze"],
+            "signatures": {
+                "ping": {"inparam_topics": [], "outparam_names": ["success"], "outparam_topics": ["/gripper/bool"]},
+                "reach": {"inparam_topics": ["/gripper/point"], "outparam_names": ["final_pos", "distance"],
+                          "outparam_topics": ["/gripper/point", "/gripper/float64"]},
+                "set_fingers": {"inparam_topics": ["/gripper/float64", "/gripper/float64"],
+                                "outparam_names": ["opening", "success"],
+                                "outparam_topics": ["/gripper/float64", "/gripper/bool"]},
+                "squeeze": {"inparam_topics": ["/gripper/float64", "/gripper/string"],
+                            "outparam_names": ["closed_for", "label"],
+                            "outparam_topics": ["/gripper/float64", "/gripper/string"]}}}
+
+
+def _bridge_with_info(info, definition=GRIPPER):
+    d = load_definition(definition) if isinstance(definition, str) else definition
+    bridge = make_bridge(d)
+    ModuleServer(d, bridge, lambda t: None, lambda t: None)
+    bridge.library, bridge.cpp_node, bridge._info = True, "/gripper", info
+    return bridge
+
+
+def test_the_definition_is_checked_against_what_the_cpp_node_provides():
+    bridge = _bridge_with_info(_gripper_info())
+    bridge._check_signatures(wait=0)   # the example matches its definition
+    assert all(bridge._signature_problem(fn, _gripper_info()) == "" for fn in bridge.definition.functions.values())
+
+    info = _gripper_info()
+    info["functions"].remove("ping")
+    del info["signatures"]["ping"]
+    info["signatures"]["set_fingers"]["inparam_topics"] = ["/gripper/float64"]
+    info["signatures"]["reach"]["outparam_names"] = ["final_pos", "dist"]
+    with pytest.raises(BindingError) as exc:
+        _bridge_with_info(info)._check_signatures(wait=0)
+    text = str(exc.value)
+    assert text.startswith(GRIPPER + " does not match the C++ node: ")
+    assert ("function 'ping' is not provided by the C++ node /gripper (it provides reach, set_fingers, squeeze): "
+            "add provide(\"ping\", ...)") in text
+    assert ("function 'set_fingers' takes its inputs on [\"/gripper/float64\"] in the C++ node /gripper, but the "
+            "definition's Input-params (left: std_msgs/Float64, right: std_msgs/Float64) are sent on "
+            "[\"/gripper/float64\", \"/gripper/float64\"]") in text
+    assert ("function 'reach' returns dist on /gripper/float64, final_pos on /gripper/point in the C++ node "
+            "/gripper, but the definition's Output-params are distance on /gripper/float64, final_pos on "
+            "/gripper/point") in text
+    assert "function 'squeeze'" not in text
+
+
+def test_a_call_to_a_function_the_restarted_cpp_node_lost_is_rejected_with_the_reason():
+    info = _gripper_info()
+    info["functions"].remove("squeeze")
+    bridge = _bridge_with_info(info)
+    bridge._ready = True
+    bridge._out_sub = type("Sub", (), {"impl": type("Impl", (), {"has_connection": lambda self, uri: True})()})()
+    with pytest.raises(Rejected, match="function 'squeeze' is not provided by the C.. node /gripper"):
+        bridge._execute("squeeze", {})
+
+
+def test_a_node_of_an_older_library_is_only_checked_for_its_function_names():
+    info = {"library": "bmtree", "protocol": 1, "functions": ["ping", "reach", "set_fingers", "squeeze"]}
+    _bridge_with_info(info)._check_signatures(wait=0)
+    info["functions"] = ["ping"]
+    with pytest.raises(BindingError, match="function 'reach' is not provided"):
+        _bridge_with_info(info)._check_signatures(wait=0)
+
+
+def test_an_original_node_is_not_checked():
+    bridge = _bridge_with_info(None)
+    bridge.library = False
+    bridge._check_signatures(wait=0)
+
+
+def test_a_malformed_bm_info_is_a_difference_not_a_crash():
+    info = _gripper_info()
+    info["signatures"]["reach"]["outparam_names"] = [["final_pos"], {"x": 1}]
+    info["signatures"]["ping"] = "nonsense"
+    with pytest.raises(BindingError, match="function 'reach' returns nothing in the C.. node"):
+        _bridge_with_info(info)._check_signatures(wait=0)

@@ -204,6 +204,8 @@ class BasicModule {
     f.input_topics = {topicFor<In>()...};
     std::vector<std::string> output_topics = {topicFor<Out>()...};
     std::vector<std::string> names(output_names.begin(), output_names.end());
+    f.output_names = names;
+    f.output_topics = output_topics;
     for (const auto& n : names) {  // {"width"} for two outputs compiles: the missing name is ""
       if (n.empty()) {
         throw std::logic_error("provide(\"" + name + "\"): the function returns " + std::to_string(sizeof...(Out)) +
@@ -226,6 +228,8 @@ class BasicModule {
  private:
   struct Function {
     std::vector<std::string> input_topics;
+    std::vector<std::string> output_names;
+    std::vector<std::string> output_topics;
     std::function<nlohmann::json(const std::vector<std::size_t>&)> run;
   };
   struct Pending {
@@ -273,8 +277,15 @@ class BasicModule {
     info["library"] = "bmtree";
     info["protocol"] = 2;  // 2: takes cancels on /<BM>/BM_cancel
     std::vector<std::string> names;
-    for (const auto& f : functions_) names.push_back(f.first);
+    nlohmann::json signatures = nlohmann::json::object();
+    for (const auto& f : functions_) {
+      names.push_back(f.first);
+      signatures[f.first] = {{"inparam_topics", f.second.input_topics},
+                             {"outparam_names", f.second.output_names},
+                             {"outparam_topics", f.second.output_topics}};
+    }
     info["functions"] = names;
+    info["signatures"] = signatures;  // a bridge checks its definition against them at start
     std_msgs::String msg;
     msg.data = info.dump();
     info_pub_.publish(msg);
