@@ -109,6 +109,10 @@ root:
         call: gripper.reach
         name: too far
         inputs: {target: {x: 2.0, y: 0.0, z: 0.0}}
+    - force_success:
+        call: gripper.squeeze
+        name: not a number
+        inputs: {seconds: .nan, label: nan}
 """
 
 
@@ -121,6 +125,7 @@ def test_cpp_module_through_the_bridge(gripper, tmp_path):
     assert [line.split()[3] for line in lines[:4]] == ["succeeded"] * 4, out.stdout
     assert "failed" in lines[4] and "the left finger must stay left of the right one" in lines[4]
     assert "rejected" in lines[5] and "out of reach" in lines[5]
+    assert "failed" in lines[6] and "seconds must be within 0..60" in lines[6]
     live = run("modules", "--live")
     assert "gripper  (node /gripper_bridge)" in live.stdout
     assert "set_fingers(left: std_msgs/Float64, right: std_msgs/Float64)" in live.stdout

@@ -43,7 +43,7 @@ class Gripper : public bmtree::BasicModule {
   // would stop the motors here and return.
   std::tuple<std_msgs::Float64, std_msgs::String> squeeze(const std_msgs::Float64& seconds,
                                                          const std_msgs::String& label) {
-    if (seconds.data < 0 || seconds.data > 60) throw bmtree::Failure("seconds must be within 0..60");
+    if (!(seconds.data >= 0 && seconds.data <= 60)) throw bmtree::Failure("seconds must be within 0..60");  // NaN too
     auto start = std::chrono::steady_clock::now();
     if (!sleepFor(seconds.data)) ROS_INFO("gripper: squeeze cancelled, fingers stopped");
     std_msgs::Float64 closed_for;
