@@ -483,3 +483,33 @@ def test_modules_cpp_is_also_a_catkin_package(tmp_path):
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     config = tmp_path / "devel" / "share" / "bmtree_cpp" / "cmake" / "bmtree_cppConfig.cmake"
     assert os.path.join(CPP, "include") in config.read_text()
+
+
+def test_an_installed_library_is_found_by_find_package(gripper_exe, tmp_path):
+    """cmake --install puts a package config beside the header: another plain-CMake project builds
+    a module with find_package(bmtree_cpp) and the target bmtree::module."""
+    prefix = tmp_path / "prefix"
+    out = subprocess.run(["cmake", "--install", os.path.dirname(gripper_exe), "--prefix", str(prefix)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    project = tmp_path / "my_module"
+    project.mkdir()
+    (project / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.10)\nproject(my_module CXX)\nset(CMAKE_CXX_STANDARD 14)\n"
+        "find_package(bmtree_cpp REQUIRED)\nadd_executable(my_module my_module.cpp)\n"
+        "target_link_libraries(my_module PRIVATE bmtree::module)\n"
+        "target_compile_options(my_module PRIVATE -Wall -Wextra -Werror)\n")
+    (project / "my_module.cpp").write_text(
+        "#include <bmtree/basic_module.h>\n#include <std_msgs/Bool.h>\n\n"
+        "class Mine : public bmtree::BasicModule {\n public:\n"
+        "  explicit Mine(ros::NodeHandle nh) : BasicModule(nh, \"mine\") { provide(\"ping\", &Mine::ping, {\"success\"}); }\n"
+        "  std::tuple<std_msgs::Bool> ping() { std_msgs::Bool ok; ok.data = !cancelled(); return std::make_tuple(ok); }\n"
+        "};\n\nint main(int argc, char** argv) { return bmtree::run<Mine>(argc, argv, \"mine\"); }\n")
+    build = tmp_path / "build"
+    for cmd in (["cmake", "-S", str(project), "-B", str(build), "-DCMAKE_PREFIX_PATH=%s" % prefix],
+                ["cmake", "--build", str(build)]):
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, "%s:\n%s%s" % (" ".join(cmd), out.stdout[-3000:], out.stderr[-3000:])
+    assert os.access(build / "my_module", os.X_OK)
+    flags = (build / "CMakeFiles" / "my_module.dir" / "flags.make").read_text()
+    assert "%s/include" % prefix in flags and CPP not in flags, flags  # the installed header, not the source tree's
