@@ -272,8 +272,9 @@ def cmd_watch(args: argparse.Namespace) -> int:
             from coordinator.webview import serve
 
             server = serve(state, args.bind, args.port, control=lambda cmd: client.send(cmd, 10.0))
-            print("watching %s/* of the master %s; page at %s" % (
-                args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.url))
+            print("watching %s/* of the master %s; page at %s%s" % (
+                args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.url,
+                " (from other machines: %s)" % server.remote_url if server.remote_url else ""))
             sys.stdout.flush()
         elif tty:
             view = LiveView(state, footer=keys_help).start()

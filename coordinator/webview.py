@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable, Dict, Optional
@@ -93,6 +94,13 @@ class WebServer:
         self.httpd.daemon_threads = True
         host, real_port = self.httpd.server_address[:2]
         self.url = "http://%s:%d/" % ("127.0.0.1" if host in ("0.0.0.0", "") else host, real_port)
+        #: how other machines reach the page when it listens on every address (ROS_IP or
+        #: ROS_HOSTNAME, as the machine's ROS nodes are reached, else its host name)
+        self.remote_url = ""
+        if host in ("0.0.0.0", ""):
+            name = os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or socket.getfqdn()
+            if name and name not in ("localhost", "127.0.0.1") and not name.startswith("localhost."):
+                self.remote_url = "http://%s:%d/" % (name, real_port)
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="bmtree-web", daemon=True)
         self._thread.start()
 
@@ -154,7 +162,8 @@ def cmd_replay_web(args: Any) -> int:
     end = log.end or {}
     duration = float(end.get("duration") or (records[-1].get("t") if records else 0.0) or 0.0)
     server = WebServer(None, args.bind, args.port, at=replay_states(records), duration=duration)
-    print("replay of %s; page at %s (Ctrl-C stops)" % (path, server.url))
+    print("replay of %s; page at %s%s (Ctrl-C stops)" % (
+        path, server.url, " (from other machines: %s)" % server.remote_url if server.remote_url else ""))
     sys.stdout.flush()
     try:
         while True:
