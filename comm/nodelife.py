@@ -20,15 +20,16 @@ blocked in a system call asleep: the pipe is also Python's ``signal.set_wakeup_f
 """
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import os
 import select
 import signal
 import sys
 import threading
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Dict, Iterator, Optional
 
-__all__ = ["StopSignals", "stop_requested"]
+__all__ = ["Interrupts", "StopSignals", "registering", "stop_requested"]
 
 _installed: Optional[StopSignals] = None
 
@@ -163,3 +164,60 @@ def _wake_registration_thread() -> Callable[[str], None]:
 def stop_requested() -> bool:
     """True once the process's :class:`StopSignals` saw a stop: long start-up waits end early."""
     return _installed is not None and _installed.requested
+
+
+class Interrupts:
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread, which is how ``bmtree run``
+    stops a tree (its running calls are cancelled), except inside :func:`registering`.
+
+    rospy registering a topic with the master must not be cut short half-way: the master would
+    keep a registration that the process never unregisters (every later run and watch then
+    waits for a node that is gone). Inside ``registering()`` the signal is noted and raised
+    when the block ends. :meth:`restore` puts the previous handlers back.
+    """
+
+    def __init__(self) -> None:
+        global _interrupts
+        self._depth = 0
+        self._pending = False
+        self._previous: Dict[int, Any] = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.getsignal(sig)
+            signal.signal(sig, self._on_signal)
+        _interrupts = self
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        if self._depth:
+            self._pending = True
+            return
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
+            yield
+            return
+        self._depth += 1
+        try:
+            yield
+        finally:
+            self._depth -= 1
+            if not self._depth and self._pending:
+                self._pending = False
+                raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        global _interrupts
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        if _interrupts is self:
+            _interrupts = None
+
+
+_interrupts: Optional[Interrupts] = None
+
+
+def registering() -> Any:
+    """A block in which a process's :class:`Interrupts` hold a stop signal until the block ends
+    (wrap rospy's ``init_node``, ``Publisher`` and ``Subscriber`` in it); a plain block otherwise."""
+    return _interrupts.held() if _interrupts is not None else contextlib.nullcontext()

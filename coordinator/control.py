@@ -24,6 +24,7 @@ import yaml
 from py_trees.common import Status
 
 from comm import settle_new_connection
+from comm.nodelife import registering
 from coordinator.context import WAKE
 from coordinator.runevents import RunObserver, notify
 
@@ -291,7 +292,8 @@ def ros_controller(enabled: bool, max_bytes: int = MAX_REQUEST) -> Controller:
     import rospy
     from std_msgs.msg import String
 
-    pub = rospy.Publisher(REPLY, String, queue_size=100)
+    with registering():
+        pub = rospy.Publisher(REPLY, String, queue_size=100)
     ctl = Controller(enabled, reply=lambda r: pub.publish(String(json.dumps(r, default=str))))
 
     def got(msg: Any) -> None:
@@ -308,5 +310,6 @@ def ros_controller(enabled: bool, max_bytes: int = MAX_REQUEST) -> Controller:
         cmd["by"] = str(header.get("callerid", "?"))
         ctl.submit(cmd)
 
-    ctl.subscription = rospy.Subscriber(REQUEST, String, got, queue_size=100)
+    with registering():
+        ctl.subscription = rospy.Subscriber(REQUEST, String, got, queue_size=100)
     return ctl

@@ -43,6 +43,7 @@ from comm.messages import (
     FunctionCall,
     FunctionResult,
 )
+from comm.nodelife import registering
 from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, Watchdog
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runstream import CHANNELS, Sink
@@ -113,21 +114,23 @@ class RosTransport(Transport):
         from std_msgs.msg import String
 
         self._String = String
-        if not rospy.core.is_initialized():
-            rospy.init_node(self.node_name, anonymous=True, disable_signals=True)
-        widen_accept_queue()  # every module connects to this node at once in the preflight
-        from comm.masterwatch import watch_master
+        with registering():  # a Ctrl-C now would leave registrations on the master for ever
+            if not rospy.core.is_initialized():
+                rospy.init_node(self.node_name, anonymous=True, disable_signals=True)
+            widen_accept_queue()  # every module connects to this node at once in the preflight
+            from comm.masterwatch import watch_master
 
-        watch_master()  # a restarted master gets this node's topics again; the run goes on
-        # the shared call and cancel topics only when a module needs them (_shared): every module
-        # listens there, so each publisher costs one connection per module
-        self._pubs = {"request": self._publisher(TOPIC_BB_REQUEST)}
-        self._subs = [
-            rospy.Subscriber(TOPIC_RESULT, String, self._on(FunctionResult, self._take_ping), queue_size=1000,
-                             tcp_nodelay=True),
-            rospy.Subscriber(TOPIC_EVENT, String, self._on(Event), queue_size=1000, tcp_nodelay=True),
-            rospy.Subscriber(TOPIC_BB_ANSWER, String, self._on(BlackboardAnswer), queue_size=100, tcp_nodelay=True),
-        ]
+            watch_master()  # a restarted master gets this node's topics again; the run goes on
+            # the shared call and cancel topics only when a module needs them (_shared): every module
+            # listens there, so each publisher costs one connection per module
+            self._pubs = {"request": self._publisher(TOPIC_BB_REQUEST)}
+            self._subs = [
+                rospy.Subscriber(TOPIC_RESULT, String, self._on(FunctionResult, self._take_ping), queue_size=1000,
+                                 tcp_nodelay=True),
+                rospy.Subscriber(TOPIC_EVENT, String, self._on(Event), queue_size=1000, tcp_nodelay=True),
+                rospy.Subscriber(TOPIC_BB_ANSWER, String, self._on(BlackboardAnswer), queue_size=100,
+                                 tcp_nodelay=True),
+            ]
 
     def _publisher(self, topic: str) -> Any:
         """Queued (non-blocking, see the module docstring), Nagle off: calls are small."""
@@ -242,7 +245,8 @@ class RosTransport(Transport):
     def _shared(self, which: str) -> Any:
         pub = self._pubs.get(which)
         if pub is None:
-            pub = self._pubs[which] = self._publisher(TOPIC_CALL if which == "call" else TOPIC_CANCEL)
+            with registering():
+                pub = self._pubs[which] = self._publisher(TOPIC_CALL if which == "call" else TOPIC_CANCEL)
         return pub
 
     def topics_of(self, module: str) -> Tuple[str, str]:
@@ -334,8 +338,9 @@ class RosTransport(Transport):
                 route = None
             if route is None and live.call_topic is not None:
                 fresh.append(live)
-        senders = topic_senders([live.call_topic or "" for live in fresh], self._String, SEND_QUEUE,
-                                on_connect=self._connected)
+        with registering():
+            senders = topic_senders([live.call_topic or "" for live in fresh], self._String, SEND_QUEUE,
+                                    on_connect=self._connected)
         for live, sender in zip(fresh, senders):
             self._routes[live.name] = sender
 
@@ -371,10 +376,11 @@ class RosStreamSink(Sink):
 
         self._String = string_cls
         self._pubs = {}
-        for c in CHANNELS:
-            topic = "%s/%s" % (namespace.rstrip("/"), c)
-            self._pubs[c] = (sync_publisher(topic, string_cls, latch=True) if c in self._ONCE else
-                             rospy.Publisher(topic, string_cls, queue_size=1000))
+        with registering():
+            for c in CHANNELS:
+                topic = "%s/%s" % (namespace.rstrip("/"), c)
+                self._pubs[c] = (sync_publisher(topic, string_cls, latch=True) if c in self._ONCE else
+                                 rospy.Publisher(topic, string_cls, queue_size=1000))
 
     def write(self, channel: str, text: str) -> None:
         self._pubs[channel].publish(self._String(text))

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
-import signal
 import sys
 import time
 from typing import Any, Dict, List, Set
 
 from comm.errors import did_you_mean
+from comm.nodelife import Interrupts, registering
 from coordinator.cliutil import (
     EXIT_ENV,
     EXIT_FAILED,
@@ -24,6 +25,8 @@ from coordinator.cliutil import (
 from coordinator.errors import TreeErrors, UsageError
 
 __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run"]
+
+log = logging.getLogger("bmtree.coordinator")
 
 PROJECT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMO_TREE = os.path.join(PROJECT, "trees", "find_apple.yaml")
@@ -184,12 +187,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
     graph = None
     transport = None
-    previous = signal.getsignal(signal.SIGTERM)
-
-    def on_term(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_term)
+    interrupts = Interrupts()  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
     try:
         deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
         if not args.sim:
@@ -270,17 +268,28 @@ def cmd_run(args: argparse.Namespace) -> int:
         err("interrupted: running calls were cancelled")
         return EXIT_ENV
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        if transport is not None:
-            transport.close()
-            try:
-                import rospy
-
-                rospy.signal_shutdown("bmtree run finished")
-            except Exception:
-                pass
+        try:
+            with registering():  # a second Ctrl-C must not cut the unregistering short
+                _leave_graph(transport)
+        except KeyboardInterrupt:
+            pass
+        interrupts.restore()
         if graph is not None:
             graph.close()
+
+
+def _leave_graph(transport: Any) -> None:
+    """Unregister everything this process registered with the master (also when a stop signal
+    came before the transport was made: ``init_node`` may have registered already)."""
+    if transport is not None:
+        transport.close()
+    try:
+        import rospy
+
+        if rospy.core.is_initialized():
+            rospy.signal_shutdown("bmtree run finished")
+    except Exception as exc:  # the master is gone: nothing is left to unregister
+        log.debug("leaving the ROS graph: %s", exc)
 
 
 def _user_module(spec: str) -> Any:

@@ -120,3 +120,46 @@ def test_a_module_that_never_comes_is_the_environment_and_a_close_name_is_a_typo
     out, _ = run.communicate(timeout=30)
     assert run.returncode == 2 and "typo.yaml:3:9: unknown module 'prob' (did you mean 'probe'?)" in _text(err), \
         out + _text(err)
+
+
+def _registrations_of(pid):
+    """Topics the master still lists for the node of process ``pid`` (rospy's anonymous names hold it)."""
+    import rosgraph
+
+    pubs, subs, _ = rosgraph.Master("/t").getSystemState()
+    mark = "_%d_" % pid
+    return sorted("%s %s" % (kind, topic) for kind, table in (("publishes", pubs), ("subscribes", subs))
+                  for topic, nodes in table for n in nodes if mark in n)
+
+
+def test_a_run_stopped_at_any_moment_of_its_start_up_leaves_nothing_on_the_master(ros_graph, tmp_path):
+    """SIGTERM or SIGINT while ``bmtree run`` registers with the master (its module never comes, so
+    it stays in its start-up): it ends with exit 3 and unregisters everything it had registered,
+    whichever moment the signal hit."""
+    import signal
+
+    tree = tmp_path / "first.yaml"
+    tree.write_text(TREE)
+    leaks = []
+    for i, delay in enumerate([0.0, 0.01, 0.02, 0.04, 0.08, 0.15, 0.3, 0.6] * scale(1, 5)):
+        proc = subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "--modules", PROBE_JSON, "-q",
+                                 "--wait", "30"], env=dict(os.environ), stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        try:
+            end = time.monotonic() + 60
+            while not _registrations_of(proc.pid):  # its node has registered something: start-up is under way
+                assert proc.poll() is None and time.monotonic() < end, proc.communicate()[0]
+                time.sleep(0.005)
+            time.sleep(delay)
+            proc.send_signal(signal.SIGTERM if i % 2 else signal.SIGINT)
+            out, _ = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(10)
+        assert proc.returncode == 3, out
+        assert "Traceback" not in out, out
+        left = _registrations_of(proc.pid)
+        if left:
+            leaks.append((delay, left))
+    assert leaks == [], leaks

@@ -1,10 +1,15 @@
-"""StopSignals in a process of its own: real signals, sent in bursts."""
+"""StopSignals in a process of its own: real signals, sent in bursts; Interrupts held while rospy registers."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+
+import pytest
+
+from comm.nodelife import Interrupts, registering
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -145,3 +150,29 @@ def test_private_parameters_on_the_command_line_wait_for_the_master_and_a_stop_e
     assert ("waiting for the ROS master at http://127.0.0.1:9/ (this node's _name:=value parameters go there)"
             in done.stderr)
     assert "Traceback" not in done.stderr
+
+
+def test_a_signal_is_a_keyboard_interrupt_but_waits_for_the_end_of_a_registration():
+    interrupts = Interrupts()
+    try:
+        steps = []
+        with pytest.raises(KeyboardInterrupt):
+            with registering():
+                os.kill(os.getpid(), signal.SIGTERM)
+                steps.append("registered")   # the signal did not cut this block short
+                with registering():          # nested: held until the outermost block ends
+                    steps.append("nested")
+                steps.append("end of block")
+        assert steps == ["registered", "nested", "end of block"]
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(1000):  # Python runs the handler at the next bytecode boundary
+                pass
+    finally:
+        interrupts.restore()
+    assert signal.getsignal(signal.SIGTERM) is not interrupts._on_signal
+
+
+def test_without_interrupts_registering_is_a_plain_block():
+    with registering():
+        pass
