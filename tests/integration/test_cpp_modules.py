@@ -242,35 +242,34 @@ root:
     assert "succeeded" in lines[-1] and all("stubborn" in line for line in lines[2:]), lines
 
 
+def long_squeeze_then(seconds, timeout, then):
+    """A tree: a squeeze of ``seconds`` given up on after ``timeout`` s, then the call leaf ``then``
+    (its YAML lines, without indentation) tried every 0.1 s until it succeeds (100 tries)."""
+    leaf = "".join("          %s%s\n" % ("- " if i == 0 else "  ", line) for i, line in enumerate(then))
+    return ("format: 1\nroot:\n  sequence:\n    - force_success:\n        call: gripper.squeeze\n"
+            "        name: long\n        inputs: {seconds: %s, label: long}\n        timeout: %s\n"
+            "    - retry: 100\n      child:\n        sequence:\n          - wait: 0.1\n%s" % (seconds, timeout, leaf))
+
+
+def timed_run(tree):
+    """``bmtree run -q`` of a tree that must succeed: (its call lines, seconds it took)."""
+    t0 = time.monotonic()
+    out = run("run", str(tree), "-q")
+    elapsed = time.monotonic() - t0
+    assert out.returncode == 0, out.stdout + out.stderr
+    return call_lines(out.stdout), elapsed
+
+
 def test_a_halted_cpp_function_stops_at_once_and_the_module_takes_calls_again(gripper, tmp_path):
     """The library's sleepFor() returns when the bridge forwards the cancel of a halted call, so
     the 30 s squeeze ends just after the tree's 0.3 s timeout, and the module takes calls again
     (a call sent within those milliseconds is still refused busy, as by any module whose
     cancelled code has not returned yet)."""
     tree = tmp_path / "halt.yaml"
-    tree.write_text("""format: 1
-root:
-  sequence:
-    - force_success:
-        call: gripper.squeeze
-        name: long
-        inputs: {seconds: 30.0, label: long}
-        timeout: 0.3
-    - retry: 100
-      child:
-        sequence:
-          - wait: 0.1
-          - call: gripper.set_fingers
-            name: next
-            inputs: {left: 0.0, right: 0.01}
-""")
-    t0 = time.monotonic()
-    out = run("run", str(tree), "-q")
-    elapsed = time.monotonic() - t0
-    assert out.returncode == 0, out.stdout + out.stderr
-    lines = call_lines(out.stdout)
+    tree.write_text(long_squeeze_then(30.0, 0.3, ["call: gripper.set_fingers", "inputs: {left: 0.0, right: 0.01}"]))
+    lines, elapsed = timed_run(tree)
     assert "timeout" in lines[0] or "halted" in lines[0], lines
-    assert "succeeded" in lines[-1], lines
+    assert "succeeded" in lines[-1] and "set_fingers" in lines[-1], lines
     assert elapsed < 20, elapsed  # not after the squeeze's 30 s (the retries would have run out first)
 
 
@@ -282,56 +281,12 @@ def test_the_bridges_call_timeout_cancels_the_cpp_function(ros_graph, gripper_ex
                          "/gripper_bridge")
     wait_announced("gripper")
     tree = tmp_path / "given_up.yaml"
-    tree.write_text("""format: 1
-root:
-  sequence:
-    - force_success:
-        call: gripper.squeeze
-        name: long
-        inputs: {seconds: 50.0, label: long}
-        timeout: 60
-    - retry: 100
-      child:
-        sequence:
-          - wait: 0.1
-          - call: gripper.squeeze
-            name: next
-            inputs: {seconds: 0.1, label: next}
-            outputs: {label: got}
-    - check: 'got == "next"'
-""")
-    t0 = time.monotonic()
-    out = run("run", str(tree), "-q")
-    elapsed = time.monotonic() - t0
-    assert out.returncode == 0, out.stdout + out.stderr
-    lines = call_lines(out.stdout)
+    tree.write_text(long_squeeze_then(50.0, 60, ["call: gripper.squeeze", "inputs: {seconds: 0.1, label: next}",
+                                                 "outputs: {label: got}"]) + "    - check: 'got == \"next\"'\n")
+    lines, elapsed = timed_run(tree)
     assert "failed" in lines[0] and "no BM_output from the C++ node /gripper within 0.5s" in lines[0], lines
     assert "succeeded" in lines[-1], lines
     assert elapsed < 30, elapsed  # not after the first squeeze's 50 s
-
-
-def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe,
-                                                                                       tmp_path):
-    """The bridge gives up on a call (--call-timeout) while the C++ node still runs it (a function
-    that does not look at cancels): the node stays busy until its late BM_output, which no later
-    call is given."""
-    start_oddities(ros_graph, gripper_exe, "--call-timeout", "0.5")
-    tree = tmp_path / "stale.yaml"
-    tree.write_text("""format: 1
-root:
-  sequence:
-    - force_success:
-        call: oddities.stubborn
-        name: first
-        inputs: {seconds: 1.5}
-        timeout: 10
-""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
-    out = run("run", str(tree), "-q")
-    assert out.returncode == 0, out.stdout + out.stderr
-    lines = call_lines(out.stdout)
-    assert "failed" in lines[0] and "no BM_output from the C++ node /oddities within 0.5s" in lines[0], lines
-    assert "rejected" in lines[1] and "still runs oddities.stubborn" in lines[1], lines
-    assert "succeeded" in lines[-1], lines
 
 
 def test_a_concurrent_function_in_a_cpp_definition_is_refused(tmp_path):
