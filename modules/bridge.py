@@ -90,7 +90,7 @@ class CppBridge(BasicModule):
         self._cancel_pub: Any = None
         self._out_sub: Any = None
         self._info_sub: Any = None
-        self._info: Optional[Dict[str, Any]] = None  # the latest BM_info of the library's node
+        self._infos: Dict[str, Dict[str, Any]] = {}  # the latest BM_info of each node that sent one
         self._String: Any = None
         self._self_name = ""
         #: a call that timed out while the C++ node still ran it: (function, the node's URI, when its
@@ -218,7 +218,7 @@ class CppBridge(BasicModule):
             log.warning("ignored a malformed BM_info from %s: %s", msg._connection_header.get("callerid"), exc)
             return
         with self._cond:
-            self._info = info
+            self._infos[str(msg._connection_header.get("callerid"))] = info
             self._cond.notify_all()
 
     def _signature_problem(self, fn: FunctionDefinition, info: Dict[str, Any]) -> str:
@@ -231,9 +231,9 @@ class CppBridge(BasicModule):
             return
         end = time.monotonic() + wait
         with self._cond:
-            while self._info is None and time.monotonic() < end:
+            while self.cpp_node not in self._infos and time.monotonic() < end:
                 self._cond.wait(end - time.monotonic())
-            info = self._info
+            info = self._infos.get(self.cpp_node)
         if info is None:
             log.warning("no BM_info from %s within %gs: its functions are not checked against %s", self.cpp_node,
                         wait, self.definition.source or self.definition.name)
@@ -291,7 +291,7 @@ class CppBridge(BasicModule):
                                                                                    "; ".join(missing)))
         self._settle_owed()
         with self._cond:
-            info = self._info if self.library else None
+            info = self._infos.get(self.cpp_node) if self.library else None
         problem = self._signature_problem(fn, info) if info is not None else ""
         if problem:  # the C++ node was rebuilt and restarted since the bridge started
             raise Rejected(problem)

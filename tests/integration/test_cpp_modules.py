@@ -289,6 +289,30 @@ def test_the_bridges_call_timeout_cancels_the_cpp_function(ros_graph, gripper_ex
     assert elapsed < 30, elapsed  # not after the first squeeze's 50 s
 
 
+def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe,
+                                                                                       tmp_path):
+    """The bridge gives up on a call (--call-timeout) while the C++ node still runs it (a function
+    that does not look at cancels): the node stays busy until its late BM_output, which no later
+    call is given."""
+    start_oddities(ros_graph, gripper_exe, "--call-timeout", "0.5")
+    tree = tmp_path / "stale.yaml"
+    tree.write_text("""format: 1
+root:
+  sequence:
+    - force_success:
+        call: oddities.stubborn
+        name: first
+        inputs: {seconds: 1.5}
+        timeout: 10
+""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
+    out = run("run", str(tree), "-q")
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = call_lines(out.stdout)
+    assert "failed" in lines[0] and "no BM_output from the C++ node /oddities within 0.5s" in lines[0], lines
+    assert "rejected" in lines[1] and "still runs oddities.stubborn" in lines[1], lines
+    assert "succeeded" in lines[-1], lines
+
+
 def test_a_concurrent_function_in_a_cpp_definition_is_refused(tmp_path):
     with open(GRIPPER_JSON) as fh:
         data = json.load(fh)

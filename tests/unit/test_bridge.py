@@ -106,7 +106,9 @@ def _bridge_with_info(info, definition=GRIPPER):
     d = load_definition(definition) if isinstance(definition, str) else definition
     bridge = make_bridge(d)
     ModuleServer(d, bridge, lambda t: None, lambda t: None)
-    bridge.library, bridge.cpp_node, bridge._info = True, "/gripper", info
+    bridge.library, bridge.cpp_node = True, "/gripper"
+    if info is not None:
+        bridge._infos["/gripper"] = info
     return bridge
 
 
