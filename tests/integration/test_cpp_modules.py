@@ -216,27 +216,21 @@ THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS = """    - retry: 100
 """
 
 
+def stubborn_first(timeout, then=""):
+    """A tree: a 1.5 s ``oddities.stubborn`` given up on after ``timeout`` s, the steps ``then``
+    (YAML, as items of the root sequence), and a second stubborn call that must get its own outputs."""
+    return ("format: 1\nroot:\n  sequence:\n    - force_success:\n        call: oddities.stubborn\n"
+            "        name: first\n        inputs: {seconds: 1.5}\n        outputs: {slept: wrong}\n"
+            "        timeout: %s\n%s" % (timeout, then)) + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS
+
+
 def test_a_halted_calls_late_answer_is_not_taken_for_the_next_call(ros_graph, gripper_exe, tmp_path):
     """A function that does not look at cancels runs on after its call was halted: the node is
     busy until it answers, and that answer is never given to the next call."""
     start_oddities(ros_graph, gripper_exe)
     tree = tmp_path / "late.yaml"
-    tree.write_text("""format: 1
-root:
-  sequence:
-    - force_success:
-        call: oddities.stubborn
-        name: first
-        inputs: {seconds: 1.5}
-        outputs: {slept: wrong}
-        timeout: 0.3
-    - force_success:
-        call: oddities.ok
-        name: while busy
-""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
-    out = run("run", str(tree), "-q")
-    assert out.returncode == 0, out.stdout + out.stderr
-    lines = call_lines(out.stdout)
+    tree.write_text(stubborn_first(0.3, "    - force_success:\n        call: oddities.ok\n        name: while busy\n"))
+    lines, _ = timed_run(tree)
     assert "timeout" in lines[0] or "halted" in lines[0], lines
     assert "rejected" in lines[1] and "busy with call" in lines[1], lines
     assert "succeeded" in lines[-1] and all("stubborn" in line for line in lines[2:]), lines
@@ -296,18 +290,8 @@ def test_after_the_bridges_call_timeout_the_late_answer_is_not_taken_for_the_nex
     call is given."""
     start_oddities(ros_graph, gripper_exe, "--call-timeout", "0.5")
     tree = tmp_path / "stale.yaml"
-    tree.write_text("""format: 1
-root:
-  sequence:
-    - force_success:
-        call: oddities.stubborn
-        name: first
-        inputs: {seconds: 1.5}
-        timeout: 10
-""" + THEN_A_SECOND_CALL_GETS_ITS_OWN_OUTPUTS)
-    out = run("run", str(tree), "-q")
-    assert out.returncode == 0, out.stdout + out.stderr
-    lines = call_lines(out.stdout)
+    tree.write_text(stubborn_first(10))
+    lines, _ = timed_run(tree)
     assert "failed" in lines[0] and "no BM_output from the C++ node /oddities within 0.5s" in lines[0], lines
     assert "rejected" in lines[1] and "still runs oddities.stubborn" in lines[1], lines
     assert "succeeded" in lines[-1], lines
