@@ -10,12 +10,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import sys
 import threading
 import time
 from typing import Any, Callable, List, Optional, Tuple, Union
 
+from comm.nodelife import StopSignals
 from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
@@ -214,23 +214,6 @@ def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Option
     return t
 
 
-class _StopSignals:
-    """Ctrl-C, ``kill``, ``timeout`` or a closed terminal end a watch through the ``finally`` that
-    unregisters it (a dead subscriber stays registered with the master, and each later run would
-    wait for it). The handler only raises a flag that the waits poll: an exception thrown into
-    rospy while it registers a subscriber would leave that subscriber on the master."""
-
-    def __init__(self) -> None:
-        self.requested = False
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._on_signal)
-        if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
-            signal.signal(signal.SIGHUP, self._on_signal)
-
-    def _on_signal(self, signum: int, frame: Any) -> None:
-        self.requested = True
-
-
 def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
@@ -243,7 +226,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
     state = WatchState()
     tty = sys.stdout.isatty() and not args.plain
     printer = None if tty or args.web else LinePrinter(sys.stdout)
-    signals = _StopSignals()
+    # Ctrl-C, kill, timeout or a closed terminal only raise a flag that the waits poll, and the
+    # watch ends through the finally that unregisters it: an exception thrown into rospy while it
+    # registers a subscriber would leave that subscriber on the master, which each later run waits for
+    signals = StopSignals()
     watcher = None
     server = None
     view = None
@@ -272,9 +258,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
             from coordinator.webview import serve
 
             server = serve(state, args.bind, args.port, control=lambda cmd: client.send(cmd, 10.0))
-            print("watching %s/* of the master %s; page at %s%s" % (
-                args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.url,
-                " (from other machines: %s)" % server.remote_url if server.remote_url else ""))
+            print("watching %s/* of the master %s; page at %s" % (
+                args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.where()))
             sys.stdout.flush()
         elif tty:
             view = LiveView(state, footer=keys_help).start()

@@ -120,6 +120,10 @@ class WebServer:
         data.update(mode="live", steer=self.control is not None and (data.get("tree") or {}).get("control") is not False)
         return data
 
+    def where(self) -> str:
+        """The page's address as printed: the local one, and the one of other machines if it has one."""
+        return self.url + (" (from other machines: %s)" % self.remote_url if self.remote_url else "")
+
     def close(self) -> None:
         self.httpd.shutdown()
         self.httpd.server_close()
@@ -162,8 +166,7 @@ def cmd_replay_web(args: Any) -> int:
     end = log.end or {}
     duration = float(end.get("duration") or (records[-1].get("t") if records else 0.0) or 0.0)
     server = WebServer(None, args.bind, args.port, at=replay_states(records), duration=duration)
-    print("replay of %s; page at %s%s (Ctrl-C stops)" % (
-        path, server.url, " (from other machines: %s)" % server.remote_url if server.remote_url else ""))
+    print("replay of %s; page at %s (Ctrl-C stops)" % (path, server.where()))
     sys.stdout.flush()
     try:
         while True:

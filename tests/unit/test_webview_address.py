@@ -10,6 +10,7 @@ def test_a_loopback_page_names_only_its_loopback_address():
     server = WebServer(None, "127.0.0.1", 0)
     try:
         assert server.url.startswith("http://127.0.0.1:") and server.remote_url == ""
+        assert server.where() == server.url
     finally:
         server.close()
 
@@ -21,6 +22,7 @@ def test_a_page_on_every_address_names_the_one_other_machines_use(monkeypatch):
         port = server.url.rsplit(":", 1)[1].strip("/")
         assert server.url == "http://127.0.0.1:%s/" % port
         assert server.remote_url == "http://127.0.0.2:%s/" % port
+        assert server.where() == "%s (from other machines: %s)" % (server.url, server.remote_url)
         with urllib.request.urlopen(server.remote_url, timeout=10) as page:  # it does listen there
             assert page.status == 200
     finally:
