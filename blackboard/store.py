@@ -85,7 +85,10 @@ class Store:
 
         store = cls.__new__(cls)
         store.path, store.keep = path, DEFAULT_KEEP
-        store.db = sqlite3.connect("file:%s?mode=ro" % urllib.parse.quote(os.path.abspath(path)), uri=True,
+        # SQLite deletes the -wal file when its last writer closes the store. Without one, nobody writes
+        # it, and "immutable" reads it without the -wal/-shm files a WAL reader would leave behind.
+        flags = "mode=ro" if os.path.exists(path + "-wal") else "mode=ro&immutable=1"
+        store.db = sqlite3.connect("file:%s?%s" % (urllib.parse.quote(os.path.abspath(path)), flags), uri=True,
                                    check_same_thread=False, isolation_level=None)
         try:
             columns = {row[1] for row in store.db.execute("PRAGMA table_info(value)")}

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from std_msgs.msg import Bool, String
@@ -102,6 +103,20 @@ def test_store_survives_reopen_and_dump(tmp_path, capsys):
     assert bmtree(["blackboard", "dump", "--db", path, "--name", "vision/find_object/room"]) == 0
     assert "vision.find_object" in capsys.readouterr().out
     assert bmtree(["blackboard", "dump", "--db", str(tmp_path / "none.sqlite")]) == 3
+
+
+def test_dump_reads_a_store_being_written_and_leaves_a_closed_store_as_it_was(tmp_path, capsys):
+    path = str(tmp_path / "bb.sqlite")
+    writer = Store(path)
+    writer.add([("room", "std_msgs/String", '{"data": "hall"}', "vision", "find_object", "c1", 1.0)])
+    assert os.path.exists(path + "-wal")              # the value is still in the writer's WAL
+    assert bmtree(["blackboard", "dump", "--db", path]) == 0
+    assert '{"data": "hall"}' in capsys.readouterr().out
+    writer.close()
+    assert sorted(os.listdir(str(tmp_path))) == ["bb.sqlite"]
+    assert bmtree(["blackboard", "dump", "--db", path]) == 0
+    assert '{"data": "hall"}' in capsys.readouterr().out
+    assert sorted(os.listdir(str(tmp_path))) == ["bb.sqlite"]    # no -wal/-shm left by a reader
 
 
 def test_original_modules_results_are_stored_under_the_module_whose_node_published_them(tmp_path):
