@@ -62,6 +62,7 @@ class CallRecord:
     messages: Dict[str, Any]      # the inputs as sent (ROS messages)
     started: float
     ended: Optional[float] = None
+    answered: Optional[float] = None  # when its answer came in (the tree may take it later: paused)
     status: RecordStatus = RecordStatus.RUNNING
     error: str = ""
     outputs: Dict[str, Any] = field(default_factory=dict)
@@ -76,7 +77,10 @@ class CallRecord:
 
     @property
     def duration(self) -> Optional[float]:
-        return None if self.ended is None else self.ended - self.started
+        """From sending to the answer (to the end, for calls that ended unanswered)."""
+        if self.ended is None:
+            return None
+        return (self.answered if self.answered is not None else self.ended) - self.started
 
 
 class RunContext:
@@ -212,6 +216,7 @@ class RunContext:
                 return
             self.pending.pop(rec.call_id, None)
             rec.result = item
+            rec.answered = self.clock.now()
             if item.names and rec.call_id:  # an original module's result is stored under the call it answers
                 fn = rec.function
                 target = rec.target

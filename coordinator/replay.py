@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Optional, TextIO, Tuple
 import py_trees
 from py_trees.common import Status
 
-from coordinator.runevents import RunObserver
+from coordinator.runevents import RunObserver, control_line
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
 from coordinator.runner import Display
 
@@ -81,6 +81,8 @@ class Replay:
         self.pending: Dict[str, Dict[str, Any]] = {}
         self.finished: List[Dict[str, Any]] = []
         self.events: List[Dict[str, Any]] = []
+        self.control: List[Dict[str, Any]] = []  # the operator's commands (run --control), and breakpoints hit
+        self.paused = False
         self.index = 1
         self.t = 0.0
 
@@ -109,6 +111,12 @@ class Replay:
             self.blackboard[str(rec.get("key"))] = rec.get("value")
         elif kind == "event":
             self.events.append(rec)
+        elif kind == "control":
+            self.control.append(rec)
+            if "paused" in rec:
+                self.paused = bool(rec["paused"])
+            if display is not None:
+                display.on_control(rec, self.t)
 
     def next(self, display: Optional[RunObserver] = None) -> Optional[Dict[str, Any]]:
         if self.index >= len(self.log.records):
@@ -142,6 +150,8 @@ class Replay:
     def snapshot(self, out: TextIO) -> None:
         """The tree, the tree blackboard and the calls in flight now."""
         out.write(py_trees.display.unicode_tree(self.root, show_status=True) + "\n")
+        if self.paused:
+            out.write("paused by control (%s)\n" % control_line(self.control[-1]))
         out.write("tree blackboard:\n")
         for k in sorted(self.blackboard):
             out.write("  %s = %s\n" % (k, json.dumps(self.blackboard[k], ensure_ascii=False)))
@@ -214,6 +224,10 @@ def _report(replay: Replay, out: TextIO) -> None:
                                                          c.get("error") or ""))
     for c in replay.pending.values():
         out.write("  +%7.3fs  %-26s %-10s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
+    if replay.control:
+        out.write("control:\n")
+        for c in replay.control:
+            out.write("  +%7.3fs  %s\n" % (float(c.get("t") or 0.0), control_line(c)))
 
 
 def cmd_replay(args: Any) -> int:

@@ -15,7 +15,7 @@ from typing import Any, Dict, Iterable, List, Tuple
 
 from py_trees.common import Status
 
-__all__ = ["RunObserver", "StatusWatcher", "Change", "notify"]
+__all__ = ["RunObserver", "StatusWatcher", "Change", "notify", "control_line"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -48,6 +48,14 @@ class RunObserver:
 
     def on_control(self, record: Any, now: float) -> None:
         """A control command was answered (``bmtree run --control``): command, args, ok, answer, by."""
+
+
+def control_line(record: Dict[str, Any]) -> str:
+    """A control record as one line: ``force 'grasp' FAILURE by /bmtree_ctl_1: 'grasp' will end in …``."""
+    args = record.get("args") if isinstance(record.get("args"), dict) else {}
+    words = [str(record.get("command", "?"))] + [repr(v) if k in ("node", "key") else str(v) for k, v in args.items()]
+    verdict = "" if record.get("ok", True) else "refused: "
+    return "%s by %s: %s%s" % (" ".join(words), record.get("by") or "?", verdict, record.get("answer", ""))
 
 
 def notify(observers: List[RunObserver], method: str, *args: Any) -> None:

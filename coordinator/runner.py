@@ -17,7 +17,7 @@ from py_trees.common import Status
 
 from coordinator.context import WAKE, CallRecord, RunContext
 from coordinator.reasons import FailureExplainer
-from coordinator.runevents import Change, RunObserver, StatusWatcher, notify
+from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
 
 __all__ = ["Display", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
 
@@ -78,6 +78,7 @@ class Display(RunObserver):
         self._drawn: Optional[float] = None
         self._lines = 0
         self._start = 0.0
+        self._control = ""
 
     def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
         self.root = root
@@ -98,6 +99,16 @@ class Display(RunObserver):
                 self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", b.name))
         self.stream.flush()
 
+    def on_control(self, record: Any, now: float) -> None:
+        line = control_line(record)
+        if self.tty:  # shown under the tree, which is redrawn in place
+            self._control = line
+            if self.root is not None:
+                self._draw(now - self._start)
+            return
+        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, "CONTROL", line))
+        self.stream.flush()
+
     def on_end(self, result: Any) -> None:
         if self.tty and self.root is not None:
             self._draw(result.duration)
@@ -105,6 +116,8 @@ class Display(RunObserver):
     def _draw(self, now: float) -> None:
         self._drawn = now
         text = py_trees.display.unicode_tree(self.root, show_status=True)
+        if self._control:
+            text += "\ncontrol: " + self._control
         if self._lines:
             self.stream.write("\x1b[%dA\x1b[J" % self._lines)
         self.stream.write(text + "\n")

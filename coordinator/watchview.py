@@ -15,6 +15,7 @@ from typing import Any, Dict, List, Optional, TextIO, Tuple
 from rich.console import Group
 from rich.text import Text
 
+from coordinator.runevents import control_line
 from coordinator.watchstate import WatchState
 
 __all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
@@ -117,8 +118,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         bb = [Text("  %s = %s" % (k, _short(v, max(20, width - len(k) - 6)))) for k, v in sorted(state.blackboard.items())]
         ev = [Text("  %7.2fs %s.%s %s" % (float(e.get("t") or 0.0), e.get("module"), e.get("event"),
                                            _short(e.get("params"), 40))) for e in state.events]
-        ev += [Text("  %7.2fs control %s %s: %s" % (float(c.get("t") or 0.0), c.get("command"),
-                                                      _short(c.get("args"), 30), c.get("answer")), style="magenta")
+        ev += [Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)), style="magenta")
                for c in state.control]
         ev.sort(key=lambda x: x.plain)
         calls = []
@@ -197,7 +197,7 @@ class LinePrinter:
         elif kind == "write":
             lines.append("[%7.3fs] write     %s = %s" % (t, rec.get("key"), _short(rec.get("value"))))
         elif kind == "control":
-            lines.append("[%7.3fs] control   %s %s: %s" % (t, rec.get("command"), _short(rec.get("args")), rec.get("answer")))
+            lines.append("[%7.3fs] control   %s" % (t, control_line(rec)))
         elif kind == "end":
             lines.append("[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else ""))
         for line in lines:

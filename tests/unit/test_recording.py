@@ -514,3 +514,42 @@ def test_a_scenario_is_refused_for_a_run_whose_outcome_a_person_forced(sim_defs,
                                           r"0.500s: force go to the kitchen FAILURE\); a scenario replays"):
         write_scenario(read_log(str(forced)), str(tmp_path / "forced.yaml"))
     assert not (tmp_path / "forced.yaml").exists()
+
+
+def test_a_paused_run_times_its_calls_by_their_answers_and_replay_shows_the_control(sim_defs, tmp_path, capsys):
+    """Paused at 0.5 s while go_to runs (it answers at 2.5 s), resumed at 10 s: the call took 2 s, not 9.5 s;
+    the live display, the run log, replay's summary and a replay at 5 s show who paused it."""
+    from coordinator.builder import build_tree
+    from coordinator.clock import SimClock
+    from coordinator.context import RunContext
+    from coordinator.control import Controller
+    from coordinator.language import load_tree
+    from coordinator.runner import Display, TreeRunner
+    from coordinator.testing.mocks import InProcessTransport, Mocks
+
+    mocks = Mocks(sim_defs)
+    mocks["navigation.go_to"].script(succeed(room="kitchen", delay=2.0))
+    clock = SimClock()
+    ctx = RunContext(InProcessTransport(mocks, clock), clock, sim_defs)
+    tree = load_tree(GO, sim_defs)
+    control = Controller(True)
+    clock.call_later(0.5, lambda: control.submit({"command": "pause", "by": "/tester"}))
+    clock.call_later(10.0, lambda: control.submit({"command": "resume", "by": "/tester"}))
+    live = io.StringIO()
+    log = str(tmp_path / "run.jsonl")
+    result = TreeRunner(build_tree(tree, ctx, {}), ctx, observers=[RunStream([RunLogWriter(log, fsync=False)]), control,
+                                                                    Display(live, tty=False)],
+                        tree=tree, gate=control).run(60.0)
+    assert result.status == Status.SUCCESS and result.duration >= 10.0
+    go = [c for c in result.calls if c.target == "navigation.go_to"][0]
+    assert go.duration == pytest.approx(2.0, abs=0.3) and go.ended >= 10.0
+    assert "CONTROL   pause by /tester: paused: no node starts" in live.getvalue()
+    assert "CONTROL   resume by /tester: resumed" in live.getvalue()
+    ends = [r for r in read_log(log).records if r.get("type") == "call_end" and r["target"] == "navigation.go_to"]
+    assert ends[0]["duration"] == pytest.approx(2.0, abs=0.3)
+    assert cmd_replay(_args(run=log)) == 0
+    out = capsys.readouterr().out
+    assert "control:\n  +  0.500s  pause by /tester: paused" in out and "+ 10.000s  resume by /tester: resumed" in out
+    assert "CONTROL   pause by /tester" in out   # the replayed display shows it where the live one did
+    assert cmd_replay(_args(run=log, at=5.0)) == 0
+    assert "paused by control (pause by /tester: paused" in capsys.readouterr().out
