@@ -14,8 +14,9 @@ after being unreachable, or with another pid, it registers every publisher,
 subscriber and service of this process again through the master API with the node's own
 XML-RPC URI (what ``rospy.impl.registration.RegManager`` does at start-up), tells the
 node's subscribers the current publishers (its own ``publisherUpdate``), sets the
-parameters the node asked to keep, and calls ``on_restart`` hooks. A master that does not
-keep connections open (HTTP/1.0) is asked every ``period`` seconds instead.
+parameters the node asked to keep, and calls ``on_restart`` hooks (``on_down`` hooks when
+the master stops answering: a run records both). A master that does not keep connections
+open (HTTP/1.0) is asked every ``period`` seconds instead.
 
 An idle node costs nothing: asking twice a second cost 50 idle module nodes 6% of a core,
 and the master 3% more, for nothing.
@@ -59,7 +60,8 @@ class MasterWatch:
         # the node's own master (rosgraph reads __master:= remappings and ROS_MASTER_URI)
         self.master_uri = rosgraph.get_master_uri()
         self.params: Dict[str, Callable[[], Any]] = {}
-        self.on_restart: List[Callable[[], None]] = []
+        self.on_restart: List[Callable[[], None]] = []  # after registering again
+        self.on_down: List[Callable[[], None]] = []     # when the master stops answering
         self.restarts = 0
         self._pid: Optional[int] = None
         self._line = PidLine(self.master_uri, timeout, "/bmtree_masterwatch")
@@ -106,6 +108,7 @@ class MasterWatch:
             if pid is None:
                 if not down:
                     log.warning("the ROS master at %s does not answer; waiting for it to come back", self.master_uri)
+                    self._call(self.on_down)
                 down = True
                 continue
             if down or pid != self._pid:
@@ -118,6 +121,14 @@ class MasterWatch:
                 self._pid = pid
                 self.restarts += 1
             down = False
+
+    @staticmethod
+    def _call(hooks: List[Callable[[], None]]) -> None:
+        for hook in list(hooks):
+            try:
+                hook()
+            except Exception:  # a hook must not stop the watch
+                log.exception("master watch hook %r failed", hook)
 
     def register_again(self) -> None:
         """Register every topic, service and kept parameter of this node with the master."""
@@ -141,8 +152,7 @@ class MasterWatch:
             v = value()
             if v is not None:
                 master.setParam(caller_id, key, v)
-        for hook in list(self.on_restart):
-            hook()
+        self._call(self.on_restart)
         rospy.logwarn("registered again with the restarted ROS master at %s", self.master_uri)
         self.registered.set()
 

@@ -21,7 +21,7 @@ from comm.textenum import TextEnum
 from coordinator.clock import Clock
 from coordinator.liveness import BlackboardLost, ModuleLost
 from coordinator.refs import resolve, unwrap
-from coordinator.runevents import RunObserver, notify
+from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
@@ -98,6 +98,7 @@ class RunContext:
         self.calls: List[CallRecord] = []
         self.pending: typing.OrderedDict[str, CallRecord] = OrderedDict()
         self.events: List[Event] = []
+        self.notices: List[Notice] = []
         self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
         self.dropped: List[FunctionResult] = []
@@ -232,6 +233,10 @@ class RunContext:
             if item.request_id:
                 self._confirmed(item)
                 self.answers[item.request_id] = item
+        elif isinstance(item, Notice):
+            self.notices.append(item)
+            if self.observers:
+                notify(self.observers, "on_notice", item, self.clock.now())
         elif isinstance(item, ModuleLost):
             for call_id in item.call_ids:
                 rec = self.pending.get(call_id)

@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Optional, TextIO, Tuple
 import py_trees
 from py_trees.common import Status
 
-from coordinator.runevents import RunObserver, control_line
+from coordinator.runevents import Notice, RunObserver, control_line
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
 from coordinator.runner import Display
 
@@ -83,6 +83,7 @@ class Replay:
         self.events: List[Dict[str, Any]] = []
         self.control: List[Dict[str, Any]] = []  # the operator's commands (run --control), and breakpoints hit
         self.paused = False
+        self.notices: List[Dict[str, Any]] = []  # what happened to the ROS graph (the master went away...)
         self.index = 1
         self.t = 0.0
 
@@ -111,6 +112,10 @@ class Replay:
             self.blackboard[str(rec.get("key"))] = rec.get("value")
         elif kind == "event":
             self.events.append(rec)
+        elif kind == "notice":
+            self.notices.append(rec)
+            if display is not None:
+                display.on_notice(Notice(str(rec.get("what")), str(rec.get("text"))), self.t)
         elif kind == "control":
             self.control.append(rec)
             if "paused" in rec:
@@ -224,6 +229,10 @@ def _report(replay: Replay, out: TextIO) -> None:
                                                          c.get("error") or ""))
     for c in replay.pending.values():
         out.write("  +%7.3fs  %-26s %-10s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
+    if replay.notices:
+        out.write("the ROS graph:\n")
+        for n in replay.notices:
+            out.write("  +%7.3fs  %s\n" % (float(n.get("t") or 0.0), n.get("text")))
     if replay.control:
         out.write("control:\n")
         for c in replay.control:

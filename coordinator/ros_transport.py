@@ -46,6 +46,7 @@ from comm.messages import (
 from comm.nodelife import registering
 from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, Watchdog
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
+from coordinator.runevents import Notice
 from coordinator.runstream import CHANNELS, Sink
 from coordinator.sender import TopicSender, topic_senders, widen_accept_queue
 from coordinator.transport import Transport
@@ -91,6 +92,7 @@ class RosTransport(Transport):
         self.max_bytes = max_bytes
         self._early: List[Event] = []  # events that came during the preflight, for the run
         self._deliver: Callable[[Any], None] = self._hold
+        self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
         self.watchdog = Watchdog(lambda item: self._deliver(item), self._node_of, self._uri_of, period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
@@ -120,7 +122,9 @@ class RosTransport(Transport):
             widen_accept_queue()  # every module connects to this node at once in the preflight
             from comm.masterwatch import watch_master
 
-            watch_master()  # a restarted master gets this node's topics again; the run goes on
+            self._watch = watch_master()  # a restarted master gets this node's topics again; the run goes on
+            self._watch.on_down.append(self._master_down)  # and the run log says when and why
+            self._watch.on_restart.append(self._master_back)
             # the shared call and cancel topics only when a module needs them (_shared): every module
             # listens there, so each publisher costs one connection per module
             self._pubs = {"request": self._publisher(TOPIC_BB_REQUEST)}
@@ -354,7 +358,21 @@ class RosTransport(Transport):
         self.open()
         return RosStreamSink(namespace, self._String)
 
+    def _master_down(self) -> None:
+        self._deliver(Notice("master_down", "the ROS master at %s does not answer: calls on open connections go on, "
+                                            "but no node can find another until it is back" % self._watch.master_uri))
+
+    def _master_back(self) -> None:
+        self._deliver(Notice("master_back", "the ROS master at %s answers again; this run's topics are registered "
+                                            "with it again (plain rospy/roscpp nodes, such as original modules, do "
+                                            "not register again: they are unknown to it until restarted)" % self._watch.master_uri))
+
     def close(self) -> None:
+        watch = self._watch
+        if watch is not None:
+            for hooks, hook in ((watch.on_down, self._master_down), (watch.on_restart, self._master_back)):
+                if hook in hooks:
+                    hooks.remove(hook)
         self.watchdog.stop()
         for s in self._subs:
             s.unregister()

@@ -11,15 +11,25 @@ not raise (a failing observer is logged and detached, the run goes on).
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Tuple
 
 from py_trees.common import Status
 
-__all__ = ["RunObserver", "StatusWatcher", "Change", "notify", "control_line"]
+__all__ = ["RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line"]
 
 log = logging.getLogger("bmtree.coordinator")
 
 Change = Tuple[Any, Status, Status]  # (behaviour, old status, new status)
+
+
+@dataclass
+class Notice:
+    """Something that happened to the ROS graph under the run, which explains what follows
+    (the master went away, came back), delivered by the transport like a result."""
+
+    what: str   # master_down, master_back
+    text: str
 
 
 class RunObserver:
@@ -48,6 +58,9 @@ class RunObserver:
 
     def on_control(self, record: Any, now: float) -> None:
         """A control command was answered (``bmtree run --control``): command, args, ok, answer, by."""
+
+    def on_notice(self, notice: Notice, now: float) -> None:
+        """The transport noticed something about the ROS graph (a :class:`Notice`)."""
 
 
 def control_line(record: Dict[str, Any]) -> str:

@@ -78,7 +78,7 @@ class Display(RunObserver):
         self._drawn: Optional[float] = None
         self._lines = 0
         self._start = 0.0
-        self._control = ""
+        self._note = ""  # the latest control answer or notice, under the tree on a terminal
 
     def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
         self.root = root
@@ -100,13 +100,19 @@ class Display(RunObserver):
         self.stream.flush()
 
     def on_control(self, record: Any, now: float) -> None:
-        line = control_line(record)
-        if self.tty:  # shown under the tree, which is redrawn in place
-            self._control = line
+        self._line(now, "CONTROL", control_line(record), "control: ")
+
+    def on_notice(self, notice: Any, now: float) -> None:
+        self._line(now, "NOTICE", notice.text)
+
+    def _line(self, now: float, kind: str, text: str, label: str = "") -> None:
+        """A line between the status changes; on a terminal the latest stays under the tree."""
+        if self.tty:
+            self._note = label + text
             if self.root is not None:
                 self._draw(now - self._start)
             return
-        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, "CONTROL", line))
+        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, kind, text))
         self.stream.flush()
 
     def on_end(self, result: Any) -> None:
@@ -116,8 +122,8 @@ class Display(RunObserver):
     def _draw(self, now: float) -> None:
         self._drawn = now
         text = py_trees.display.unicode_tree(self.root, show_status=True)
-        if self._control:
-            text += "\ncontrol: " + self._control
+        if self._note:
+            text += "\n" + self._note
         if self._lines:
             self.stream.write("\x1b[%dA\x1b[J" % self._lines)
         self.stream.write(text + "\n")

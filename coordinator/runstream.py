@@ -193,6 +193,11 @@ class RunStream(RunObserver):
             self._emit("blackboard", {"v": VERSION, "type": "write", "run": self.run_id, "t": self._t(now),
                                       "key": key, "value": plain(value)})
 
+    def on_notice(self, notice: Any, now: float) -> None:
+        if self._open:
+            self._emit("events", {"v": VERSION, "type": "notice", "run": self.run_id, "t": self._t(now),
+                                  "what": notice.what, "text": notice.text})
+
     def on_control(self, record: Any, now: float) -> None:
         if self._open:
             self._emit("control", dict(record, v=VERSION, type="control", run=self.run_id, t=self._t(now)))

@@ -114,7 +114,7 @@ class WatchState:
                 del self.calls[:-KEEP]
         elif kind == "write":
             self.blackboard[str(rec.get("key"))] = rec.get("value")
-        elif kind == "event":
+        elif kind in ("event", "notice"):  # a notice: what happened to the ROS graph (the master went away)
             self.events.append(rec)
             del self.events[:-KEEP]
         elif kind == "control":

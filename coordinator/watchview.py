@@ -116,8 +116,8 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
             plines.append(Text("  %-24s %6.1fs / %s  %s" % (
                 c.get("target"), el, ("%gs" % to) if to else "-", _short(c.get("inputs"), 40))))
         bb = [Text("  %s = %s" % (k, _short(v, max(20, width - len(k) - 6)))) for k, v in sorted(state.blackboard.items())]
-        ev = [Text("  %7.2fs %s.%s %s" % (float(e.get("t") or 0.0), e.get("module"), e.get("event"),
-                                           _short(e.get("params"), 40))) for e in state.events]
+        ev = [Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
+                   style="yellow" if e.get("type") == "notice" else "") for e in state.events]
         ev += [Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)), style="magenta")
                for c in state.control]
         ev.sort(key=lambda x: x.plain)
@@ -157,6 +157,13 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
     return Group(*out)
 
 
+def event_text(rec: Dict[str, Any], width: int = 60) -> str:
+    """A module's event (``people.lostPerson {...}``) or a notice about the graph, as text."""
+    if rec.get("type") == "notice":
+        return str(rec.get("text"))
+    return "%s.%s %s" % (rec.get("module"), rec.get("event"), _short(rec.get("params"), width))
+
+
 class LinePrinter:
     """One line per change (statuses, calls, events, writes, control, the end), for logs and pipes."""
 
@@ -193,7 +200,9 @@ class LinePrinter:
         elif kind == "call_end":
             lines.append("[%7.3fs] %-9s %s %s" % (t, rec.get("status"), rec.get("target"), rec.get("error") or ""))
         elif kind == "event":
-            lines.append("[%7.3fs] event     %s.%s %s" % (t, rec.get("module"), rec.get("event"), _short(rec.get("params"))))
+            lines.append("[%7.3fs] event     %s" % (t, event_text(rec)))
+        elif kind == "notice":
+            lines.append("[%7.3fs] notice    %s" % (t, event_text(rec)))
         elif kind == "write":
             lines.append("[%7.3fs] write     %s = %s" % (t, rec.get("key"), _short(rec.get("value"))))
         elif kind == "control":

@@ -91,7 +91,8 @@ function draw(s) {
   if (s.t !== anchor[0]) anchor = [s.t, Date.now()];
   drawPending(s);
   rows("blackboard", Object.keys(s.blackboard).sort(), (k) => [k, js(s.blackboard[k])]);
-  const ev = s.events.map((e) => [e.t, sec(e.t), e.module + "." + e.event, js(e.params)])
+  const ev = s.events.map((e) => e.type === "notice" ? [e.t, sec(e.t), "ROS graph", e.text]
+    : [e.t, sec(e.t), e.module + "." + e.event, js(e.params)])
     .concat(s.control.map((c) => [c.t, sec(c.t), "control " + c.command + " " + js(c.args || {}), c.answer]));
   ev.sort((a, b) => a[0] - b[0]);
   rows("events", ev.slice(-30), (e) => e.slice(1));

@@ -5,6 +5,7 @@ These tests use their own master (the session's must not die), so the coordinato
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -73,9 +74,9 @@ def _wait_registered(graph, timeout=30.0):
         time.sleep(0.02)
 
 
-def _run(graph, tree, quiet=True):
+def _run(graph, tree, quiet=True, record=None):
     return subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "--modules", PROBE_JSON]
-                            + (["-q"] if quiet else []),
+                            + (["-q"] if quiet else []) + (["--record", str(record)] if record else []),
                             env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
@@ -92,7 +93,7 @@ def test_nodes_register_again_after_a_master_restart_and_runs_go_on(own_graph, t
                     "    - call: probe.echo\n      inputs: {tag: b}\n")
     took = []
     for i in range(scale(1, 5)):
-        in_flight = _run(graph, slow, quiet=False) if i == 0 else None
+        in_flight = _run(graph, slow, quiet=False, record=tmp_path / "in_flight.jsonl") if i == 0 else None
         seen = []
         if in_flight is not None:  # restart while a call of this run is in flight
             for line in in_flight.stdout:
@@ -106,6 +107,7 @@ def test_nodes_register_again_after_a_master_restart_and_runs_go_on(own_graph, t
         if in_flight is not None:
             out, _ = in_flight.communicate(timeout=60)
             assert in_flight.returncode == 0, "".join(seen) + out
+            _the_run_recorded_the_restart(out, tmp_path / "in_flight.jsonl")
         run = _run(graph, quick)
         out, _ = run.communicate(timeout=60)
         assert run.returncode == 0, out
@@ -113,3 +115,18 @@ def test_nodes_register_again_after_a_master_restart_and_runs_go_on(own_graph, t
     if FULL:
         assert max(took) <= 5.0, took
 
+
+
+def _the_run_recorded_the_restart(out, log):
+    """The run's display, its log and its replay say when the master went away and came back."""
+    down = out.index("does not answer: calls on open connections go on")
+    back = out.index("answers again; this run's topics are registered with it again")
+    assert "] NOTICE    the ROS master at " in out[down - 80:down] and down < back, out
+    records = [json.loads(line) for line in open(str(log))]
+    notices = [r["what"] for r in records if r["type"] == "notice"]
+    assert notices == ["master_down", "master_back"], notices
+    assert records[-1]["type"] == "end" and records[-1]["status"] == "SUCCESS"
+    replay = subprocess.run([sys.executable, "-m", "coordinator", "replay", str(log)], capture_output=True, text=True,
+                            timeout=60)
+    assert replay.returncode == 0, replay.stderr
+    assert "the ROS graph:\n" in replay.stdout and "does not answer" in replay.stdout, replay.stdout

@@ -67,6 +67,21 @@ def stop(proc):
         proc.wait(30)
 
 
+def with_a_notice(env, tmp_path):
+    """The newest run log of ``env``'s ROS_HOME, copied with a notice of a master restart put in."""
+    import json
+
+    from coordinator.replay import find_run
+
+    path = find_run("last", os.path.join(env["ROS_HOME"], "bmtree", "runs"))
+    records = [json.loads(line) for line in open(path)]
+    notice = {"v": 1, "type": "notice", "run": records[0]["run"], "t": records[1]["t"], "what": "master_back",
+              "text": "the ROS master at http://robot:11311/ answers again"}
+    copy = tmp_path / "with_notice.jsonl"
+    copy.write_text("".join(json.dumps(r) + "\n" for r in records[:1] + [notice] + records[1:]))
+    return str(copy)
+
+
 def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
     driver = browser(tmp_path)  # first: its start-up is slow, the trip is not endless
     run = SimRun(tmp_path, tree=LONG_TREE, world=slow_world(tmp_path, speed=0.3))
@@ -91,10 +106,11 @@ def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
         stop(web)
 
         env = dict(run.env)
-        web, _out, url = start_web("replay", "last", "--web", env=env)
+        web, _out, url = start_web("replay", with_a_notice(env, tmp_path), "--web", env=env)
         driver.get(url)
         wait_until(driver, lambda d: d.find_element("id", "timeline").is_displayed())
         assert "result: SUCCESS" in text(driver, "result")
+        assert "ROS graph" in text(driver, "events") and "master at http://robot:11311/ answers" in text(driver, "events")
         driver.execute_script("const s=document.getElementById('scrub'); s.value=s.max/2;"
                               "s.dispatchEvent(new Event('input'));")
         wait_until(driver, lambda d: node_status(d, "go to the kitchen") == "RUNNING")

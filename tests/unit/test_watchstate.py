@@ -125,3 +125,30 @@ def test_a_snapshot_held_back_by_the_interval_is_published_when_it_ends():
     assert [p["n"] for p in published] == [0, 1] and published[-1]["status"]["2"] == "RUNNING"
     sink.close()
     assert published[-1]["n"] == 1 and len(published) == 3
+
+
+def test_notices_and_control_answers_show_beside_module_events_and_survive_a_snapshot():
+    sink = SnapshotSink(publish=lambda text: None)
+    live = sink.state
+    records = [tree_record(),
+               {"type": "event", "run": "r1", "t": 0.5, "module": "people", "event": "lostPerson",
+                "params": {"name": "Ana"}},
+               {"type": "notice", "run": "r1", "t": 1.0, "what": "master_down",
+                "text": "the ROS master at http://robot:11311/ does not answer"},
+               {"type": "control", "run": "r1", "t": 1.5, "command": "force", "ok": False, "by": "/op",
+                "args": {"node": "leaf 0.1", "outcome": "MAYBE"}, "answer": "an outcome is SUCCESS or FAILURE"}]
+    out = io.StringIO()
+    printer = LinePrinter(out)
+    for rec in records:
+        live.apply(rec)
+        printer.record(rec, live)
+    lines = out.getvalue()
+    assert "event     people.lostPerson {\"name\":\"Ana\"}" in lines
+    assert "[  1.000s] notice    the ROS master at http://robot:11311/ does not answer" in lines
+    assert ("[  1.500s] control   force 'leaf 0.1' MAYBE by /op: refused: an outcome is SUCCESS or FAILURE"
+            in lines)
+    late = WatchState()
+    late.apply(tree_record())
+    late.apply(live.snapshot())
+    text = shown(render(late, 120, 40))
+    assert "people.lostPerson" in text and "does not answer" in text and "refused: an outcome" in text
