@@ -13,7 +13,7 @@ import json
 import os
 import sys
 import types
-from typing import Any, Callable, Dict, List, Optional, TextIO, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -67,6 +67,16 @@ def _skeleton(nodes: List[Dict[str, Any]]) -> Tuple[Any, Dict[int, Any]]:
     return make(roots[0], 0), by_id
 
 
+class Failure(NamedTuple):
+    """Where a failure started: its place among the status changes, its tick record, node and message."""
+
+    seq: int
+    index: int
+    node: int
+    message: str
+    t: float
+
+
 class Replay:
     """Steps through a run log, keeping the tree, the tree blackboard and the calls in flight."""
 
@@ -100,7 +110,8 @@ class Replay:
                 old, new = b.status, Status(change[1])
                 b.status = new
                 b.feedback_message = change[2] if len(change) > 2 else ""
-                changes.append((b, old, new))
+                # as it was at this change: a retry may restart the leaf in the same tick
+                changes.append((types.SimpleNamespace(name=b.name, feedback_message=b.feedback_message), old, new))
             if display is not None:
                 display.on_tick(self.root, changes, self.t)
         elif kind == "call_start":
@@ -143,14 +154,46 @@ class Replay:
             if stop(rec):
                 return True
 
-    def first_leaf_failure(self, rec: Dict[str, Any]) -> Optional[List[Any]]:
-        if rec.get("type") != "tick":
-            return None
-        for change in rec.get("changes") or []:
-            b = self.by_id.get(change[0])
-            if b is not None and change[1] == "FAILURE" and not b.children:
-                return change
-        return None
+    def failures(self) -> Tuple[Optional[Failure], List[Failure]]:
+        """Where failures started, over the whole log (a leaf, or a node failing by itself: a timeout
+        that fired): the one that ended the run (None if none did), and those the tree recovered from
+        (an ancestor succeeded later: a selector moved on, a retry succeeded), in order."""
+        parent = {i: n.get("parent") for i, n in self.nodes.items()}
+        kids: Dict[Any, List[int]] = {}
+        for i, p in parent.items():
+            kids.setdefault(p, []).append(i)
+        status: Dict[int, str] = {}
+        succeeded: Dict[int, int] = {}
+        origins: List[Failure] = []
+        seq = 0
+        for index, rec in enumerate(self.log.records):
+            if rec.get("type") != "tick":
+                continue
+            for change in rec.get("changes") or []:
+                seq += 1
+                nid, new = change[0], change[1]
+                status[nid] = new
+                if new == "SUCCESS":
+                    succeeded[nid] = seq
+                elif new == "FAILURE" and (not kids.get(nid) or (len(change) > 2 and change[2] and all(
+                        status.get(k) != "FAILURE" for k in kids[nid]))):
+                    origins.append(Failure(seq, index, nid, change[2] if len(change) > 2 else "failed",
+                                           float(rec.get("t") or 0.0)))
+
+        def ancestors(nid: Any) -> List[Any]:
+            out = []
+            while parent.get(nid) is not None and len(out) < 200:
+                nid = parent[nid]
+                out.append(nid)
+            return out
+
+        recovered = [f for f in origins if any(succeeded.get(a, -1) > f.seq for a in ancestors(f.node))]
+        ended = None
+        end = self.log.end
+        if end is not None and end.get("status") == "FAILURE":
+            unrecovered = [f for f in origins if f not in recovered]
+            ended = unrecovered[-1] if unrecovered else None
+        return ended, recovered
 
     def snapshot(self, out: TextIO) -> None:
         """The tree, the tree blackboard and the calls in flight now."""
@@ -224,11 +267,11 @@ def _report(replay: Replay, out: TextIO) -> None:
             out.write("reason: %s\n" % end.get("reason"))
     out.write("calls:\n")
     for c in replay.finished:
-        out.write("  +%7.3fs  %-26s %-10s %7.3fs  %s\n" % (float(c.get("started") or 0.0), c.get("target"),
+        out.write("  +%7.3fs  %-26s %-11s %7.3fs  %s\n" % (float(c.get("started") or 0.0), c.get("target"),
                                                          c.get("status"), float(c.get("duration") or 0.0),
                                                          c.get("error") or ""))
     for c in replay.pending.values():
-        out.write("  +%7.3fs  %-26s %-10s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
+        out.write("  +%7.3fs  %-26s %-11s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
     if replay.notices:
         out.write("the ROS graph:\n")
         for n in replay.notices:
@@ -239,6 +282,65 @@ def _report(replay: Replay, out: TextIO) -> None:
             out.write("  +%7.3fs  %s\n" % (float(c.get("t") or 0.0), control_line(c)))
 
 
+def _jump_to_failure(replay: Replay, out: TextIO) -> None:
+    """``--failure``: the failure that ended the run (not one the tree recovered from), where, why,
+    and the state then; for a run stopped from outside, the state just before the stop."""
+    log = replay.log
+    ended, recovered = replay.failures()
+    end = log.end or {}
+
+    def where(f: Failure) -> str:
+        n = replay.nodes.get(f.node, {})
+        return "'%s' (%s:%s): %s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"), f.message)
+
+    if ended is not None:
+        replay.until(lambda rec: replay.index > ended.index)
+        out.write("the failure that ended the run, at %.3fs: %s\n" % (ended.t, where(ended)))
+    elif end.get("status") == "FAILURE" or end.get("status") == "INVALID" or not end:
+        ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick"]
+        stop = ticks[-2] if len(ticks) >= 2 and end else (ticks[-1] if ticks else 0)  # before the halting tick
+        replay.until(lambda rec: replay.index > stop)
+        out.write("no leaf's failure ended this run: %s\nthe state at %.3fs, its last tick before that:\n" % (
+            end.get("reason") or "its log ends without the run's end (the process was killed?)", replay.t))
+    elif recovered:
+        replay.until(lambda rec: replay.index > recovered[0].index)
+        out.write("the run succeeded; the tree recovered from %d failure%s, the first at %.3fs: %s\n" % (
+            len(recovered), "" if len(recovered) == 1 else "s", recovered[0].t, where(recovered[0])))
+    else:
+        out.write("no leaf failed in this run\n")
+        return
+    if end.get("reason") and end.get("status") != "SUCCESS":
+        out.write("the run ended %s: %s\n" % (end.get("status"), end.get("reason")))
+    earlier = [f for f in recovered if ended is None or f.seq < ended.seq]
+    if earlier and ended is not None:
+        out.write("before it, the tree recovered from: %s\n" % "; ".join(
+            "%s at %.3fs" % (where(f), f.t) for f in earlier[:5]))
+    replay.snapshot(out)
+
+
+def _test_command(log: RunLog, scenario: str) -> str:
+    """``bmtree test`` of ``scenario`` with the definition files the run was given, and a word
+    on the modules it knew only from the live graph (their definitions are in no file it had)."""
+    import shlex
+
+    from modules.definition import DefinitionError
+    from modules.search import default_definitions
+
+    given = [m for m in log.tree.get("modules") or [] if isinstance(m, str) and os.path.exists(m)]
+    command = " ".join(["bmtree test"] + ["--modules %s" % shlex.quote(m) for m in given] + [shlex.quote(scenario)])
+    try:
+        known = set(default_definitions(given))
+    except (DefinitionError, OSError) as exc:  # changed since the run: the test will say what is wrong
+        return "%s (its definitions: %s)" % (command, str(exc).splitlines()[0])
+    used = {str(n["target"]).split(".", 1)[0] for n in log.tree.get("nodes") or []
+            if isinstance(n, dict) and isinstance(n.get("target"), str)}
+    missing = sorted(used - known)
+    if missing:
+        return "%s, adding --modules with the definition of %s (the run had it from the live graph)" % (
+            command, ", ".join(missing))
+    return command
+
+
 def cmd_replay(args: Any) -> int:
     out = sys.stdout
     path = find_run(args.run, args.dir)
@@ -247,31 +349,13 @@ def cmd_replay(args: Any) -> int:
         from coordinator.scenariogen import write_scenario
 
         write_scenario(log, args.scenario)
-        out.write("wrote %s (run it with: bmtree test %s)\n" % (args.scenario, args.scenario))
+        out.write("wrote %s (run it with: %s)\n" % (args.scenario, _test_command(log, args.scenario)))
         return 0
     replay = Replay(log)
     started = datetime.datetime.fromtimestamp(float(log.tree.get("started") or 0.0))
     out.write("replay of %s: %s, started %s\n" % (path, log.tree.get("name"), started.strftime("%Y-%m-%d %H:%M:%S")))
     if args.failure:
-        found: List[Any] = []
-
-        def stop(rec: Dict[str, Any]) -> bool:
-            change = replay.first_leaf_failure(rec)
-            if change is not None:
-                found.append(change)
-            return change is not None
-
-        if not replay.until(stop):
-            out.write("no leaf failed in this run\n")
-            return 0
-        b = replay.by_id[found[0][0]]
-        n = replay.nodes[found[0][0]]
-        out.write("first failing leaf at %.3fs: '%s' (%s:%s): %s\n" % (
-            replay.t, b.name, n.get("file", "?"), n.get("line", "?"), b.feedback_message or "failed"))
-        end = log.end
-        if end is not None and end.get("reason"):
-            out.write("the run ended %s: %s\n" % (end.get("status"), end.get("reason")))
-        replay.snapshot(out)
+        _jump_to_failure(replay, out)
         return 0
     if args.at is not None:
         at = args.at

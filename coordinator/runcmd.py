@@ -42,7 +42,7 @@ def _report(result: Any, tree_name: str) -> None:
     print("calls:")
     for c in result.calls:
         dur = "%.3fs" % c.duration if c.duration is not None else "-"
-        print("  +%7.3fs  %-26s %-10s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
+        print("  +%7.3fs  %-26s %-11s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
 
 
 def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
@@ -187,6 +187,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
     graph = None
     transport = None
+    runner = None
     interrupts = Interrupts()  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
     try:
         deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
@@ -251,13 +252,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         display = None if args.quiet or view is not None else Display()
         print("running %s" % tree.name)
         recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
-                                  control=bool(getattr(args, "control", False)))
+                                  control=bool(getattr(args, "control", False)),
+                                  modules=list(args.modules or []) + [um.definition_path for um in user_modules])
         from coordinator.control import ros_controller
 
         steer = ros_controller(getattr(args, "control", False))
+        runner = TreeRunner(root, ctx, period=args.period, display=display, observers=[recorder, steer], tree=tree,
+                            gate=steer)
         try:
-            result = TreeRunner(root, ctx, period=args.period, display=display, observers=[recorder, steer],
-                                tree=tree, gate=steer).run(args.max_duration)
+            result = runner.run(args.max_duration)
         finally:
             if view is not None:
                 view.stop()
@@ -266,6 +269,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
         err("interrupted: running calls were cancelled")
+        if runner is not None and runner.result is not None and tree is not None:
+            with registering():  # what it did and where its log is, before a second Ctrl-C
+                _report(runner.result, tree.name)
+                files.report(print)
         return EXIT_ENV
     finally:
         try:

@@ -15,7 +15,7 @@ import queue
 import re
 import threading
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Sequence
 
 from comm.errors import InvalidInput
 from coordinator.runstream import Sink
@@ -91,12 +91,16 @@ class RunFiles:
         self.writer: Optional[RunLogWriter] = None
 
     def recorder(self, sinks: List[Sink], inputs: Dict[str, Any], max_duration: Optional[float],
-                 world: Optional[str], control: bool = False) -> Any:
+                 world: Optional[str], control: bool = False, modules: Sequence[str] = ()) -> Any:
         """The run-stream observer writing to ``sinks`` and, unless ``--no-record``, the log.
-        ``control``: the run takes control commands (``--control``), so viewers offer them."""
+        ``control``: the run takes control commands (``--control``), so viewers offer them.
+        ``modules``: the definition files the run was given (``--modules``, ``--module``), so that
+        a scenario made from its log can say how to test it."""
         from coordinator.runstream import RunStream
 
         meta: Dict[str, Any] = {"inputs": inputs, "max_duration": max_duration, "control": control}
+        if modules:
+            meta["modules"] = [os.path.abspath(m) for m in modules]
         if world is not None or os.path.isdir(self.sim_dir):
             meta["sim"] = {"world": os.path.abspath(world) if world else None, "dir": self.sim_dir}
         all_sinks = list(sinks)

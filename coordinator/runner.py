@@ -67,6 +67,15 @@ class Visited(py_trees.visitors.VisitorBase):
         self.visited.append((behaviour, behaviour.status))
 
 
+def while_running(root: py_trees.behaviour.Behaviour) -> str:
+    """`` while 'go to the kitchen' was running``: the leaves a stop will halt (for its reason)."""
+    names = ["'%s'" % b.name for b in root.iterate() if b.status == Status.RUNNING and not b.children]
+    if not names:
+        return ""
+    more = " and %d more" % (len(names) - 3) if len(names) > 3 else ""
+    return " while %s%s %s running" % (", ".join(names[:3]), more, "was" if len(names) == 1 else "were")
+
+
 class Display(RunObserver):
     """Shows the tree with statuses: redrawn in place on a terminal, as changed lines otherwise."""
 
@@ -147,6 +156,7 @@ class TreeRunner:
                  observers: Sequence[RunObserver] = (), tree: Any = None, gate: Any = None):
         self.root = root
         self.gate = gate  # may_tick() -> bool: the steering of run --control (coordinator.control)
+        self.result: Optional[RunResult] = None  # once run() ended, also when it was interrupted
         self.ctx = ctx
         self.period = period
         self.tree_file = tree
@@ -205,6 +215,7 @@ class TreeRunner:
                 elif stop_when is not None:
                     reason = stop_when()
                 if reason:
+                    reason += while_running(self.root)
                     self.root.stop(Status.INVALID)
                     self._tell([])
                     break
@@ -220,13 +231,14 @@ class TreeRunner:
                     except Exception:
                         item = None
         except BaseException:
+            why = "interrupted" + while_running(self.root)
             self.root.stop(Status.INVALID)
             self._tell([])
+            self.result = RunResult(status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
+                                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=why,
+                                    history=self.history, started=start)
             if ctx.observers:
-                notify(ctx.observers, "on_end", RunResult(
-                    status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason="interrupted", history=self.history,
-                    started=start))
+                notify(ctx.observers, "on_end", self.result)
             raise
         status = self.root.status
         if reason:  # stopped by max_duration: the task did not get done
@@ -236,6 +248,7 @@ class TreeRunner:
         result = RunResult(status=status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
                            blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
                            started=start)
+        self.result = result
         if ctx.observers:
             notify(ctx.observers, "on_end", result)
         return result

@@ -7,8 +7,8 @@ expectations are the recorded result and the calls in order with their inputs, s
 ``bmtree test`` reproduces the same path on simulated time, and a changed tree
 shows which calls changed.
 
-A run whose log has no end (the coordinator was killed, the robot lost power) becomes a
-scenario of what the tree saw until its last recorded tick: it stops there
+A run whose log has no end (the coordinator was killed, the robot lost power), or that was
+interrupted (Ctrl-C, SIGTERM), becomes a scenario of what the tree saw until its last recorded tick: it stops there
 (``max_duration``, so its status is ``failure``) after the same calls; answers and events
 the tree had not ticked on yet are left out, so those calls hang.
 """
@@ -22,7 +22,13 @@ import yaml
 
 from coordinator.runlog import RunLog, RunLogError, empty_file
 
-__all__ = ["scenario_from_log", "seen_until", "write_scenario"]
+__all__ = ["scenario_from_log", "seen_until", "write_scenario", "cut_short"]
+
+
+def cut_short(log: RunLog) -> bool:
+    """The run did not end by itself: killed (no end record) or interrupted (Ctrl-C, SIGTERM)."""
+    end = log.end
+    return end is None or end.get("status") == "INVALID"
 
 
 def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
@@ -58,7 +64,7 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     end = log.end
     seen = log  # what the tree acted on
     stop_at: Optional[float] = None
-    if end is None:
+    if cut_short(log):
         seen, stop_at = seen_until(log)
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
@@ -92,7 +98,7 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
         scenario["max_duration"] = stop_at
     elif tree.get("max_duration") is not None:
         scenario["max_duration"] = tree["max_duration"]
-    status = "failure" if end is None else str(end.get("status", "")).lower()
+    status = "failure" if stop_at is not None else str((end or {}).get("status", "")).lower()
     scenario["expect"] = {"status": status, "calls": calls}
     rel = os.path.relpath(os.path.abspath(path), os.path.dirname(os.path.abspath(out_path)))
     return {"tree": rel, "scenarios": [scenario]}
@@ -115,9 +121,11 @@ def write_scenario(log: RunLog, out_path: str) -> None:
                               "bmtree does not overwrite it (choose a new name)" % out_path)
     data = scenario_from_log(log, out_path)
     end = log.end
-    if end is None:
-        how = ("# The run has no end (it was killed): this stops at its last recorded tick, %gs, after the\n"
-               "# same calls; the calls still running then hang.\n" % data["scenarios"][0]["max_duration"])
+    if cut_short(log):
+        how = ("# The run %s: this stops at its last recorded tick, %gs, after the\n"
+               "# same calls; the calls still running then hang.\n" % (
+                   "has no end (it was killed)" if end is None else "was interrupted (%s)" % end.get("reason"),
+                   data["scenarios"][0]["max_duration"]))
     else:
         how = "# and the run must end the same way (%s%s) with the same calls.\n" % (
             end.get("status"), ": %s" % end.get("reason") if end.get("reason") else "")

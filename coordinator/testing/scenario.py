@@ -314,7 +314,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     run = s.test.run(max_duration=limits["max_duration"], observers=[guard], stop_when=guard)
     if guard.hit:
         return run, [guard.hit]
-    stopped = run.reason == "stopped after %g s" % limits["max_duration"]
+    stopped = run.reason.startswith("stopped after %g s" % limits["max_duration"])
     if stopped and "max_duration" not in s.given:
         return run, ["stopped after %g simulated seconds, the default max_duration: the tree did not end; set the "
                      "scenario key 'max_duration' to raise the limit (or to expect the stop)" % limits["max_duration"]]

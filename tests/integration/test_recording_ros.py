@@ -60,7 +60,7 @@ def test_field_run_to_log_to_scenario_and_a_changed_tree(tmp_path):
 
     failure = bmtree("replay", "last", "--failure", env=env)
     assert failure.returncode == 0, failure.stderr
-    assert "first failing leaf at" in failure.stdout and "'go to the kitchen'" in failure.stdout
+    assert "the failure that ended the run, at" in failure.stdout and "'go to the kitchen'" in failure.stdout
     assert "tree blackboard:" in failure.stdout and "calls in flight: none" in failure.stdout
 
     scenario = str(tmp_path / "regression.yaml")
@@ -88,9 +88,9 @@ def test_run_stream_on_ros_topics_and_max_duration(ros_graph, ros_probe, tmp_pat
     try:
         out = bmtree("run", GO, "-q", "--max-duration", "3", "--record", str(log), env=dict(os.environ))
         assert out.returncode == 1, out.stdout + out.stderr
-        assert "reason: stopped after 3 s" in out.stdout
+        assert "reason: stopped after 3 s while 'go to the kitchen' was running" in out.stdout
         end = json.loads(got["end"].wait_for(lambda t: True, 20)[0])
-        assert end["v"] == 1 and end["status"] == "FAILURE" and end["reason"] == "stopped after 3 s"
+        assert end["v"] == 1 and end["status"] == "FAILURE" and end["reason"] == "stopped after 3 s while 'go to the kitchen' was running"
         tree = json.loads(got["tree"].wait_for(lambda t: True, 20)[0])
         assert tree["name"] == "go_kitchen" and tree["run"] == end["run"]
         node = next(n for n in tree["nodes"] if n["name"] == "go to the kitchen")

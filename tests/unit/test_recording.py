@@ -147,7 +147,7 @@ def test_max_duration_ends_in_failure_with_its_reason(sim_defs):
     t.mocks["navigation.go_to"].hang()
     run = t.run(max_duration=5.0)
     assert run.status == Status.FAILURE
-    assert run.reason == "stopped after 5 s"
+    assert run.reason == "stopped after 5 s while 'go to the kitchen' was running"
     assert run.calls("navigation.go_to")[0].status == "halted"
 
 
@@ -155,7 +155,7 @@ def test_max_duration_stops_at_the_limit_not_at_the_next_period(sim_defs):
     t = TreeTest(GO, definitions=sim_defs)
     t.mocks["navigation.go_to"].hang()
     run = t.run(max_duration=0.1)  # the period is 0.25 s: the run used to stop at 0.25 s
-    assert run.reason == "stopped after 0.1 s"
+    assert run.reason == "stopped after 0.1 s while 'go to the kitchen' was running"
     assert abs(run.result.duration - 0.1) < 1e-9
 
 
@@ -182,7 +182,7 @@ def test_max_duration_halts_show_in_the_log(sim_defs, tmp_path):
 
     log_path, run = recorded(GO, sim_defs, tmp_path, lambda m: m["navigation.go_to"].hang(), max_duration=5.0)
     log = read_log(log_path)
-    assert log.end["status"] == "FAILURE" and log.end["reason"] == "stopped after 5 s"
+    assert log.end["status"] == "FAILURE" and log.end["reason"] == "stopped after 5 s while 'go to the kitchen' was running"
     ids = {n["name"]: n["id"] for n in log.tree["nodes"]}
     last = log.of_type("tick")[-1]
     assert [ids["go to the kitchen"], "INVALID"] in last["changes"] and last["t"] >= 5.0
@@ -346,6 +346,23 @@ def _args(**kw):
     return types.SimpleNamespace(**base)
 
 
+def test_replay_of_a_retried_failure_prints_its_reason_as_the_live_display_did(sim_defs, tmp_path):
+    from coordinator.runner import Display
+
+    live = io.StringIO()
+    t = TreeTest(GO_RETRY, definitions=sim_defs)
+    blocked_once(t.mocks)
+    log = str(tmp_path / "run.jsonl")
+    t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), Display(live, tty=False)])
+    replay = Replay(read_log(log))
+    shown = io.StringIO()
+    display = Display(shown, tty=False)
+    while replay.next(display) is not None:
+        pass
+    assert "FAILURE   navigation.go_to (navigation.go_to failed: blocked)" in live.getvalue()
+    assert shown.getvalue() == live.getvalue()
+
+
 def test_replay_prints_what_the_live_display_printed(sim_defs, tmp_path, capsys):
     from coordinator.runner import Display
 
@@ -377,10 +394,44 @@ def test_replay_at_a_moment_and_at_the_failure(sim_defs, tmp_path, capsys):
     assert "go to the kitchen [" in out
     assert cmd_replay(_args(run=log_path, failure=True)) == 0
     out = capsys.readouterr().out
-    assert "first failing leaf at 4.0" in out and "'go to the kitchen' (" in out
+    assert "the failure that ended the run, at 4.0" in out and "'go to the kitchen' (" in out
     assert "go_kitchen.yaml:12" in out and "calls in flight: none" in out
     assert cmd_replay(_args(run=log_path, step=True)) == 0
     assert "--- tick 1 at" in capsys.readouterr().out
+
+
+def test_replay_failure_goes_to_the_failure_that_ended_the_run_not_one_the_tree_recovered_from(sim_defs, tmp_path,
+                                                                                                  capsys):
+    def blocked_twice_then_mute(m):
+        m["navigation.go_to"].script(fail("blocked"), succeed(room="kitchen", delay=1.0))
+        m["speech.say"].script(succeed(), fail("speaker unplugged"))
+
+    log_path, run = recorded(GO_RETRY, sim_defs, tmp_path, blocked_twice_then_mute)
+    assert run.status == Status.FAILURE
+    assert cmd_replay(_args(run=log_path, failure=True)) == 0
+    out = capsys.readouterr().out
+    assert "the failure that ended the run, at 1.0" in out and "'arrived' (" in out and "speaker unplugged" in out, out
+    assert "before it, the tree recovered from: 'navigation.go_to' (" in out and "blocked at 0.000s" in out, out
+    assert "arrived [✕]" in out
+
+    (tmp_path / "ok").mkdir()
+    log_path, run = recorded(GO_RETRY, sim_defs, tmp_path / "ok", blocked_once)
+    assert run.status == Status.SUCCESS
+    assert cmd_replay(_args(run=log_path, failure=True)) == 0
+    assert "the run succeeded; the tree recovered from 1 failure, the first at 0.000s: 'navigation.go_to'" in \
+        capsys.readouterr().out
+
+
+def test_replay_failure_of_an_interrupted_run_shows_what_ran_when_it_was_stopped(sim_defs, tmp_path, capsys):
+    t = TreeTest(GO, definitions=sim_defs)
+    t.mocks["navigation.go_to"].script(succeed(room="kitchen", delay=4.0))
+    log = str(tmp_path / "run.jsonl")
+    with pytest.raises(KeyboardInterrupt):
+        t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), CtrlC(2.0)])
+    assert cmd_replay(_args(run=log, failure=True)) == 0
+    out = capsys.readouterr().out
+    assert "no leaf's failure ended this run: interrupted while 'go to the kitchen' was running" in out, out
+    assert "go to the kitchen [*]" in out and "navigation.go_to" in out.split("calls in flight:")[1], out
 
 
 def test_find_run_by_number_name_and_last(sim_defs, tmp_path):
@@ -474,6 +525,58 @@ def test_a_killed_run_becomes_a_scenario_of_what_the_tree_saw_until_its_last_tic
     before_any_tick.write_text(json.dumps(records[0]) + "\n")
     with pytest.raises(RunLogError, match="no end record and no tick"):
         write_scenario(read_log(str(before_any_tick)), str(tmp_path / "s.yaml"))
+
+
+class CtrlC(RunObserver):
+    """Presses Ctrl-C (KeyboardInterrupt in the ticking thread, as bmtree run's handler does) at ``at`` seconds."""
+
+    def __init__(self, at):
+        self.at, self.start = at, None
+
+    def on_start(self, tree, root, ctx):
+        self.clock = ctx.clock
+        self.start = ctx.clock.now()
+
+    def on_tick(self, root, changes, now):
+        if self.at is not None and now - self.start >= self.at:
+            self.at = None  # once
+            raise KeyboardInterrupt
+
+
+def test_an_interrupted_run_becomes_a_scenario_that_passes_and_replay_says_how_to_test_it(sim_defs, tmp_path,
+                                                                                          capsys):
+    t = TreeTest(GO, definitions=sim_defs)
+    t.mocks["navigation.go_to"].script(succeed(room="kitchen", delay=4.0))
+    log = str(tmp_path / "run.jsonl")
+    defs_dir = tmp_path / "defs"
+    defs_dir.mkdir()
+    stream = RunStream([RunLogWriter(log, fsync=False)], {"inputs": {}, "modules": [str(defs_dir)]})
+    with pytest.raises(KeyboardInterrupt):
+        t.run(observers=[stream, CtrlC(2.0)])
+    assert read_log(log).end["status"] == "INVALID"
+    out_path = str(tmp_path / "interrupted.yaml")
+    assert cmd_replay(_args(run=log, scenario=out_path)) == 0
+    said = capsys.readouterr().out
+    assert "(run it with: bmtree test --modules %s %s)" % (defs_dir, out_path) in said, said
+    text = open(out_path).read()
+    assert "was interrupted (interrupted while 'go to the kitchen' was running)" in text and "hang: true" in text, text
+    scenario = yaml.safe_load(text)["scenarios"][0]
+    assert scenario["expect"]["status"] == "failure" and scenario["max_duration"] >= 2.0
+    out = io.StringIO()
+    assert run_scenario_file(out_path, sim_defs, out) == [True], out.getvalue()
+
+
+def test_replay_says_which_modules_a_scenario_needs_that_the_run_had_from_the_live_graph(sim_defs, tmp_path, capsys):
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    records = [json.loads(line) for line in open(log_path)]
+    for n in records[0]["nodes"]:
+        if n.get("target") == "navigation.go_to":
+            n["target"] = "wheels.go_to"
+    changed = tmp_path / "live.jsonl"
+    changed.write_text("".join(json.dumps(r) + "\n" for r in records))
+    assert cmd_replay(_args(run=str(changed), scenario=str(tmp_path / "s.yaml"))) == 0
+    assert "adding --modules with the definition of wheels (the run had it from the live graph)" in \
+        capsys.readouterr().out
 
 
 def test_a_malformed_record_is_a_clear_error(sim_defs, tmp_path, capsys):

@@ -137,7 +137,7 @@ def test_max_duration_default_and_given(tmp_path):
     text = out.getvalue()
     assert ("    stopped after 3600 simulated seconds, the default max_duration: the tree did not end; set the "
             "scenario key 'max_duration' to raise the limit (or to expect the stop)\n") in text
-    assert "    status FAILURE, expected SUCCESS (stopped after 10 s)\n" in text
+    assert "    status FAILURE, expected SUCCESS (stopped after 10 s while 'wait 5000s' was running)\n" in text
     assert "    the run reached the scenario's max_duration (10 s of simulated time); raise it" in text
 
 
