@@ -107,7 +107,8 @@ class _Preflight:
 
 def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
                definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
-               legacy: Optional[Mapping[str, str]] = None, notify: Optional[Callable[[str], None]] = None) -> None:
+               legacy: Optional[Mapping[str, str]] = None, notify: Optional[Callable[[str], None]] = None,
+               where: Optional[Mapping[str, str]] = None) -> None:
     """:meth:`RosTransport.wait_ready <coordinator.ros_transport.RosTransport.wait_ready>` (documented there)."""
     tr.open()
     wanted = sorted(set(modules))
@@ -164,7 +165,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             tr.node_modules.update({node: n for n, (node, _uri) in originals.items()})
             _announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
             return
-        if notify is not None and time.monotonic() >= start + NOTIFY_AFTER:
+        if notify is not None and start + NOTIFY_AFTER <= time.monotonic() <= end - NOTIFY_AFTER / 2:
             notify("waiting up to %.3g s more (--wait): %s ..." % (
                 max(0.0, end - time.monotonic()), "; ".join(p for name in sorted(problems) for p in problems[name])))
             notify = None
@@ -173,7 +174,9 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
 
             problems.update(_dead([announced[n] for n in problems if n in announced]))
             hint = address_problem()
-            raise EnvironmentProblem("; ".join([p for name in sorted(problems) for p in problems[name]]
+            at = where or {}
+            raise EnvironmentProblem("; ".join(["%s: %s" % (at[name], p) if name in at else p
+                                                for name in sorted(problems) for p in problems[name]]
                                                + ([hint] if hint else [])))
         with tr._cond:
             tr._cond.wait(POLL)

@@ -307,7 +307,7 @@ class RosTransport(Transport):
     def wait_ready(self, modules: Iterable[str], timeout: float,
                    definitions: Optional[Mapping[str, ModuleDefinition]] = None, blackboard: bool = False,
                    legacy: Optional[Mapping[str, str]] = None,
-                   notify: Optional[Callable[[str], None]] = None) -> None:
+                   notify: Optional[Callable[[str], None]] = None, where: Optional[Mapping[str, str]] = None) -> None:
         """Wait (bounded) until a first call to every module would be taken and answered.
 
         All modules at once (:mod:`coordinator.preflight`): one master query for the
@@ -324,11 +324,12 @@ class RosTransport(Transport):
 
         ``notify`` is told once what is still missing when the wait goes on past
         :data:`~coordinator.preflight.NOTIFY_AFTER` seconds (a run started before its modules).
+        ``where`` (module -> ``file:line:column`` of its first use) prefixes its problems.
 
         Raises:
             EnvironmentProblem: what is missing or different, after ``timeout`` seconds.
         """
-        wait_ready(self, modules, timeout, definitions, blackboard, legacy, notify)
+        wait_ready(self, modules, timeout, definitions, blackboard, legacy, notify, where)
 
     def _set_routes(self, lives: List[LiveModule]) -> None:
         """Publishers for the modules' own topics (once; all new ones registered with the

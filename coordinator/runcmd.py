@@ -45,6 +45,17 @@ def _report(result: Any, tree_name: str) -> None:
         print("  +%7.3fs  %-26s %-11s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
 
 
+def first_uses(tree: Any) -> Dict[str, str]:
+    """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
+    from coordinator.treeast import walk
+
+    out: Dict[str, str] = {}
+    for n in walk(tree.root):
+        for m in n.nodekind.modules(n):
+            out.setdefault(m, str(n.value_pos or n.pos))
+    return out
+
+
 def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
     """Print the tree's warnings; ``--set`` keys must be inputs the tree declares (a typo would
     silently use the default) and every required input must be given."""
@@ -164,6 +175,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if user_modules and not args.sim:
         raise UsageError("--module starts your module beside the simulated robot: it needs --sim "
                          "(without --sim, start it with bmtree-module and run against the live graph)")
+    for option, value, what in (("--world", getattr(args, "world", None), "chooses the simulated robot's world"),
+                                ("--ros-ip", getattr(args, "ros_ip", None), "is the simulated robot's address")):
+        if value and not args.sim:
+            raise UsageError("%s %s: it needs --sim (without --sim the tree runs on the live graph, whose modules "
+                             "are the robot's)" % (option, what))
     for um in user_modules:
         defs[um.definition.name] = um.definition
     tree = None
@@ -239,7 +255,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 "%s (bmtree watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
         try:
             left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
-            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err)
+            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err,
+                                 where=first_uses(tree))
         except OSError as exc:
             err("error: %s" % exc)
             return EXIT_ENV

@@ -344,6 +344,37 @@ def _unencodable(text: str, index: int) -> str:
         "YAML error: unacceptable character #x%04x" % c
 
 
+_INDENT_HINT = ("check the indentation of this line and the one before: the keys of a mapping line up at one "
+                "column, the items ('- ') of a list at one column; a key at the wrong depth, or a list item where "
+                "a key belongs, breaks the block")
+
+
+def _syntax_hint(exc: Any, text: str, line: int, column: int) -> str:
+    """What most likely causes one of libyaml's (or PyYAML's) syntax errors, and how to fix it: '' if
+    nothing is known. ``line``/``column`` (from 1) is where the error is reported."""
+    problem = str(getattr(exc, "problem", "") or "")
+    context = str(getattr(exc, "context", "") or "")
+    cmark = getattr(exc, "context_mark", None)
+    inside = ""
+    if cmark is not None and "block" in context:   # the block the parser was reading when it broke
+        what = "mapping" if "mapping" in context else "list"
+        inside = " (in the %s that starts at line %d, column %d)" % (what, cmark.line + 1, cmark.column + 1)
+    if "did not find expected key" in problem or "expected <block end>" in problem:
+        return "%s: %s" % (inside, _INDENT_HINT)
+    if "did not find expected '-' indicator" in problem:
+        return ("%s: check the indentation of this line and the one before: every item of a list starts with "
+                "'- ' at the same column, and the keys of an item line up with its first key" % inside)
+    if "mapping values are not allowed" in problem:
+        return (": a ': ' inside a value that is not quoted, or a key indented deeper than the keys above it: "
+                "quote the value (name: \"note: hi\") or line the key up with the others")
+    if "cannot start any token" in problem:
+        lines = text.splitlines()
+        row = lines[line - 1] if 0 < line <= len(lines) else ""
+        if row[column - 1:column] == "\t":
+            return ": a tab: YAML indents with spaces only"
+    return ""
+
+
 def _first_line(exc: Exception) -> str:
     return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
 
@@ -382,8 +413,8 @@ def load_yaml(text: str, file: str) -> Any:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        raise TreeErrors([TreeError(Pos(file, line, col), "YAML syntax error: %s" % (
-            exc.problem or _first_line(exc)))])
+        raise TreeErrors([TreeError(Pos(file, line, col), "YAML syntax error: %s%s" % (
+            exc.problem or _first_line(exc), _syntax_hint(exc, text, line, col)))])
     except yaml.reader.ReaderError as exc:   # libyaml's position counts bytes: the first such character is it
         char = exc.character if isinstance(exc.character, int) else 0
         at = text.find(chr(char))

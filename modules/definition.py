@@ -340,13 +340,14 @@ def load_definition(path: str) -> ModuleDefinition:
 
 
 def _expand(paths: Iterable[str]) -> List[str]:
-    files = []
+    """The definition files of ``paths`` (folders: their ``.json`` files), each once (a folder and a
+    file in it, or one file given twice, is not a duplicate module)."""
+    files: Dict[str, str] = {}
     for p in paths:
-        if os.path.isdir(p):
-            files.extend(sorted(os.path.join(p, f) for f in os.listdir(p) if f.endswith(".json")))
-        else:
-            files.append(p)
-    return files
+        found = sorted(os.path.join(p, f) for f in os.listdir(p) if f.endswith(".json")) if os.path.isdir(p) else [p]
+        for f in found:
+            files.setdefault(os.path.realpath(f), f)
+    return list(files.values())
 
 
 def load_definitions(paths: Iterable[str]) -> Dict[str, ModuleDefinition]:

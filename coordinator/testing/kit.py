@@ -133,11 +133,21 @@ class TreeTest:
         definitions: module definitions (default: :func:`modules.search.default_definitions`).
         inputs: values for the tree's declared inputs.
         coverage: a :class:`Coverage` to record into (the pytest plugin passes one).
+        modules: more definition files or folders (your own modules), as ``--modules`` of the CLI;
+            added to ``definitions`` (or to the default ones).
     """
 
     def __init__(self, path: str, definitions: Optional[Mapping[str, ModuleDefinition]] = None,
-                 inputs: Optional[Dict[str, Any]] = None, coverage: Optional[Coverage] = None):
-        self.definitions = dict(definitions) if definitions is not None else default_definitions()
+                 inputs: Optional[Dict[str, Any]] = None, coverage: Optional[Coverage] = None,
+                 modules: Sequence[str] = ()):
+        if definitions is None:
+            self.definitions = default_definitions(modules)
+        else:
+            self.definitions = dict(definitions)
+            if modules:
+                from modules.definition import load_definitions
+
+                self.definitions.update(load_definitions(list(modules)))
         self.inputs = dict(inputs or {})
         self.tree = load_tree(path, self.definitions, given=set(self.inputs))
         self.mocks = Mocks(self.definitions)

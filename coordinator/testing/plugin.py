@@ -1,7 +1,8 @@
 """The bmtree pytest plugin (entry point ``pytest11: bmtree``).
 
 Fixtures:
-    bmtree_tree: ``bmtree_tree("trees/x.yaml", inputs={...})`` -> a TreeTest (mocked modules, simulated clock).
+    bmtree_tree: ``bmtree_tree("trees/x.yaml", inputs={...}, modules=["modules/gripper.json"])`` -> a TreeTest
+        (mocked modules, simulated clock); ``modules`` adds your definitions, as does the ini key ``bmtree_modules``.
     ros_master: a real ``rosmaster --core`` on a free port for the session (its own ROS_HOME); yields the URI.
     ros_graph: start nodes as processes against that master; they are stopped (by pid) after the test.
     ros_probe: publish/collect topics from the test process (one rospy node per session).
@@ -28,6 +29,9 @@ def pytest_addoption(parser: Any) -> None:
     group = parser.getgroup("bmtree")
     group.addoption("--bmtree-coverage", action="store_true", default=False,
                     help="report which nodes of the tested trees ran and which outcomes they reached")
+    parser.addini("bmtree_modules", type="pathlist", default=[],
+                  help="module definition files or folders every bmtree_tree gets (your own modules), "
+                       "relative to the ini file")
 
 
 def pytest_configure(config: Any) -> None:
@@ -52,10 +56,14 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
 
 @pytest.fixture
 def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
-    """Factory: ``bmtree_tree(path, definitions=None, inputs=None)`` -> TreeTest."""
+    """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=())`` -> TreeTest; ``modules``
+    come after the ini key ``bmtree_modules``'s."""
     cov = _coverage(request.config)
+    configured = [os.path.abspath(str(p)) for p in request.config.getini("bmtree_modules")]
 
     def make(path: str, **kwargs: Any) -> TreeTest:
+        given = configured + [os.path.abspath(m) for m in kwargs.get("modules") or ()]
+        kwargs["modules"] = list(dict.fromkeys(given))  # a file given both ways is loaded once
         return TreeTest(path, coverage=cov, **kwargs)
 
     return make

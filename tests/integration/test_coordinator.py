@@ -130,10 +130,21 @@ root:
     assert out.stdout.count("succeeded") == 3
 
 
+def first_use(tree, prefix):
+    """(line, column) of the first ``prefix`` in a shipped tree (1-based)."""
+    for line, text in enumerate(open(os.path.join(TREES, tree)), 1):
+        if prefix in text:
+            return line, text.index(prefix) + 1
+    raise AssertionError("%s not in %s" % (prefix, tree))
+
+
 def test_missing_module_is_an_environment_error(ros_master, tmp_path):
     out = run("run", os.path.join(TREES, "find_apple.yaml"), "--wait", "1")
     assert out.returncode == 3
     assert "module 'navigation' is not running" in out.stderr and "Traceback" not in out.stderr
+    # where the tree uses it (here in the tree it includes), as a tree error would say
+    assert "search_room.yaml:%d:%d: module 'navigation' is not running" % first_use("search_room.yaml", "navigation.") \
+        in out.stderr, out.stderr
 
 
 def test_no_master_is_an_environment_error():

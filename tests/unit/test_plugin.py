@@ -67,3 +67,31 @@ def test_the_readme_example_runs(pytester):
     pytester.makepyfile(test_readme=code)
     result = pytester.runpytest("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
+
+
+OWN_MODULE_TEST = '''
+from coordinator.testing import succeed
+
+def test_by_keyword(bmtree_tree):
+    t = bmtree_tree(%(tree)r, modules=[%(gripper)r])
+    t.mocks["gripper.close"].script(succeed(success=True, holding=True))
+    assert t.run().blackboard["holding"] is True
+
+def test_by_ini(bmtree_tree):
+    t = bmtree_tree(%(tree)r)
+    assert t.run().succeeded
+'''
+
+
+def test_your_own_modules_by_keyword_or_by_the_ini_key(pytester):
+    from tests.conftest import DATA
+
+    gripper = os.path.join(DATA, "gripper")
+    pytester.makepyfile(test_user=OWN_MODULE_TEST % {"tree": os.path.join(gripper, "grasp.yaml"),
+                                                     "gripper": os.path.join(gripper, "gripper.json")})
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1, failed=1)  # without the ini key, the tree's gripper is unknown
+    result.stdout.fnmatch_lines(["*test_by_ini*", "*unknown module 'gripper'*"])
+    pytester.makeini("[pytest]\nbmtree_modules = %s\n" % os.path.relpath(gripper, str(pytester.path)))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=2)

@@ -306,6 +306,10 @@ def test_run_module_option_errors(no_master, capsys):
     spec = "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"), os.path.join(GRIPPER, "gripper.py"))
     assert main(["run", "--module", spec, GRASP]) == 2
     assert "it needs --sim" in capsys.readouterr().err
+    assert main(["run", "--world", "house.yaml", GRASP]) == 2
+    assert "--world chooses the simulated robot's world: it needs --sim" in capsys.readouterr().err
+    assert main(["run", "--ros-ip", "10.0.0.5", GRASP]) == 2
+    assert "--ros-ip is the simulated robot's address: it needs --sim" in capsys.readouterr().err
     assert main(["run", "--sim", "--module", "gripper.json", GRASP]) == 2
     assert "--module takes DEFINITION.json=FILE.py:CLASS" in capsys.readouterr().err
     assert main(["run", "--sim", "--modules", os.path.join(GRIPPER, "gripper.json"), GRASP]) == 2
