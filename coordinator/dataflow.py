@@ -1,6 +1,7 @@
 """Checks over a whole tree, asked of each node's kind (``coordinator.nodes``).
 
-Data flow: every key a node reads is written earlier on every path, or is a declared input.
+Data flow: every key a node reads is written earlier on every path, or is a declared input; a read
+is reported at its reference, and a key that no node writes is told apart (likely misspelt).
 Types: a ``$reference`` whose value's ROS type (known from the definitions of the nodes that
 write the key) cannot be converted to the input it is passed to.
 """
@@ -19,7 +20,10 @@ def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[Tree
     """Every read of a key not surely written before it, for a whole tree."""
     errors: List[TreeError] = []
     avail = frozenset(k for k, v in tree.inputs.items() if v is not REQUIRED) | given | tree.required_inputs
-    Flow(errors).of(tree.root, avail)
+    flow = Flow(errors)
+    flow.of(tree.root, avail)
+    if flow.missed:   # the keys written anywhere tell a misspelt key from one written too late
+        flow.report(set(key_types(tree)) | avail)
     return errors
 
 

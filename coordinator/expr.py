@@ -130,6 +130,7 @@ class Expr:
         self.well_typed = False   # known to have no type errors, whatever the tree (no refs, none found)
         self.keys: Set[str] = set()
         self.refs: List[Ref] = []
+        self.ref_offsets: List[int] = []   # where each of ``refs`` starts in the text (for error positions)
         self._toks = _tokens(text)
         self._i = 0
         self._depth = 0
@@ -229,8 +230,13 @@ class Expr:
         if kind == "ref":
             self.keys.add(value[0].key)
             self.refs.append(value[0])
+            self.ref_offsets.append(at)
             return ("ref", value[0], at)
         raise ExprError("expected a value, found %r" % (value or "end of expression"), at)
+
+    def offset_of(self, key: str) -> Optional[int]:
+        """Where the first reference to ``key`` starts in the text, None if it reads no such key."""
+        return next((at for r, at in zip(self.refs, self.ref_offsets) if r.key == key), None)
 
     def _call(self, name: str, at: int) -> Any:
         self._expect("(")

@@ -47,6 +47,7 @@ _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REG
 _KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
 _KINDS = frozenset(REGISTRY)
 _LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
+_NO_CHILDREN = LList()   # an inline composite without 'children' (reported once, by _inline)
 # per kind, what parsing a node asks of it (one lookup per node)
 _INFO = {k: (nk, _ALLOWED[k], _KEYS[k], _REQUIRED[k], k in _LISTS) for k, nk in REGISTRY.items()}
 
@@ -231,12 +232,16 @@ class Parser:
         nk, allowed, keys, required, inline = _INFO[kind]
         if inline and isinstance(raw[kind], LMap):
             raw = self._inline(raw, kind, allowed)
+        meant: Set[str] = set()   # options that unknown keys look like misspellings of
         if not keys.issuperset(raw):
             for k in raw:
                 if k != kind and k not in allowed:
-                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed)))
+                    hint = did_you_mean(k, allowed)
+                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
+                    if hint:
+                        meant.add(hint[len(" (did you mean '"):-len("'?)")])
         for o in required:
-            if o not in raw:
+            if o not in raw and o not in meant:   # a misspelt option is one error, not two
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, o))
         name = raw.get("name")
         if name is not None and not isinstance(name, str):
@@ -280,6 +285,7 @@ class Parser:
         inner: LMap = outer[kind]
         merged = LMap()
         merged.pos, merged.key_pos, merged.val_pos = outer.pos, {}, {}
+        misspelt = False   # 'chilren:': its error says it all
         for src in (outer, inner):
             for k, v in src.items():
                 if src is outer and k == kind:
@@ -290,14 +296,16 @@ class Parser:
                     self.err(src.key_pos[k], "option %r given twice" % k)
                     continue
                 if src is inner and k not in allowed:
-                    self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, did_you_mean(k, allowed + ("children",))))
+                    hint = did_you_mean(k, allowed + ("children",))
+                    misspelt = misspelt or hint == " (did you mean 'children'?)"
+                    self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
                     continue
                 merged[k] = v
                 merged.key_pos[k], merged.val_pos[k] = src.key_pos[k], src.val_pos[k]
-        merged[kind] = inner.get("children")
+        merged[kind] = inner.get("children", _NO_CHILDREN)
         merged.key_pos[kind] = outer.key_pos[kind]
         merged.val_pos[kind] = inner.val_pos.get("children", inner.pos)
-        if "children" not in inner:
+        if "children" not in inner and not misspelt:
             self.err(inner.pos, "%s needs 'children' (a list of nodes)" % kind)
         return merged
 
@@ -308,6 +316,8 @@ class Parser:
             node.children.append(c)
 
     def children(self, node: TreeNode, value: Any, at: Pos) -> None:
+        if value is _NO_CHILDREN:   # already reported (see _inline)
+            return
         if not isinstance(value, LList) or not value:
             self.err(at, "%s takes a non-empty list of children" % node.kind)
             return

@@ -8,12 +8,14 @@ one line per change. ``--web`` serves the same state as a page (:mod:`coordinato
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import logging
 import os
 import sys
 import threading
 import time
-from typing import Any, Callable, List, Optional, Tuple, Union
+from typing import Any, Callable, Iterator, List, Optional, Tuple, Union
 
 from comm.nodelife import StopSignals
 from comm.nodeopts import PORT, seconds
@@ -25,6 +27,9 @@ __all__ = ["RosWatcher", "LiveView", "cmd_watch", "run_view", "STREAM_NS", "WATC
 
 STREAM_NS = "/bmtree/run"
 WATCH_CHANNELS = ("tree", "snapshot", "status", "calls", "events", "blackboard", "control", "end")
+#: after the run's end, ``watch --web`` serves until a page got the end (and one second more, for
+#: the other pages polling), and at most this long (s); the page keeps showing the last state
+END_GRACE = 5.0
 
 
 class RosWatcher:
@@ -67,15 +72,16 @@ class RosWatcher:
 
 class LiveView:
     """Redraws ``state`` in place on a terminal (rich.live, alternate screen) until stopped;
-    ``keys`` maps a key to a callable returning a short answer shown in the footer."""
+    ``footer`` (or a callable making it from the state) is the last line, ``title`` the header's first words."""
 
     def __init__(self, state: WatchState, console: Any = None, footer: Union[str, Callable[[WatchState], str]] = "",
-                 refresh: float = 0.2):
+                 refresh: float = 0.2, title: str = "bmtree watch"):
         from rich.console import Console
 
         self.state = state
         self.console = console or Console()
         self.footer = footer
+        self.title = title
         self.refresh = refresh
         self.message = ""
         self._stop = threading.Event()
@@ -85,7 +91,7 @@ class LiveView:
         size = self.console.size
         help_ = self.footer(self.state) if callable(self.footer) else self.footer
         foot = self.message or help_  # an answer replaces the help until the next key
-        return render(self.state, size.width, size.height, foot.strip(), now_since(self.state, anchor))
+        return render(self.state, size.width, size.height, foot.strip(), now_since(self.state, anchor), self.title)
 
     def _loop(self) -> None:
         from rich.live import Live
@@ -108,7 +114,7 @@ class LiveView:
             self._thread.join(5.0)
         if final:
             size = self.console.size
-            self.console.print(render(self.state, size.width, max(24, size.height) - 1, ""))
+            self.console.print(render(self.state, size.width, max(24, size.height) - 1, "", title=self.title))
 
 
 def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[Optional[LiveView], List[Any]]:
@@ -131,7 +137,7 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
     pub = rospy.Publisher("%s/snapshot" % namespace.rstrip("/"), string, queue_size=10, subscriber_listener=CatchUp())
     view = None
     if not quiet and sys.stdout.isatty():
-        view = LiveView(sink.state, footer="bmtree run (Ctrl-C stops the run)").start()
+        view = LiveView(sink.state, footer="Ctrl-C stops the run", title="bmtree run").start()
     return view, [sink]
 
 
@@ -273,7 +279,13 @@ def cmd_watch(args: argparse.Namespace) -> int:
             err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
                 args.namespace, args.wait))
             return EXIT_ENV
-        wait(lambda s: s.end is not None and not args.follow and not args.web, 1e9)  # or a stop
+        wait(lambda s: s.end is not None and not args.follow, 1e9)  # or a stop
+        if server is not None and state.end is not None and not (signals.requested or stop.is_set()):
+            print("the run ended: %s; the page keeps showing it (--follow serves it for the next run too)"
+                  % state.end.get("status"))
+            sys.stdout.flush()
+            if wait(lambda s: server.end_served.is_set(), END_GRACE):
+                wait(lambda s: False, 1.0)
         return EXIT_OK
     finally:
         stop.set()
@@ -281,11 +293,31 @@ def cmd_watch(args: argparse.Namespace) -> int:
             view.stop()
         if server is not None:
             server.close()
-        if client is not None:
-            client.close()
-        if watcher is not None:
-            watcher.close()
-        rospy.signal_shutdown("bmtree watch finished")
+        with quiet_unregistering():
+            if client is not None:
+                client.close()
+            if watcher is not None:
+                watcher.close()
+            rospy.signal_shutdown("bmtree watch finished")
+
+
+class _OutOfSync(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "registrations are now out of sync" not in str(record.msg)
+
+
+@contextlib.contextmanager
+def quiet_unregistering() -> Iterator[None]:
+    """Our own shutdown leaves the master: when it is gone (the ``--sim`` run that brought it up
+    has ended), rospy warns once per topic that it could not unregister. Nothing is left to
+    unregister from a master that is gone, so those warnings are dropped, only meanwhile."""
+    rosout = logging.getLogger("rosout")
+    quiet = _OutOfSync()
+    rosout.addFilter(quiet)
+    try:
+        yield
+    finally:
+        rosout.removeFilter(quiet)
 
 
 def add_watch_parser(sub: Any) -> None:

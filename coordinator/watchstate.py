@@ -19,6 +19,7 @@ __all__ = ["WatchState", "SnapshotSink", "StateSink", "SNAPSHOT_VERSION"]
 
 SNAPSHOT_VERSION = 1
 KEEP = 200  # finished calls, events and control actions kept (the latest)
+OUTCOMES = ("SUCCESS", "FAILURE")
 
 
 class WatchState:
@@ -38,6 +39,11 @@ class WatchState:
         self.status: Dict[int, str] = {}
         self.halted: Dict[int, bool] = {}
         self.feedback: Dict[int, str] = {}
+        #: each node's last outcome (SUCCESS or FAILURE), kept when py_trees resets it to INVALID
+        #: (a selector clears the children it moved past, a stopped tree its finished nodes)
+        self.last: Dict[int, str] = {}
+        #: tree-blackboard keys, least recently written first (the view keeps the newest when cut)
+        self.written: List[str] = []
         self.pending: Dict[str, Dict[str, Any]] = {}
         self.calls: List[Dict[str, Any]] = []
         self.events: List[Dict[str, Any]] = []
@@ -76,7 +82,9 @@ class WatchState:
                 self._reset(run)
             self.tree = {k: v for k, v in rec.items() if k != "nodes"}
             self.nodes = [n for n in rec.get("nodes") or [] if isinstance(n, dict)]
-            self.blackboard.update(rec.get("blackboard") or {})
+            for key, value in (rec.get("blackboard") or {}).items():
+                if str(key) not in self.blackboard:  # the same run's tree again must not undo its writes
+                    self._write(str(key), value)
             early, self._early = self._early, []
             for r in early:  # records that came before the tree (topics are not ordered among them)
                 if str(r.get("run") or "") == run:
@@ -104,7 +112,10 @@ class WatchState:
                 old = self.status.get(i, "INVALID")
                 self.halted[i] = new == "INVALID" and old == "RUNNING"
                 self.status[i] = new
-                self.feedback[i] = str(change[2]) if len(change) > 2 else ""
+                if new in OUTCOMES:
+                    self.last[i] = new
+                if new != "INVALID" or old not in OUTCOMES:  # a reset keeps why it failed, for "was FAILURE"
+                    self.feedback[i] = str(change[2]) if len(change) > 2 else ""
         elif kind == "call_start":
             self.pending[str(rec.get("call_id"))] = rec
         elif kind == "call_end":
@@ -113,7 +124,7 @@ class WatchState:
                 self.calls.append(dict(rec, started=(start or {}).get("t", rec.get("t"))))
                 del self.calls[:-KEEP]
         elif kind == "write":
-            self.blackboard[str(rec.get("key"))] = rec.get("value")
+            self._write(str(rec.get("key")), rec.get("value"))
         elif kind in ("event", "notice"):  # a notice: what happened to the ROS graph (the master went away)
             self.events.append(rec)
             del self.events[:-KEEP]
@@ -126,17 +137,29 @@ class WatchState:
             self.end = rec
             self.pending.clear()
 
+    def _write(self, key: str, value: Any) -> None:
+        self.blackboard[key] = value
+        if key in self.written:
+            self.written.remove(key)
+        self.written.append(key)
+
     def _load(self, rec: Dict[str, Any]) -> None:
         self.t = float(rec.get("t") or 0.0)
         self.tick = int(rec.get("n") or 0)
         self.status = {int(k): str(v) for k, v in (rec.get("status") or {}).items()}
         self.halted = {int(k): True for k in rec.get("halted") or []}
         self.feedback = {int(k): str(v) for k, v in (rec.get("feedback") or {}).items()}
+        self.last = {int(k): str(v) for k, v in (rec.get("last") or {}).items() if v in OUTCOMES}
+        self.last.update((k, v) for k, v in self.status.items() if v in OUTCOMES)
         self.pending = {str(c.get("call_id")): c for c in rec.get("pending") or []}
         self.calls = list(rec.get("calls") or [])
         self.events = list(rec.get("events") or [])
         self.control = list(rec.get("control") or [])
-        self.blackboard = dict(rec.get("blackboard") or {})
+        board = rec.get("blackboard") or {}
+        order = [str(k) for k in rec.get("written") or [] if k in board]  # a snapshot of an older bmtree has none
+        self.blackboard, self.written = {}, []
+        for key in [k for k in board if k not in order] + order:
+            self._write(str(key), board[key])
         self.paused = bool(rec.get("paused"))
         if rec.get("end"):
             self.end = rec["end"]
@@ -150,9 +173,10 @@ class WatchState:
                     "n": self.tick, "status": {str(k): v for k, v in self.status.items() if v != "INVALID"},
                     "halted": [k for k, v in self.halted.items() if v],
                     "feedback": {str(k): v for k, v in self.feedback.items() if v},
+                    "last": {str(k): v for k, v in self.last.items() if self.status.get(k, "INVALID") == "INVALID"},
                     "pending": list(self.pending.values()), "calls": self.calls[-calls:],
                     "events": self.events[-events:], "control": self.control[-events:],
-                    "blackboard": dict(self.blackboard), "paused": self.paused, "end": self.end}
+                    "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused, "end": self.end}
 
     def view(self) -> Dict[str, Any]:
         """Everything a view draws, as plain data (the web page's JSON)."""
@@ -169,10 +193,14 @@ class WatchState:
         return self.tree.get("control") is not False
 
     def label(self, i: int) -> str:
-        """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED or '' (not ticked yet / reset)."""
+        """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED (a running node its parent
+        stopped), ``was SUCCESS`` / ``was FAILURE`` (it ended so and was reset since: a selector
+        clears the children it moved past, a stopped tree its finished nodes) or '' (never ticked)."""
         s = self.status.get(i, "INVALID")
         if s == "INVALID":
-            return "HALTED" if self.halted.get(i) else ""
+            if self.halted.get(i):
+                return "HALTED"
+            return "was %s" % self.last[i] if i in self.last else ""
         return s
 
     def wait(self, predicate: Callable[[WatchState], bool], timeout: float) -> bool:

@@ -20,8 +20,10 @@ from coordinator.watchstate import WatchState
 
 __all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
 
-STYLE = {"RUNNING": "bold yellow", "SUCCESS": "green", "FAILURE": "bold red", "HALTED": "magenta", "": "dim"}
-MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "": "-"}
+# "was SUCCESS" / "was FAILURE": the node's last outcome, faded, after py_trees reset it (WatchState.label)
+STYLE = {"RUNNING": "bold yellow", "SUCCESS": "green", "FAILURE": "bold red", "HALTED": "magenta",
+         "was SUCCESS": "dim green", "was FAILURE": "dim red", "": "dim"}
+MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "was SUCCESS": "+", "was FAILURE": "x", "": "-"}
 
 
 def _short(value: Any, width: int = 60) -> str:
@@ -75,7 +77,7 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
         label = state.label(i)
         line = Text("  " * depth)
         line.append("%s " % MARK[label], style=STYLE[label])
-        line.append(str(n.get("name", "?")), style="bold" if label == "RUNNING" else "")
+        line.append(str(n.get("name", "?")), style="bold" if label == "RUNNING" else "dim" if label.startswith("was") else "")
         if n.get("shape") not in (None, "leaf"):
             line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
         if label:
@@ -83,8 +85,8 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
         if hidden:
             line.append("  (+%d folded)" % hidden, style="dim")
         fb = state.feedback.get(i)
-        if fb and label == "FAILURE":
-            line.append("  " + fb, style="red")
+        if fb and label in ("FAILURE", "was FAILURE"):
+            line.append("  " + fb, style=STYLE[label] if label != "FAILURE" else "red")
         out.append(line)
     rest = len(rows) - start - len(window)
     if rest > 0:
@@ -96,26 +98,39 @@ def _section(title: str) -> Text:
     return Text(title, style="bold cyan")
 
 
-def render(state: WatchState, width: int, height: int, footer: str = "", now: Optional[float] = None) -> Group:
-    """The whole view, exactly ``height`` lines or fewer, none longer than ``width``."""
+def _panel(title: str, shown: List[Text], total: int, empty: str) -> List[Text]:
+    """A section's title (``(6 of 8)`` when cut) and the lines it shows."""
+    head = _section("%s%s" % (title, "" if total else ": " + empty))
+    if total > len(shown):
+        head.append(" (%d of %d%s)" % (len(shown), total, ", last written" if title == "tree blackboard" else ""),
+                    style="dim")
+    return [head] + shown
+
+
+def render(state: WatchState, width: int, height: int, footer: str = "", now: Optional[float] = None,
+           title: str = "bmtree watch") -> Group:
+    """The whole view, exactly ``height`` lines or fewer, none longer than ``width``. ``now``: the
+    run's time advanced by the wall clock since its last record (:func:`now_since`) for the header's
+    clock and the pending calls' elapsed times; ``title``: what shows it (``bmtree run``)."""
     with state.lock:
         name = state.tree.get("name") or "(waiting for a run on the run stream)"
+        # between records the run's clock moves on: a long call makes no record until it ends
+        t_now = state.t if now is None or state.end or not state.nodes else max(state.t, now)
         head = Text()
-        head.append("bmtree watch ", style="bold")
-        head.append("%s  t=%.1fs  tick %d" % (name, state.t, state.tick))
+        head.append("%s " % title, style="bold")
+        head.append("%s  t=%.1fs  tick %d" % (name, t_now, state.tick))
         if state.paused:
             head.append("  PAUSED", style="bold magenta")
         if state.end:
             head.append("  %s" % state.end.get("status"), style=STYLE.get(str(state.end.get("status")), ""))
-        pending = list(state.pending.values())
-        t_now = state.t if now is None else now
         plines = []
-        for c in pending:
+        for c in state.pending.values():
             el = max(0.0, t_now - float(c.get("t") or 0.0))
             to = c.get("timeout")
             plines.append(Text("  %-24s %6.1fs / %s  %s" % (
                 c.get("target"), el, ("%gs" % to) if to else "-", _short(c.get("inputs"), 40))))
-        bb = [Text("  %s = %s" % (k, _short(v, max(20, width - len(k) - 6)))) for k, v in sorted(state.blackboard.items())]
+        written = [k for k in state.written if k in state.blackboard]
+        written += [k for k in state.blackboard if k not in set(written)]
         ev = [Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
                    style="yellow" if e.get("type") == "notice" else "") for e in state.events]
         ev += [Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)), style="magenta")
@@ -133,21 +148,30 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                 state.end.get("status"), float(state.end.get("duration") or 0.0), state.end.get("ticks"),
                 ("  reason: %s" % state.end.get("reason")) if state.end.get("reason") else ""),
                 style=STYLE.get(str(state.end.get("status")), "")))
-        # budget: header, footer, result; the panels get a share, the tree the rest
+
+        def board(take: int) -> List[Text]:
+            """The keys shown in order; cut, the most recently written ones (a stale one matters least)."""
+            keys = sorted(written if take >= len(written) else written[len(written) - take:])
+            return [Text("  %s = %s" % (k, _short(state.blackboard[k], max(20, width - len(k) - 6)))) for k in keys]
+
+        # budget: header, footer, result; the panels get a share, the tree the rest, and the lines
+        # the tree leaves unused go back to the panels that were cut
         fixed = 1 + (1 if footer else 0) + len(end)
         room = max(4, height - fixed)
-        panels = [("pending calls", plines, "none"), ("tree blackboard", bb, "empty"),
-                  ("last events", ev, "none"), ("call log", calls, "none")]
-        share = max(1, room // 3 // len(panels)) if height < 30 else max(2, room // 2 // len(panels))
-        body: List[Text] = []
-        for title, lines, empty in panels:
-            body.append(_section("%s%s" % (title, "" if lines else ": " + empty)))
-            take = lines[-share:] if title in ("last events", "call log") else lines[:share]
-            if len(lines) > share:
-                body[-1].append(" (%d of %d)" % (share, len(lines)), style="dim")
-            body.extend(take)
-        tree_room = max(3, room - len(body))
-        tree = tree_lines(state, tree_room)
+        sizes = [len(plines), len(written), len(ev), len(calls)]
+        share = max(1, room // 3 // len(sizes)) if height < 30 else max(2, room // 2 // len(sizes))
+        takes = [min(n, share) for n in sizes]
+        tree = tree_lines(state, max(3, room - len(sizes) - sum(takes)))
+        spare = room - len(tree) - len(sizes) - sum(takes)
+        while spare > 0 and any(t < n for t, n in zip(takes, sizes)):
+            for k, n in enumerate(sizes):  # one line each in turn, so that no cut panel takes them all
+                if spare > 0 and takes[k] < n:
+                    takes[k] += 1
+                    spare -= 1
+        body = (_panel("pending calls", plines[:takes[0]], len(plines), "none")
+                + _panel("tree blackboard", board(takes[1]), len(written), "empty")
+                + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
+                + _panel("call log", calls[len(calls) - takes[3]:], len(calls), "none"))
         out = [head] + tree + body + end + ([Text(footer, style="dim")] if footer else [])
     out = out[:height]
     for line in out:

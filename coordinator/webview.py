@@ -38,6 +38,8 @@ class WebServer:
         self.at = at
         self.duration = duration
         self.control = control
+        #: set once a page has been answered with the run's end (``watch --web`` may then end)
+        self.end_served = threading.Event()
         server = self
 
         class Handler(BaseHTTPRequestHandler):
@@ -118,6 +120,8 @@ class WebServer:
         self.state.wait(lambda s: s.version != since, 8.0)
         data = self.state.view()
         data.update(mode="live", steer=self.control is not None and (data.get("tree") or {}).get("control") is not False)
+        if data.get("end"):
+            self.end_served.set()
         return data
 
     def where(self) -> str:

@@ -183,7 +183,9 @@ class ModuleServer:
     """Serves one module: decode, check, dispatch, check outputs, answer.
 
     A call holds the module (a later non-concurrent call is ``rejected: busy with call …``)
-    until it is answered and its code has returned. A method answers with its outputs, an
+    until it is answered and its code has returned. A call that arrives while the holding call
+    is being cancelled (the tree halted it and went on: a retry, the next child) waits for it,
+    up to ``cancel_grace`` seconds, instead of being refused; one call waits at a time. A method answers with its outputs, an
     exception, or an :class:`Outcome` that the server carries out on its clock (delays and
     hangs hold no thread).
 
@@ -214,6 +216,7 @@ class ModuleServer:
         self._lock = threading.Lock()
         self._calls: Dict[str, _Call] = {}
         self._exclusive: Optional[_Call] = None
+        self._waiting: Optional[_Call] = None  # the next exclusive call, while the holder is being cancelled
         self._bind()
         impl._server = self
 
@@ -282,17 +285,37 @@ class ModuleServer:
             self._reject(call_id, fname, "bad inputs: %s" % exc)
             return
         call = _Call(CallContext(call_id, fname), fn, inputs, not self._is_concurrent(fn))
+        waits = False
         with self._lock:
             busy = self._exclusive if call.exclusive else None
+            if busy is not None and busy.ctx.cancelled.is_set() and self._waiting is None:
+                busy, waits, self._waiting = None, True, call  # its code is stopping: run this one next
+            elif busy is not None and self._waiting is not None:
+                busy = self._waiting
             if busy is None:
-                if call.exclusive:
+                if call.exclusive and not waits:
                     self._exclusive = call
                 if call_id is not None:
                     self._calls[call_id] = call
         if busy is not None:
             self._reject(call_id, fname, "busy with call %s (%s)" % (busy.ctx.call_id, busy.ctx.function))
-            return
-        self.executor.submit(self._run, call, None)
+        elif waits:
+            holder = self._exclusive
+            self.scheduler.call_later(self.cancel_grace, lambda: self._stop_waiting(call, holder))
+        else:
+            self.executor.submit(self._run, call, None)
+
+    def _stop_waiting(self, call: _Call, holder: Optional[_Call]) -> None:
+        """The cancelled holder's code did not return within the grace: refuse the waiting call."""
+        with self._lock:
+            if self._waiting is not call:
+                return
+            self._waiting = None
+            if call.ctx.call_id is not None and self._calls.get(call.ctx.call_id) is call:
+                del self._calls[call.ctx.call_id]
+        who = "%s (%s)" % (holder.ctx.call_id, holder.ctx.function) if holder is not None else "?"
+        self._reject(call.ctx.call_id, call.ctx.function, "busy with call %s: it was cancelled, but its code has not "
+                     "returned within %gs" % (who, self.cancel_grace))
 
     def handle_cancel(self, text: Any) -> None:
         """Handle one ``/master/cancel`` payload; never raises."""
@@ -311,9 +334,16 @@ class ModuleServer:
             return
         with self._lock:
             call = self._calls.get(req.call_id)
+            queued = call is not None and self._waiting is call
+            if queued:  # never started: nothing to stop
+                self._waiting = None
+                call.running = False
         if call is None:
             return
         call.ctx.cancel()
+        if queued:
+            self._finish(call, self._cancelled(call))
+            return
         with self._lock:
             running = call.running
         if running:  # its code may still stop the hardware: wait for it, but not forever
@@ -400,7 +430,9 @@ class ModuleServer:
         # HANG: no answer until a cancel
 
     def _finish(self, call: _Call, result: FunctionResult) -> None:
-        """Answer once; free the module when the call is answered and its code has returned."""
+        """Answer once; free the module when the call is answered and its code has returned (and
+        start the call waiting for it)."""
+        nxt = None
         with self._lock:
             first = not call.answered
             call.answered = True
@@ -408,7 +440,10 @@ class ModuleServer:
                 if call.ctx.call_id is not None and self._calls.get(call.ctx.call_id) is call:
                     del self._calls[call.ctx.call_id]
                 if self._exclusive is call:
-                    self._exclusive = None
+                    self._exclusive = nxt = self._waiting
+                    self._waiting = None
+        if nxt is not None:
+            self.executor.submit(self._run, nxt, None)
         if first:
             text = result.encode()
             size = len(text) if text.isascii() else len(text.encode("utf-8"))

@@ -125,18 +125,35 @@ class Option:
 
 
 class Flow:
-    """The data-flow walk (``coordinator.dataflow``): kinds call back into it for their children."""
+    """The data-flow walk (``coordinator.dataflow``): kinds call back into it for their children.
+
+    Each read of a key not surely written is noted (``missed``); :meth:`report` makes the errors once
+    the walk is over and the keys written anywhere in the tree are known."""
 
     def __init__(self, errors: List[TreeError]):
         self.errors = errors
+        self.missed: List[Tuple[TreeNode, str, FrozenSet[str]]] = []
 
     def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
         missing = [k for k in keys if k not in avail]
         for k in sorted(set(missing)) if missing else ():
-            self.errors.append(TreeError(node.pos, "reads %r, which is not written on every path before this "
-                                                   "node (%s)" % (k, did_you_mean(k, avail)[2:-1]
-                                                                  or "write it earlier or declare it under "
-                                                                     "'inputs:'")))
+            self.missed.append((node, k, avail))
+
+    def report(self, written: Iterable[str]) -> None:
+        """The errors of the reads noted, at each reference; ``written``: every key a node of the tree
+        writes or an input gives (a key outside it is likely misspelt)."""
+        anywhere = frozenset(written)
+        for node, k, avail in self.missed:
+            at = node.nodekind.read_pos(node, k) or node.pos
+            if k in anywhere:
+                message = "reads %r, which is not written on every path before this node (%s)" % (
+                    k, did_you_mean(k, avail)[2:-1] or "write it earlier or declare it under 'inputs:'")
+            else:
+                message = "reads %r, which no node writes and no input declares (%s)" % (
+                    k, did_you_mean(k, anywhere | avail)[2:-1]
+                    or "write it first, with a call's 'outputs:' or a 'set', or declare it under 'inputs:'")
+            self.errors.append(TreeError(at, message))
+        self.missed = []
 
     def of(self, node: TreeNode, avail: FrozenSet[str]) -> FrozenSet[str]:
         """Keys surely written when ``node`` succeeds."""
@@ -201,6 +218,13 @@ class NodeKind(abc.ABC):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:  # noqa: B027
         """Report references whose known type cannot fit where they are used (most kinds pass none)."""
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        """Where ``node`` reads ``key``, for the data-flow errors: by default its main value when that
+        reads it, else None (the node itself)."""
+        from coordinator.values import read_at
+
+        return read_at(node.spec, node.value_pos, key) if node.value_pos is not None else None
 
     def warnings(self, node: TreeNode) -> List[TreeError]:
         return []

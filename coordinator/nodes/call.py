@@ -14,9 +14,9 @@ from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import NodeKind, Option, param_keys, run_param
 from coordinator.nodes.leafbase import Leaf
-from coordinator.refs import RefError, refs_in, resolve, unwrap
+from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import value_type_errors
+from coordinator.values import misfit_text, read_at, ref_type, type_words, value_type_errors
 from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS"]
@@ -146,7 +146,9 @@ class CallKind(NodeKind):
                 try:  # converted here, once: the call leaf sends these messages as they are
                     spec.static[q.name] = q.convert(spec.inputs[q.name])
                 except ProtocolError as exc:
-                    p.err(inputs_raw.val_pos[q.name], "input %r: %s" % (q.name, exc))
+                    said = misfit_text(q.rostype, spec.inputs[q.name])
+                    p.err(inputs_raw.val_pos[q.name], "input %r %s" % (q.name, said) if said
+                          else "input %r: %s" % (q.name, exc))
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
         return spec
 
@@ -155,6 +157,11 @@ class CallKind(NodeKind):
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return [r.key for r in refs_in(node.spec.inputs)] + param_keys(node.spec.timeout)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        where = node.spec.input_pos
+        return next((p for p in (read_at(v, where[k], key) for k, v in node.spec.inputs.items() if k in where)
+                     if p is not None), None)
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         fn = node.spec.function
@@ -187,12 +194,26 @@ class CallKind(NodeKind):
             try:
                 q.convert(sample)
             except ProtocolError as exc:
-                held = ", ".join("%s (%s holds %s)" % (r, r.key, next(iter(types[r.key]))) for r in refs)
-                errors.append(TreeError(node.spec.input_pos.get(q.name, node.pos), "input %r (%s) cannot take %s: %s"
-                                        % (q.name, q.rostype, held, exc)))
+                errors.append(TreeError(at, _cannot_take(q.name, q.rostype, value, sample, types, exc)))
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Call(node, ctx)
+
+
+def _cannot_take(name: str, rostype: str, value: Any, sample: Any, types: Dict[str, set], exc: Exception) -> str:
+    """Why input ``name`` cannot take ``value`` (holding references; ``sample``: it made of messages of the
+    types its references hold), in the tree's words."""
+    if isinstance(value, Ref):
+        t = ref_type(types, value)
+        got = "%s, which holds %s (%s)" % (value, type_words(t), t) if t else str(value)
+        said = misfit_text(rostype, sample, got)
+        if said:
+            return "input %r %s" % (name, said)
+    held = "; ".join("%s holds %s" % (r, next(iter(types[r.key]))) for r in refs_in(value))
+    said = misfit_text(rostype, sample)
+    if said:
+        return "input %r %s (%s)" % (name, said, held)
+    return "input %r (%s) cannot take %s: %s" % (name, rostype, held, exc)
 
 
 def _sample(types: Dict[str, set], key: str) -> Any:

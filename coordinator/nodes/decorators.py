@@ -7,10 +7,10 @@ from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional
 import py_trees
 from py_trees.common import Status
 
-from coordinator.errors import TreeError
+from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors
+from coordinator.values import at_value_errors, read_at
 
 __all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "Timeout", "TimesSpec", "SecondsSpec"]
 
@@ -139,6 +139,9 @@ class Counted(NodeKind):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         at_value_errors(self.param(node), node.value_pos or node.pos, types, errors)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        return read_at(self.param(node), node.value_pos, key) if node.value_pos is not None else None
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
         f.need(node, self.reads(node), avail)

@@ -12,6 +12,7 @@ from coordinator.nodes.base import Flow, NodeKind, Option
 from coordinator.nodes.leaves import SetKeys
 from coordinator.refs import refs_in
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode
+from coordinator.values import read_at
 
 __all__ = ["IncludeSpec", "KINDS"]
 
@@ -21,6 +22,7 @@ class IncludeSpec:
     path: Any
     args: Dict[str, Any] = field(default_factory=dict)
     tree: Optional[TreeFile] = None
+    arg_pos: Dict[str, Pos] = field(default_factory=dict)   # where each argument's value is written
 
     def bound(self) -> Dict[str, Any]:
         """What the include sets when it starts: the subtree's defaults, then the arguments."""
@@ -38,7 +40,8 @@ class IncludeKind(NodeKind):
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> IncludeSpec:
         args_raw = p.mapping(raw, "args", at, "'args' must be a mapping of input name: value")
-        spec = IncludeSpec(path=value, args={k: p.literal_at(args_raw, k, at) for k in args_raw})
+        spec = IncludeSpec(path=value, args={k: p.literal_at(args_raw, k, at) for k in args_raw},
+                           arg_pos={k: args_raw.val_pos[k] for k in args_raw})
         if not isinstance(value, str) or not value:
             p.err(at, "include takes a file path")
             return spec
@@ -67,6 +70,11 @@ class IncludeKind(NodeKind):
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec.bound())
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        where = node.spec.arg_pos
+        return next((p for p in (read_at(v, where[k], key) for k, v in node.spec.args.items() if k in where)
+                     if p is not None), None)
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
         f.need(node, self.reads(node), avail)

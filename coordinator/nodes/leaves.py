@@ -13,7 +13,7 @@ from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
-from coordinator.values import ref_kind, value_type_errors
+from coordinator.values import read_at, ref_kind, value_type_errors
 
 __all__ = ["Check", "KINDS", "Recall", "SetKeys", "Wait", "WaitEvent"]
 
@@ -266,6 +266,11 @@ class SetKind(NodeKind):
 
     def default_name(self, node: TreeNode) -> str:
         return "set %s" % ", ".join(node.spec)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        where = getattr(node.spec, "pos", {})
+        return next((p for p in (read_at(v, where[k], key) for k, v in node.spec.items() if k in where)
+                     if p is not None), None)
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return [r.key for r in refs_in(node.spec)]

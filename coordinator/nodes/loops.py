@@ -17,7 +17,7 @@ from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, param_k
 from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors, ref_kind
+from coordinator.values import at_value_errors, read_at, ref_kind
 
 __all__ = ["DEFAULT_MAX", "ForEach", "ForEachSpec", "KINDS", "Repeat", "RepeatSpec", "expr_option"]
 
@@ -145,6 +145,11 @@ class RepeatKind(Counted):
         super().check_types(node, types, errors)
         expr_type_errors(node.spec.cond, node.spec.cond_pos, types, errors)
 
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        s = node.spec
+        return (super().read_pos(node, key)
+                or (read_at(s.cond, s.cond_pos, key) if s.cond is not None and s.cond_pos is not None else None))
+
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Repeat(node.name, child(node.children[0]), node.spec, ctx)
 
@@ -266,6 +271,9 @@ class ForEachKind(NodeKind):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         at_value_errors(node.spec.items, node.value_pos or node.pos, types, errors)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        return read_at(node.spec.items, node.value_pos, key) if node.value_pos is not None else None
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return ForEach(node.name, child(node.children[0]), node.spec, ctx)

@@ -12,7 +12,7 @@ from coordinator.expr import text_of
 from coordinator.nodes.base import Flow, NodeKind, Option, check_choice
 from coordinator.refs import RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors
+from coordinator.values import at_value_errors, read_at
 
 __all__ = ["KINDS", "Switch", "SwitchSpec"]
 
@@ -126,6 +126,9 @@ class SwitchKind(NodeKind):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         at_value_errors(node.spec.value, node.value_pos or node.pos, types, errors)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        return read_at(node.spec.value, node.value_pos, key) if node.value_pos is not None else None
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Switch(node.name, [child(c) for c in node.children], node.spec, ctx)

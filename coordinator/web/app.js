@@ -12,9 +12,13 @@ function el(tag, attrs, text) {
 }
 
 function label(s, i) {
+  // "was SUCCESS" / "was FAILURE": its last outcome, drawn faded, after py_trees reset it (a
+  // selector clears the children it moved past, a stopped tree its finished nodes)
   const st = s.status[String(i)] || "INVALID";
-  if (st === "INVALID") return s.halted.indexOf(i) >= 0 ? "HALTED" : "";
-  return st;
+  if (st !== "INVALID") return st;
+  if (s.halted.indexOf(i) >= 0) return "HALTED";
+  const was = (s.last || {})[String(i)];
+  return was ? "was " + was : "";
 }
 
 function layout(nodes) {
@@ -54,7 +58,7 @@ function drawTree(s) {
   }
   for (const n of s.nodes) {
     const [x, y] = xy(n.id), st = label(s, n.id);
-    const grp = el("g", { class: "node " + st, "data-name": n.name, "data-status": st || "IDLE" });
+    const grp = el("g", { class: "node " + st.replace(" ", "-"), "data-name": n.name, "data-status": st || "IDLE" });
     grp.appendChild(el("rect", { x, y, width: W, height: H, rx: 6 }));
     const name = n.name.length > 22 ? n.name.slice(0, 21) + "…" : n.name;
     grp.appendChild(el("text", { x: x + 6, y: y + 15 }, name));
@@ -104,17 +108,25 @@ function draw(s) {
     sel.textContent = "";
     for (const n of s.nodes) { const o = document.createElement("option"); o.textContent = n.name; sel.appendChild(o); }
   }
-  $("controls").hidden = !s.steer;
+  $("controls").hidden = !s.steer || gone;
 }
 
 let anchor = [null, 0];
 function drawPending(s) {
   // the run's time moves on between records: count it on here (not in a replay or after the end)
-  const now = mode === "replay" || s.end || s.paused ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
+  const now = mode === "replay" || s.end || s.paused || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
   rows("pending", s.pending, (c) => [c.target, sec(now - c.t) + " / " + (c.timeout ? c.timeout + "s" : "-"), js(c.inputs)]);
 }
 setInterval(() => { if (last) drawPending(last); }, 500);
+
+let gone = false;
+function setGone(g) {
+  // the watch has ended (with its run) or is unreachable: the page keeps the last state it got
+  gone = g;
+  $("gone").hidden = !g;
+  if (last) $("controls").hidden = !last.steer || g;
+}
 
 async function poll() {
   for (;;) {
@@ -122,9 +134,11 @@ async function poll() {
       const res = await fetch("state?since=" + version);
       const s = await res.json();
       version = s.version;
+      if (gone) setGone(false);
       if (s.mode === "replay") { startReplay(s); return; }
       draw(s);
     } catch (e) {
+      if (last && !gone) setGone(true);
       await new Promise((ok) => setTimeout(ok, 1000));
     }
   }

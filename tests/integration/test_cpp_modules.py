@@ -256,15 +256,16 @@ def timed_run(tree):
 
 def test_a_halted_cpp_function_stops_at_once_and_the_module_takes_calls_again(gripper, tmp_path):
     """The library's sleepFor() returns when the bridge forwards the cancel of a halted call, so
-    the 30 s squeeze ends just after the tree's 0.3 s timeout, and the module takes calls again
-    (a call sent within those milliseconds is still refused busy, as by any module whose
-    cancelled code has not returned yet)."""
+    the 30 s squeeze ends just after the tree's 0.3 s timeout; the next call, sent at once while the
+    squeeze is still stopping, waits for it (not refused busy) and succeeds on its first try."""
     tree = tmp_path / "halt.yaml"
-    tree.write_text(long_squeeze_then(30.0, 0.3, ["call: gripper.set_fingers", "inputs: {left: 0.0, right: 0.01}"]))
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - force_success:\n        call: gripper.squeeze\n"
+                    "        inputs: {seconds: 30.0, label: long}\n        timeout: 0.3\n"
+                    "    - call: gripper.set_fingers\n      inputs: {left: 0.0, right: 0.01}\n")
     lines, elapsed = timed_run(tree)
-    assert "timeout" in lines[0] or "halted" in lines[0], lines
-    assert "succeeded" in lines[-1] and "set_fingers" in lines[-1], lines
-    assert elapsed < 20, elapsed  # not after the squeeze's 30 s (the retries would have run out first)
+    assert len(lines) == 2 and ("timeout" in lines[0] or "halted" in lines[0]), lines
+    assert "succeeded" in lines[1] and "set_fingers" in lines[1], lines
+    assert elapsed < 20, elapsed  # not after the squeeze's 30 s
 
 
 def test_the_bridges_call_timeout_cancels_the_cpp_function(ros_graph, gripper_exe, tmp_path):

@@ -184,7 +184,8 @@ def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_mod
     assert a.wait(go.call_id).status == "cancelled"          # after the grace: the function ignores it
     busy = nav.function("approach").build_call({"target": {"x": 1.0}})
     a.server.handle_call(busy.encode())
-    assert a.wait(busy.call_id).error == "busy with call %s (go_to)" % go.call_id
+    assert a.wait(busy.call_id).error == ("busy with call %s (go_to): it was cancelled, but its code has not "
+                                         "returned within 0.2s" % go.call_id)   # waited for it, for the grace
     release.set()
     deadline = time.monotonic() + 10
     while True:  # free once the function has returned
@@ -194,6 +195,39 @@ def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_mod
             break
         assert time.monotonic() < deadline, "the module stayed busy after its function returned"
         release.wait(0.01)
+
+
+def test_a_call_sent_while_the_holder_is_being_cancelled_waits_for_it_and_runs(sim_defs):
+    """The tree halts a call and goes on at once (a retry, the next child): the module's cancelled code
+    needs a moment to stop, and the next call waits for it instead of being refused busy."""
+    release = threading.Event()
+    mocks = Mocks(sim_defs)
+    mocks["navigation.go_to"].respond(lambda place: {"room": place} if release.wait(10) else {})
+    a = Answers(sim_defs, mocks, executor=WorkerThreads("t"), scheduler=TimerThread())
+    nav = sim_defs["navigation"]
+    go = nav.function("go_to").build_call({"place": "kitchen"})
+    a.server.handle_call(go.encode())
+    a.server.handle_cancel(CancelRequest(go.call_id, "navigation", "go_to").encode())
+    nxt = nav.function("approach").build_call({"target": {"x": 1.0}})
+    a.server.handle_call(nxt.encode())
+    third = nav.function("approach").build_call({"target": {"x": 2.0}})
+    a.server.handle_call(third.encode())       # one call waits; a second is refused, naming the waiting one
+    assert a.wait(third.call_id).error == "busy with call %s (approach)" % nxt.call_id
+    release.wait(0.05)                          # within the grace (0.2 s here)
+    release.set()                               # the cancelled code returns: the waiting call runs
+    assert a.wait(go.call_id).status == "cancelled"
+    assert a.wait(nxt.call_id).status == "succeeded"
+    # a waiting call that is itself cancelled never runs
+    release.clear()
+    go = nav.function("go_to").build_call({"place": "hall"})
+    a.server.handle_call(go.encode())
+    a.server.handle_cancel(CancelRequest(go.call_id, "navigation", "go_to").encode())
+    nxt = nav.function("approach").build_call({"target": {"x": 1.0}})
+    a.server.handle_call(nxt.encode())
+    a.server.handle_cancel(CancelRequest(nxt.call_id, "navigation", "approach").encode())
+    assert a.wait(nxt.call_id).status == "cancelled"
+    release.set()
+    assert a.wait(go.call_id).status == "cancelled"
 
 
 def test_respond_gets_plain_inputs_and_its_outputs_are_checked(tmp_path):
