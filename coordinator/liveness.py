@@ -97,6 +97,11 @@ class Watchdog:
         with self._lock:
             self._calls[call_id] = (module, time.monotonic())
 
+    def owes(self, call_id: str) -> bool:
+        """True while the call is in flight (sent, neither answered nor given up as lost)."""
+        with self._lock:
+            return call_id in self._calls
+
     def call_done(self, call_id: Optional[str]) -> None:
         if call_id is not None:
             with self._lock:

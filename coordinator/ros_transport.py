@@ -44,7 +44,7 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.nodelife import registering
-from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, Watchdog
+from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, Watchdog
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runevents import Notice
 from coordinator.runstream import CHANNELS, Sink
@@ -93,7 +93,7 @@ class RosTransport(Transport):
         self._early: List[Event] = []  # events that came during the preflight, for the run
         self._deliver: Callable[[Any], None] = self._hold
         self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
-        self.watchdog = Watchdog(lambda item: self._deliver(item), self._node_of, self._uri_of, period=liveness)
+        self.watchdog = Watchdog(self._from_watchdog, self._node_of, self._uri_of, period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._String: Any = None
@@ -274,23 +274,25 @@ class RosTransport(Transport):
                 for route in held.values():
                     route.flush()
 
-    def _to_route(self, route: TopicSender, text: str) -> None:
+    def _to_route(self, route: TopicSender, text: str, key: Optional[str] = None) -> None:
         if not self._holding:
-            route.publish(self._String(text))
-        elif route.publish(self._String(text), hold=True):
+            route.publish(self._String(text), key=key)
+        elif route.publish(self._String(text), hold=True, key=key):
             self._held[route.resolved_name] = route
 
     def send_call(self, call: FunctionCall) -> None:
         if call.call_id:
             self.watchdog.call_sent(call.call_id, call.basic_mod)
         route = self._routes.get(call.basic_mod)
-        if route is not None:
-            self._to_route(route, call.encode())
+        if route is not None:  # kept while the module's node is not connected (restarting), sent when it is
+            self._to_route(route, call.encode(), key=call.call_id)
         else:
             self._shared("call").publish(self._String(call.encode()))
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         route = self._routes.get(cancel.basic_mod)
+        if route is not None and cancel.call_id and route.discard(cancel.call_id):
+            return  # its module never got the call
         if route is not None:
             self._to_route(route, cancel_on_call_topic(cancel.call_id, cancel.basic_mod, cancel.function))
         else:
@@ -349,8 +351,24 @@ class RosTransport(Transport):
         for live, sender in zip(fresh, senders):
             self._routes[live.name] = sender
 
-    def _connected(self) -> None:
-        """A module connected to its call topic: the preflight may ping it now."""
+    def _from_watchdog(self, item: Any) -> None:
+        """A lost module's dead connection is closed before the run hears of it: a retry then waits
+        for the restarted node instead of going into the old socket."""
+        if isinstance(item, ModuleLost):
+            route = self._routes.get(item.module)
+            if route is not None and route.drop_closed():
+                log.info("closed the call connection of module %s's dead node %s", item.module, item.node)
+        self._deliver(item)
+
+    def _connected(self, topic: str) -> None:
+        """A module connected to its call topic: the preflight may ping it now, and the calls sent
+        while it was not connected (its node restarting) and still owed an answer go to it."""
+        for route in list(self._routes.values()):
+            if route.resolved_name == topic:
+                sent = route.connected(self.watchdog.owes)
+                if sent:
+                    log.info("%s connected: sent the %d call%s that waited for it", topic, sent,
+                             "" if sent == 1 else "s")
         with self._cond:
             self._cond.notify_all()
 

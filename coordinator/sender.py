@@ -16,6 +16,12 @@ calls so that each module gets them in one write, and wakes once (sent one by on
 modules woke twice as often and spent more CPU than the coordinator saved). Writing in the
 caller's thread spares each call a wake-up of another thread.
 
+A message published while the topic has no subscriber at all (the module's node is
+restarting: its old connection is gone, the new one not made yet) would be lost, and a call
+in it would wait out its whole timeout. Such messages are kept, with a key (the call id),
+until a subscriber connects (:meth:`TopicSender.connected`), and a kept message can be taken
+back (:meth:`TopicSender.discard`: a cancel of a call its module never got).
+
 :func:`topic_senders` makes many at once: rospy registers publishers with the master one
 after another (a lock around each XML-RPC), which with 50 modules was most of ``bmtree
 run``'s preflight; they are registered here concurrently instead.
@@ -67,7 +73,8 @@ class TopicSender:
         self.limit = limit
         self.dropped = 0
         self._queue: Deque[bytes] = collections.deque()  # whole frames for the thread
-        self._held: List[bytes] = []  # frames kept for flush()
+        self._held: List[Tuple[Optional[str], bytes]] = []  # (key, frame) kept for flush()
+        self._unconnected: List[Tuple[Optional[str], bytes]] = []  # (key, frame) sent while nobody listened
         self._rest: List[Tuple[Any, memoryview]] = []  # (connection, the unsent end of a frame): first
         self._writing = False  # the thread holds frames it has not written yet
         self._cond = threading.Condition()
@@ -75,14 +82,15 @@ class TopicSender:
         self._stopped = False  # closed and given up on flushing: drop the rest silently
         self._thread: Optional[threading.Thread] = None  # started when first needed
 
-    def publish(self, msg: Any, hold: bool = False) -> bool:
-        """Send ``msg``; with ``hold``, keep it for :meth:`flush` instead (True if it was kept)."""
+    def publish(self, msg: Any, hold: bool = False, key: Optional[str] = None) -> bool:
+        """Send ``msg``; with ``hold``, keep it for :meth:`flush` instead (True if it was kept).
+        ``key`` names it for :meth:`discard` while it waits for a subscriber."""
         frame = _frame(msg)
         with self._cond:
             if hold:
-                self._held.append(frame)
+                self._held.append((key, frame))
                 return True
-        self._send([frame])
+        self._send([(key, frame)])
         return False
 
     def flush(self) -> None:
@@ -92,9 +100,56 @@ class TopicSender:
         if frames:
             self._send(frames)
 
-    def _send(self, frames: List[bytes]) -> None:
+    def connected(self, wanted: Callable[[str], bool] = lambda key: True) -> int:
+        """A subscriber connected: send what waited for one (keyed messages only if still ``wanted``);
+        how many were sent."""
+        with self._cond:  # re-entrant: nothing newer is sent before these
+            waiting, self._unconnected = self._unconnected, []
+            frames = [(k, f) for k, f in waiting if k is None or wanted(k)]
+            if frames:
+                self._send(frames)
+        return len(frames)
+
+    def drop_closed(self) -> int:
+        """Close the connections whose subscriber is gone (its process died: the socket is at its
+        end), so that what is sent next waits for a new subscriber instead of going into them;
+        how many. A subscriber never writes after its handshake, so a readable end means gone."""
+        gone = []
+        for conn in list(self.impl.connections):
+            sock = conn.socket
+            if sock is None or conn.done:
+                continue
+            try:
+                if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"":
+                    gone.append(conn)
+            except BlockingIOError:
+                pass
+            except OSError:
+                gone.append(conn)
+        for conn in gone:
+            _close(conn)
+        return len(gone)
+
+    def discard(self, key: str) -> bool:
+        """Take back a message that still waits for a subscriber (True if it did)."""
+        with self._cond:
+            for i, (k, _frame) in enumerate(self._unconnected):
+                if k == key:
+                    del self._unconnected[i]
+                    return True
+        return False
+
+    def _send(self, keyed: List[Tuple[Optional[str], bytes]]) -> None:
         broken = []
         with self._cond:
+            if self._unconnected or not any(c.socket is not None and not c.done for c in list(self.impl.connections)):
+                if not self._unconnected:
+                    log.info("%s has no subscriber (its module's node restarting?): messages wait for one",
+                             self.resolved_name)
+                self._unconnected.extend(keyed)
+                del self._unconnected[:-self.limit]
+                return
+            frames = [f for _k, f in keyed]
             if self._queue or self._rest or self._writing:  # behind what waits: keep the order
                 for frame in frames:
                     self._enqueue(frame)
@@ -192,18 +247,18 @@ class TopicSender:
 class _Connected:
     """A rospy ``SubscribeListener``: calls ``fn`` when a subscriber connects."""
 
-    def __init__(self, fn: Callable[[], None]):
+    def __init__(self, fn: Callable[[str], None]):
         self.fn = fn
 
     def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Any) -> None:
-        self.fn()
+        self.fn(topic_name)
 
     def peer_unsubscribe(self, topic_name: str, num_peers: int) -> None:
         pass
 
 
 def topic_senders(topics: List[str], data_class: Any, limit: int = 10000,
-                  on_connect: Optional[Callable[[], None]] = None) -> List[TopicSender]:
+                  on_connect: Optional[Callable[[str], None]] = None) -> List[TopicSender]:
     """A :class:`TopicSender` per topic, registered with the master concurrently.
 
     The publishers' topics are entered in rospy's topic manager first, so that creating
@@ -211,7 +266,7 @@ def topic_senders(topics: List[str], data_class: Any, limit: int = 10000,
     then one ``registerPublisher`` per topic goes to the master from a thread pool, as
     rospy's own registration would (the master then tells the subscribers). Unregistering
     and re-registering after a master restart (``comm.masterwatch``) see them as any other.
-    ``on_connect`` is called (from rospy's thread) whenever a subscriber connects.
+    ``on_connect`` is called (from rospy's thread, with the topic) whenever a subscriber connects.
     """
     if not topics:
         return []

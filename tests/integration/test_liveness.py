@@ -5,6 +5,7 @@ import os
 import queue
 import signal
 import subprocess
+import sys
 import time
 
 from comm import BlackboardRequest, FunctionResult
@@ -146,3 +147,29 @@ def test_a_blackboard_restarted_while_a_result_came_makes_the_recall_fail_not_st
     assert run.returncode == 1, out
     assert "the Blackboard node did not store the result of probe.work (call" in out, out
     assert "that wrote tag, so its value is an older one" in out, out
+
+
+def test_a_retry_sent_while_the_killed_module_restarts_reaches_the_new_process(ros_graph, tmp_path):
+    """kill -9 of the module mid-call and an immediate restart: the call fails module_lost and the
+    retry goes out at once, before the new process has connected; it waits for that connection
+    (it used to be lost, and waited out its whole 15 s timeout)."""
+    tree = tmp_path / "retry.yaml"
+    tree.write_text("format: 1\nroot:\n  retry: 3\n  child:\n    call: probe.work\n    inputs: {seconds: 2.0, tag: x}\n"
+                    "    timeout: 15\n")
+    proc = start_probe(ros_graph)
+    run = subprocess.Popen([sys.executable, "-m", "coordinator", "run", str(tree), "--modules", PROBE_JSON],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ))
+    try:
+        for line in run.stdout:
+            if "RUNNING" in line and "probe.work" in line:
+                break
+        time.sleep(0.5)
+        ros_graph.kill_node(proc)
+        start_probe(ros_graph, wait=False)
+        out, _ = run.communicate(timeout=60)
+    finally:
+        stop_run(run)
+    assert run.returncode == 0, out
+    calls = [line for line in out.splitlines() if "probe.work" in line and line.strip().startswith("+")]
+    assert "module_lost" in calls[0] and "succeeded" in calls[-1], out
+    assert "timeout" not in out.split("calls:")[1], out

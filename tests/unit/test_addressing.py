@@ -189,8 +189,11 @@ class _Pub:
         self.resolved_name = name
         self.sent = []
 
-    def publish(self, msg):
+    def publish(self, msg, key=None):
         self.sent.append(msg.data)
+
+    def discard(self, key):
+        return False
 
 
 def test_transport_sends_to_the_announced_topics_and_the_shared_ones_otherwise():

@@ -125,3 +125,39 @@ def test_a_broken_connection_is_closed_and_the_others_still_get_their_messages()
     assert _read_frames(good_peer, 50) == ["m%d" % i for i in range(50)]
     assert bad.done
     sender.unregister()
+
+
+def test_messages_sent_while_nobody_listens_wait_for_a_subscriber_in_order_unless_taken_back():
+    """A module's node restarting: its old connection is gone, the new one not made yet. Calls sent
+    meanwhile wait (a lost call would wait out its whole timeout) and go, in order, once it connects;
+    one taken back (its cancel) or no longer owed does not go."""
+    sender = TopicSender("/bmtree/call/probe", String, pub=_Pub([]))
+    for key in ("c1", "c2", "c3", "c4"):
+        sender.publish(String(key), key=key)
+    assert sender.publish(String("c5"), hold=True, key="c5")
+    sender.flush()
+    assert sender.discard("c2") and not sender.discard("c2") and not sender.discard("nope")
+    conn, theirs = _pair()
+    sender.impl.connections.append(conn)
+    sender.publish(String("c6"), key="c6")   # after the others, though a subscriber is there now
+    assert sender.connected(lambda key: key != "c3") == 4
+    assert _read_frames(theirs, 4) == ["c1", "c4", "c5", "c6"]
+    sender.publish(String("c7"), key="c7")   # connected: at once
+    assert _read_frames(theirs, 1) == ["c7"]
+    sender.unregister()
+
+
+def test_a_connection_whose_subscriber_died_is_dropped_and_later_messages_wait_for_a_new_one():
+    dead, dead_peer = _pair()
+    alive, alive_peer = _pair()
+    sender = TopicSender("/bmtree/call/probe", String, pub=_Pub([dead, alive]))
+    dead_peer.close()
+    assert sender.drop_closed() == 1 and dead.done and not alive.done
+    alive.close()  # now nobody listens: kept until one connects
+    sender.impl.connections[:] = []
+    sender.publish(String("retry"), key="k")
+    conn, theirs = _pair()
+    sender.impl.connections.append(conn)
+    assert sender.connected() == 1 and _read_frames(theirs, 1) == ["retry"]
+    sender.unregister()
+    alive_peer.close()
