@@ -54,6 +54,7 @@ class _Call:
         self.output: Optional[Dict[str, Any]] = None
         self.output_at = 0.0
         self.call_id = ""  # in BM_input and BM_cancel, for a node built with bmtree's library
+        self.skip: Dict[str, int] = {}  # values still to come on a topic that belong to another call
         self.cancel_sent = False
 
 
@@ -97,6 +98,7 @@ class CppBridge(BasicModule):
         #: late BM_output came or 0.0). Until it answers, the node is busy: a new call would be given
         #: that answer.
         self._owed: Optional[Tuple[str, str, float]] = None
+        self._owed_id = ""  # the call_id of the owed call (a library node echoes it in BM_output)
 
     # -- set-up ----------------------------------------------------------------------
     def setup(self, node: Any) -> None:
@@ -254,6 +256,9 @@ class CppBridge(BasicModule):
         with self._cond:
             call = self._call
             if call is not None and topic in call.fresh:
+                if call.skip.get(topic):
+                    call.skip[topic] -= 1
+                    return
                 call.fresh[topic].append(msg)
                 if call.output is not None:  # before BM_output nobody waits for data: no wake-up
                     self._cond.notify_all()
@@ -267,6 +272,22 @@ class CppBridge(BasicModule):
             out = {"status": "failed", "error": "malformed BM_output from %s: %s" % (self.cpp_node, exc)}
         with self._cond:
             call = self._call
+            answers = out.get("call_id")
+            if isinstance(answers, str) and (call is None or answers != call.call_id) and (
+                    self._owed is None or answers != self._owed_id):
+                # a library node names the call it answers: this one is not ours (it began before
+                # this bridge started: the previous bridge's, killed during it)
+                log.warning("ignored a BM_output from %s for call %s, which this bridge did not send (a call of "
+                            "a previous bridge?)", self.cpp_node, answers)
+                topics = out.get("outparam_topics")
+                if call is not None and isinstance(topics, list):  # its values came (or come) first on each topic
+                    for t in topics:
+                        if isinstance(t, str) and t in call.fresh:
+                            if call.fresh[t]:
+                                call.fresh[t].pop(0)
+                            else:
+                                call.skip[t] = call.skip.get(t, 0) + 1
+                return
             if call is None and self._owed is not None and not self._owed[2]:
                 log.info("the C++ node %s answered %s after the call had timed out; it takes calls again",
                          self.cpp_node, self._owed[0])
@@ -337,6 +358,7 @@ class CppBridge(BasicModule):
                 if self.call_timeout and now - start >= self.call_timeout:
                     self._ready = False
                     self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
+                    self._owed_id = call.call_id
                     self._send_cancel(call)  # a node that takes cancels stops and answers soon
                     raise Failure("no BM_output from the C++ node %s within %gs: it hangs or crashed" % (
                         self.cpp_node, self.call_timeout))

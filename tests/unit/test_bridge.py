@@ -167,3 +167,36 @@ def test_a_malformed_bm_info_is_a_difference_not_a_crash():
     info["signatures"]["ping"] = "nonsense"
     with pytest.raises(BindingError, match="function 'reach' returns nothing in the C.. node"):
         _bridge_with_info(info)._check_signatures(wait=0)
+
+
+def test_an_answer_to_a_call_this_bridge_did_not_send_is_thrown_away_with_its_values():
+    """The previous bridge was killed during a squeeze; the C++ node finishes it and answers while
+    this bridge's first call runs: its BM_output and values must not become this call's."""
+    from std_msgs.msg import String
+
+    d = load_definition(GRIPPER)
+    bridge = make_bridge(d)
+    ModuleServer(d, bridge, lambda t: None, lambda t: None)
+    bridge.cpp_node = "/gripper"
+    call = _Call(d.function("squeeze"), ["/gripper/float64", "/gripper/string"])
+    call.call_id = "mine"
+    bridge._call = call
+
+    def msg(cls, value):
+        m = cls(value)
+        m._connection_header = {"callerid": "/gripper"}
+        return m
+
+    def output(call_id, label):
+        return msg(String, json.dumps({"outparam_names": ["closed_for", "label"], "call_id": call_id,
+                                       "outparam_topics": ["/gripper/float64", "/gripper/string"]}))
+
+    bridge._on_data(msg(Float64, 6.0), "/gripper/float64")   # the old call's values: one came before its answer,
+    bridge._on_output(output("old", "long"))                  # the other comes after it (another connection)
+    bridge._on_data(msg(String, "long"), "/gripper/string")
+    assert call.output is None
+    bridge._on_data(msg(Float64, 0.5), "/gripper/float64")    # this call's own
+    bridge._on_data(msg(String, "short"), "/gripper/string")
+    bridge._on_output(output("mine", "short"))
+    out = bridge._outputs(call)
+    assert out["closed_for"].data == 0.5 and out["label"].data == "short"

@@ -421,6 +421,7 @@ class BasicModule {
       reply["status"] = "cancelled";  // whatever it returned: the bridge throws it away
       reply["error"] = "cancelled while it ran";
     }
+    if (!call.call_id.empty()) reply["call_id"] = call.call_id;  // a new bridge tells old answers apart
     std_msgs::String out;
     out.data = reply.dump();
     out_pub_.publish(out);
