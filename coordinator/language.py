@@ -29,7 +29,7 @@ from coordinator.values import literal, loose_dollars
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 
-__all__ = ["FORMAT", "Parser", "load_tree", "used_modules", "walk"]
+__all__ = ["FORMAT", "Parser", "TreeErrorsWithWarnings", "load_tree", "used_modules", "walk"]
 
 FORMAT = 1
 # Parsing, the checks, the builder and py_trees (tick, visitors, display) recurse per level of the tree,
@@ -47,7 +47,9 @@ _REQUIRED = {k: tuple(o.name for o in nk.options if o.required) for k, nk in REG
 _KEYS = {k: frozenset(_ALLOWED[k] + (k,)) for k in REGISTRY}   # every key a node of the kind may have
 _KINDS = frozenset(REGISTRY)
 _LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")   # may be written inline
-_NO_CHILDREN = LList()   # an inline composite without 'children' (reported once, by _inline)
+_NO_CHILDREN = LList()   # a composite whose children are missing, already reported (see _inline, _node)
+_CHILDREN_HINT = (": the children of %s are its value, a list (%s: [...]), or go under 'children:' inside it "
+                  "(%s: {children: [...]})")
 # per kind, what parsing a node asks of it (one lookup per node)
 _INFO = {k: (nk, _ALLOWED[k], _KEYS[k], _REQUIRED[k], k in _LISTS) for k, nk in REGISTRY.items()}
 
@@ -230,19 +232,26 @@ class Parser:
             self._no_kind(raw)
             return None
         nk, allowed, keys, required, inline = _INFO[kind]
-        if inline and isinstance(raw[kind], LMap):
+        value = raw[kind]
+        if inline and isinstance(value, LMap):
             raw = self._inline(raw, kind, allowed)
+            value = raw[kind]
         meant: Set[str] = set()   # options that unknown keys look like misspellings of
         if not keys.issuperset(raw):
             for k in raw:
                 if k != kind and k not in allowed:
-                    hint = did_you_mean(k, allowed)
-                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
-                    if hint:
+                    hint = did_you_mean(k, allowed + ("children",) if inline else allowed)
+                    if inline and (k == "children" or hint == " (did you mean 'children'?)"):
+                        hint = _CHILDREN_HINT % (kind, kind, kind)
+                        meant.add("children")
+                    elif hint:
                         meant.add(hint[len(" (did you mean '"):-len("'?)")])
+                    self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
         for o in required:
             if o not in raw and o not in meant:   # a misspelt option is one error, not two
                 self.err(raw.key_pos[kind], "%s needs option %r" % (kind, o))
+        if "children" in meant and not value:
+            value = _NO_CHILDREN   # the list is under the misplaced key: its error is enough
         name = raw.get("name")
         if name is not None and not isinstance(name, str):
             self.err(raw.val_pos["name"], "'name' must be a string")
@@ -252,7 +261,7 @@ class Parser:
         node = TreeNode(kind, name or "", raw._kp[kind], None, None, nk, value_at, file)
         self.depth = depth
         try:
-            node.spec = nk.parse(self, node, raw, raw[kind], None if nk.parse_without_pos else node.value_pos)
+            node.spec = nk.parse(self, node, raw, value, None if nk.parse_without_pos else node.value_pos)
         finally:
             self.depth = depth - 1
         if not node.name:
@@ -305,6 +314,8 @@ class Parser:
         merged[kind] = inner.get("children", _NO_CHILDREN)
         merged.key_pos[kind] = outer.key_pos[kind]
         merged.val_pos[kind] = inner.val_pos.get("children", inner.pos)
+        misspelt = misspelt or any(k == "children" or did_you_mean(k, allowed + ("children",)) ==
+                                   " (did you mean 'children'?)" for k in outer if k != kind and k not in allowed)
         if "children" not in inner and not misspelt:
             self.err(inner.pos, "%s needs 'children' (a list of nodes)" % kind)
         return merged
@@ -433,6 +444,7 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
     """
 
     parser = Parser(definitions, loader or read_text)
+    found: List[TreeError] = []
     with gc_paused():
         tree = parser.load_file(path, None)
         errors = list(parser.errors)
@@ -440,13 +452,27 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
             nodes = nodes_of(tree.root)
             errors.extend(check_flow(tree, frozenset(given)))
             errors.extend(check_types(tree, nodes))
+            found = sorted(set(parser.warnings) | set(warnings(nodes)),
+                           key=lambda e: (e.pos.file, e.pos.line, e.pos.column, e.message))
             if not errors:
-                tree.warnings = sorted(set(parser.warnings) | set(warnings(nodes)),
-                                       key=lambda e: (e.pos.file, e.pos.line, e.pos.column, e.message))
+                tree.warnings = found
+        else:
+            found = list(parser.warnings)
     if errors:
-        raise TreeErrors(errors)
+        raise TreeErrorsWithWarnings(errors, found)
     assert tree is not None
     return tree
+
+
+class TreeErrorsWithWarnings(TreeErrors):
+    """A tree's errors (``errors``), and its warnings (``warnings``) too in its text: fixing the errors
+    first and only then learning of a warning takes one more round."""
+
+    def __init__(self, errors: List[TreeError], warned: List[TreeError]):
+        super().__init__(list(errors) + list(warned))   # the text: both, in file order
+        said = set(warned)
+        self.warnings = [e for e in self.errors if e in said]
+        self.errors = [e for e in self.errors if e not in said]
 
 
 def warnings(nodes: List[TreeNode]) -> List[TreeError]:

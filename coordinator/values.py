@@ -334,9 +334,9 @@ def _misfit(t: str, value: Any, field: str, top: bool) -> Optional[Tuple[str, st
     if isinstance(value, genpy.Message):
         return None if value._type == t else (field, t, value, "")
     slots, slot_types = list(cls.__slots__), list(cls._slot_types)
+    if top and len(slots) == 1 and not (isinstance(value, dict) and slots[0] in value):
+        return _misfit(slot_types[0], value, field, False)   # a value stands for the one field's
     if not isinstance(value, dict):
-        if top and len(slots) == 1:   # a scalar stands for the one field's value
-            return _misfit(slot_types[0], value, field, False)
         return field, t, value, ""
     for k, v in value.items():
         path = "%s.%s" % (field, k) if field else str(k)

@@ -48,13 +48,22 @@ class Call(Leaf):
         self.timeout = self.timeout or self.ctx.default_timeout
         fn = spec.function
         assert fn is not None
-        try:
-            msgs = [spec.static[p.name] if p.name in spec.static else p.convert(resolve(spec.inputs[p.name],
-                                                                                        self.ctx.lookup))
-                    for p in fn.inputs]
-        except (KeyError, RefError, ProtocolError) as exc:
-            self.reason = "cannot build the call: %s" % (exc.args[0] if exc.args else exc)
-            return
+        msgs = []
+        for p in fn.inputs:
+            if p.name in spec.static:
+                msgs.append(spec.static[p.name])
+                continue
+            try:
+                value = resolve(spec.inputs[p.name], self.ctx.lookup)
+                msgs.append(p.convert(value))
+            except (KeyError, RefError) as exc:
+                self.reason = "cannot build the call: %s" % (exc.args[0] if exc.args else exc)
+                return
+            except ProtocolError as exc:   # said in the tree's words, as the checks say it
+                said = misfit_text(p.rostype, value)
+                self.reason = "cannot build the call: input %r %s" % (p.name, said) if said else \
+                    "cannot build the call: input %r: %s" % (p.name, exc)
+                return
         call = FunctionCall(fn.module, fn.name, msgs, [p.name for p in fn.inputs], new_id())
         self.record = self.ctx.start_call(fn, call, owner=self)
         self.deadline = self.ctx.clock.now() + self.timeout

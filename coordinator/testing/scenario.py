@@ -20,6 +20,10 @@
             - speech.say
             - navigation.go_to: {place: living_room}
           blackboard: {object_room: kitchen}
+      - name: vision is blind
+        mocks:
+          vision.find_object: {fail: camera covered}
+        expect: {status: failure, reason: camera covered}
 
 The whole file is checked before any scenario runs. Every run ends: after ``max_duration``
 simulated seconds, ``max_ticks`` ticks, or ``max_ticks_per_instant`` ticks without the simulated
@@ -35,12 +39,13 @@ from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
 
 from py_trees.common import Status
 
-from comm.errors import did_you_mean
+from comm.errors import ProtocolError, did_you_mean
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
 from coordinator.runevents import RunObserver
 from coordinator.testing.kit import TreeRun, TreeTest
-from coordinator.testing.mocks import MockError, Outcome, outcome_from_dict
+from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
+from coordinator.values import misfit_text
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
@@ -56,46 +61,51 @@ DEFAULT_MAX_TICKS_PER_INSTANT = 10000
 """Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
 _SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect") + _LIMITS
-_EXPECT_KEYS = ("status", "calls", "blackboard")
+_EXPECT_KEYS = ("status", "calls", "blackboard", "reason")
 
 
-def _outcome(raw: Any, at: Pos) -> Outcome:
-    try:
-        return outcome_from_dict(raw)
-    except MockError as exc:
-        raise TreeErrors([TreeError(at, str(exc))])
+class _Problems:
+    """The problems of a scenario file, collected: every one is reported, not only the first."""
+
+    def __init__(self) -> None:
+        self.errors: List[TreeError] = []
+
+    def add(self, at: Pos, message: str) -> None:
+        self.errors.append(TreeError(at, message))
 
 
-def _check_keys(m: LMap, allowed: Any, what: str) -> None:
-    errs = [TreeError(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed)))
-            for k in m if k not in allowed]
-    if errs:
-        raise TreeErrors(errs)
+def _check_keys(m: LMap, allowed: Any, what: str, out: _Problems) -> None:
+    for k in m:
+        if k not in allowed:
+            out.add(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed)))
 
 
-def _number(m: LMap, key: str, default: float, at: Pos) -> float:
-    """``m[key]`` as a non-negative number of seconds, else a positioned error."""
+def _number(m: LMap, key: str, default: float, at: Pos, out: _Problems) -> float:
+    """``m[key]`` as a non-negative number of seconds, else ``default`` after a positioned error."""
     value = m.get(key, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < float("inf"):  # NaN too
-        raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))])
+        out.add(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))
+        return default
     return float(value)
 
 
-def _count(m: LMap, key: str, default: int, at: Pos) -> int:
-    """``m[key]`` as a whole number >= 1, else a positioned error."""
+def _count(m: LMap, key: str, default: int, at: Pos, out: _Problems) -> int:
+    """``m[key]`` as a whole number >= 1, else ``default`` after a positioned error."""
     value = m.get(key, default)
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise TreeErrors([TreeError(pos_of(m, key, at), "%s must be a whole number >= 1, got %r" % (key, value))])
+        out.add(pos_of(m, key, at), "%s must be a whole number >= 1, got %r" % (key, value))
+        return default
     return value
 
 
-def _mapping(m: Any, key: str, at: Pos, what: str) -> Any:
-    """``m[key]`` as a mapping (empty when absent or null), else a positioned error saying ``what``."""
+def _mapping(m: Any, key: str, at: Pos, what: str, out: _Problems) -> Any:
+    """``m[key]`` as a mapping (empty when absent or null, or after a positioned error saying ``what``)."""
     value = m.get(key)
     if value is None:
         return {}
     if not isinstance(value, dict):
-        raise TreeErrors([TreeError(pos_of(m, key, at), what)])
+        out.add(pos_of(m, key, at), what)
+        return {}
     return value
 
 
@@ -198,70 +208,139 @@ class TickGuard(RunObserver):
         return self.hit
 
 
-def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition]) -> _Scenario:
-    """Check one scenario (TreeErrors with positions) and script its mocks and events."""
+def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str, ModuleDefinition]) -> _Scenario:
+    """Check one scenario (TreeErrors listing every problem, with positions) and script its mocks and events;
+    ``tree_path`` None: the tree is missing or invalid (already reported), the rest is checked all the same."""
     if not isinstance(sc, LMap):
         raise TreeErrors([TreeError(at, "a scenario is a mapping")])
-    _check_keys(sc, _SCENARIO_KEYS, "scenario")
-    inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value")
-    mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)")
-    expect = _mapping(sc, "expect", at, "expect is a mapping with status, calls, blackboard")
-    _check_keys(expect, _EXPECT_KEYS, "expect")
-    status = str(expect.get("status", "success"))
-    if status.lower() not in ("success", "failure"):
-        raise TreeErrors([TreeError(pos_of(expect, "status", at), "status is success or failure, got %r" % status)])
-    calls = expect.get("calls") or []
-    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
-        raise TreeErrors([TreeError(pos_of(expect, "calls", at), "calls is a list of module.function or "
-                                                                 "{module.function: {input: value}}")])
-    _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value")
-    limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at),
-              "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at),
-              "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at)}
-    test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs))
-    declared = test.tree.inputs
-    errs = [TreeError(inputs.key_pos[k], "the tree declares no input %r%s (its inputs: %s)" % (
-        k, did_you_mean(k, declared), ", ".join(sorted(declared)) or "none")) for k in inputs if k not in declared]
-    missing = sorted(test.tree.required_inputs - set(inputs))
-    if missing:
-        errs.append(TreeError(pos_of(sc, "inputs", at), "the tree needs the input%s %s: give %s in 'inputs'" % (
-            "s" if len(missing) > 1 else "", ", ".join(missing), "them" if len(missing) > 1 else "it")))
-    if errs:
-        raise TreeErrors(errs)
+    out = _Problems()
+    _check_keys(sc, _SCENARIO_KEYS, "scenario", out)
+    inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value", out)
+    mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
+    expect = _expectations(sc, at, out)
+    limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
+              "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
+              "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
+    if not isinstance(sc.get("name", ""), str):
+        out.add(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))
+    test = TreeTest(tree_path, definitions=defs) if tree_path is not None else None   # valid: checked before
+    if test is not None:
+        _check_inputs(test.tree, inputs, sc, at, out)
+        test.inputs = dict(inputs)
+    mocked = test.mocks if test is not None else Mocks(defs)
     for target, outcomes in mocks.items():
-        t_at = mocks.key_pos.get(target, at) if isinstance(mocks, LMap) else at
-        if not isinstance(target, str):
-            raise TreeErrors([TreeError(t_at, "mocks: %r is not a module.function" % (target,))])
-        if isinstance(outcomes, list) and not outcomes:
-            raise TreeErrors([TreeError(pos_of(mocks, target, at), "mocks.%s: an empty list of outcomes (leave the "
-                                                                  "function out for the mock's default)" % target)])
-        if isinstance(outcomes, LList):
-            outcomes_list, positions = list(outcomes), outcomes.item_pos
-        else:
-            outcomes_list, positions = [outcomes], [pos_of(mocks, target, at)]
-        try:
-            test.mocks[target].script(*[_outcome(o, p) for o, p in zip(outcomes_list, positions)])
-        except MockError as exc:
-            raise TreeErrors([TreeError(t_at, str(exc))])
+        _script(mocked, mocks, target, outcomes, at, out)
     events = sc.get("events") or []
     if not isinstance(events, list):
-        raise TreeErrors([TreeError(pos_of(sc, "events", at), "events is a list of {at, event, params}")])
+        out.add(pos_of(sc, "events", at), "events is a list of {at, event, params}")
+        events = []
     for j, ev in enumerate(events):
         ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
         if not isinstance(ev, LMap) or "event" not in ev:
-            raise TreeErrors([TreeError(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")])
-        _check_keys(ev, ("at", "event", "params"), "event")
+            out.add(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")
+            continue
+        _check_keys(ev, ("at", "event", "params"), "event", out)
         params = ev.get("params") or {}
         if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
-            raise TreeErrors([TreeError(pos_of(ev, "params", ev_at), "params is a mapping of name: value")])
+            out.add(pos_of(ev, "params", ev_at), "params is a mapping of name: value")
+            continue
+        when = _number(ev, "at", 0.0, ev_at, out)
         try:
-            test.mocks.event(_number(ev, "at", 0.0, ev_at), str(ev["event"]), **dict(params))
+            mocked.event(when, str(ev["event"]), **dict(params))
         except MockError as exc:
-            raise TreeErrors([TreeError(ev_at, str(exc))])
-    if not isinstance(sc.get("name", ""), str):
-        raise TreeErrors([TreeError(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))])
+            out.add(ev_at, str(exc))
+    if out.errors or test is None:
+        raise TreeErrors(out.errors)
     return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
                      {k for k in _LIMITS if k in sc})
+
+
+def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> None:
+    """A scenario's ``inputs`` against the tree's: each declared, every required one given."""
+    declared = tree.inputs
+    for k in inputs:
+        if k not in declared:
+            out.add(inputs.key_pos[k], "the tree declares no input %r%s (its inputs: %s)" % (
+                k, did_you_mean(k, declared), ", ".join(sorted(declared)) or "none"))
+    missing = sorted(tree.required_inputs - set(inputs))
+    if missing:
+        out.add(pos_of(sc, "inputs", at), "the tree needs the input%s %s: give %s in 'inputs'" % (
+            "s" if len(missing) > 1 else "", ", ".join(missing), "them" if len(missing) > 1 else "it"))
+
+
+def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
+    """A scenario's ``expect``, checked (its problems to ``out``)."""
+    expect = _mapping(sc, "expect", at, "expect is a mapping with %s" % ", ".join(_EXPECT_KEYS), out)
+    if not expect:
+        return expect
+    _check_keys(expect, _EXPECT_KEYS, "expect", out)
+    status = str(expect.get("status", "success"))
+    if status.lower() not in ("success", "failure"):
+        out.add(pos_of(expect, "status", at), "status is success or failure, got %r%s" % (
+            status, did_you_mean(status.lower(), ("success", "failure"))))
+    calls = expect.get("calls") or []
+    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
+        out.add(pos_of(expect, "calls", at), "calls is a list of module.function or {module.function: {input: value}}")
+    _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
+    if "reason" in expect and not isinstance(expect["reason"], str):
+        out.add(pos_of(expect, "reason", at), "reason is text that the run's reason must contain, got %r" % (
+            expect["reason"],))
+    return expect
+
+
+def _script(mocked: Mocks, mocks: Any, target: Any, outcomes: Any, at: Pos, out: _Problems) -> None:
+    """Script one mocked function (its problems to ``out``, each where it is written)."""
+    t_at = mocks.key_pos.get(target, at) if isinstance(mocks, LMap) else at
+    if not isinstance(target, str):
+        out.add(t_at, "mocks: %r is not a module.function" % (target,))
+        return
+    if isinstance(outcomes, list) and not outcomes:
+        out.add(pos_of(mocks, target, at), "mocks.%s: an empty list of outcomes (leave the function out for the "
+                                           "mock's default)" % target)
+        return
+    if isinstance(outcomes, LList):
+        outcomes_list, positions = list(outcomes), outcomes.item_pos
+    else:
+        outcomes_list, positions = [outcomes], [pos_of(mocks, target, at)]
+    try:
+        mock = mocked[target]
+    except MockError as exc:
+        out.add(t_at, str(exc))
+        return
+    written, before = [], len(out.errors)
+    for raw, where in zip(outcomes_list, positions):
+        try:
+            written.append(outcome_from_dict(raw))
+        except MockError as exc:
+            out.add(where, str(exc))
+            continue
+        _check_outputs(mock.fn, raw, out)
+    if len(out.errors) > before:
+        return
+    try:
+        mock.script(*written)
+    except MockError as exc:
+        out.add(t_at, str(exc))
+
+
+def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
+    """A ``succeed``'s outputs against the function's definition: each problem at its output."""
+    outputs = raw.get("succeed") if isinstance(raw, LMap) else None
+    if not isinstance(outputs, LMap):
+        return
+    params = {q.name: q for q in fn.outputs}
+    for name, value in outputs.items():
+        q = params.get(name)
+        if q is None:
+            out.add(outputs.key_pos[name], "%s has no output %r%s" % (fn.qualified, name, did_you_mean(
+                name, params) or " (its outputs: %s)" % (", ".join(params) or "none")))
+            continue
+        try:
+            q.convert(value)
+        except ProtocolError as exc:
+            said = misfit_text(q.rostype, value)
+            out.add(outputs.val_pos[name], "%s output %r %s" % (fn.qualified, name, said) if said
+                    else "%s output %r: %s" % (fn.qualified, name, exc))
 
 
 def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None) -> List[_Scenario]:
@@ -277,8 +356,9 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
     data = load_yaml(text, path)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
-    _check_keys(data, ("tree", "scenarios"), "top-level")
-    errors = []
+    found = _Problems()
+    _check_keys(data, ("tree", "scenarios"), "top-level", found)
+    errors = found.errors
     defs = definitions if definitions is not None else default_definitions()
     tree = data["tree"]
     tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(tree))
@@ -292,14 +372,14 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
             load_tree(tree_path, defs)   # the tree itself, before the scenarios give it inputs
         except TreeErrors as exc:
             errors.extend(exc.errors)
+            errors.extend(getattr(exc, "warnings", ()))
     if not data["scenarios"]:
         errors.append(TreeError(pos_of(data, "scenarios", top), "scenarios is empty: write at least one scenario"))
-    if errors:
-        raise TreeErrors(errors)
+    usable = tree_path if not errors else None   # else the scenarios are checked without their tree
     scenarios = []
     for i, sc in enumerate(data["scenarios"]):
         try:
-            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs))
+            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], usable, defs))
         except TreeErrors as exc:
             errors.extend(exc.errors)
     if errors:
@@ -329,9 +409,16 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
                             "the tree needs longer" % limits["max_duration"])
     if "calls" in expect:
         problems.extend(_expect_calls(run, list(expect["calls"] or [])))
+    if "reason" in expect and str(expect["reason"]) not in run.reason:
+        problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
+                        else "no reason (the run %s), expected one containing %r" % (
+                            "succeeded" if run.status == Status.SUCCESS else "gave none", str(expect["reason"])))
     bb = run.blackboard
     for k, v in (expect.get("blackboard") or {}).items():
-        if bb.get(k) != v:
+        if k not in bb and v is not None:
+            problems.append("blackboard %s was never written in this run (expected %r)%s" % (
+                k, v, did_you_mean(k, bb) or "; written: %s" % (", ".join(sorted(map(str, bb))) or "none")))
+        elif bb.get(k) != v:
             problems.append("blackboard %s is %r, expected %r" % (k, bb.get(k), v))
     return run, problems
 

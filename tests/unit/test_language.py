@@ -47,7 +47,7 @@ def test_all_errors_are_reported_at_once(tmp_path, sim_defs, capsys):
     err = capsys.readouterr().err
     assert "many.yaml:4:13: module 'speech' has no function 'sya' (did you mean 'say'?)" in err
     assert "many.yaml:6:7: unknown node kind 'wiat' (did you mean 'wait'?)" in err
-    assert "many.yaml:7:7: reads 'x'" in err and "Traceback" not in err
+    assert "many.yaml:7:15: reads 'x'" in err and "Traceback" not in err
 
 
 EVERY_KIND = """

@@ -159,7 +159,7 @@ def test_template_errors_are_found_before_running(tmp_path):
     assert any("bad.yaml:6:34: '{' without its '}'" in e for e in errs), errs
     errs = errors_of(tmp_path, "format: 1\ninputs:\n  object: {default: apple}\nroot:\n"
                                "  call: speech.say\n  inputs: {text: \"the {objet}\"}\n")
-    assert errs == ["bad.yaml:5:3: reads 'objet', which is not written on every path before this node "
+    assert errs == ["bad.yaml:6:24: reads 'objet', which no node writes and no input declares "
                     "(did you mean 'object'?)"]
 
 

@@ -46,7 +46,7 @@ def test_invalid_scenario_file(tmp_path, capsys):
     f.write_text("tree: %s\nscenarios:\n  - mocks:\n      speech.say: {succeed: {volume: 3}}\n"
                  % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 2
-    assert "unknown output 'volume'" in capsys.readouterr().err
+    assert "s.yaml:4:30: speech.say has no output 'volume' (its outputs: success)" in capsys.readouterr().err
 
 
 # every scenario ends ------------------------------------------------------------------------------
@@ -189,8 +189,8 @@ def test_every_scenario_is_checked_before_the_first_runs(tmp_path, capsys):
     assert "PASS" not in captured.out and "FAIL" not in captured.out
     assert captured.err.splitlines() == [
         "%s:5:14: the tree declares no input 'objet' (did you mean 'object'?) (its inputs: object, rooms)" % f,
-        "%s:7:13: expect is a mapping with status, calls, blackboard" % f,
-        "%s:9:22: status is success or failure, got 'sucess'" % f,
+        "%s:7:13: expect is a mapping with status, calls, blackboard, reason" % f,
+        "%s:9:22: status is success or failure, got 'sucess' (did you mean 'success'?)" % f,
         "%s:11:21: calls is a list of module.function or {module.function: {input: value}}" % f,
         "%s:13:16: max_ticks must be a whole number >= 1, got 0" % f]
 
@@ -257,3 +257,65 @@ def test_a_scenario_value_of_the_wrong_kind_is_a_positioned_error(tmp_path, caps
     assert bmtree(["test", str(path)]) == 2
     err = capsys.readouterr().err
     assert "%s:%s" % (path, says) in err and "Traceback" not in err, err
+
+
+# every problem of a file at once; expectations that say what went wrong -----------------------------------
+def test_every_problem_of_a_scenario_is_reported_at_once(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n"
+                 "  - name: three mistakes\n"
+                 "    mocks:\n"
+                 "      vision.find_object:\n"
+                 "        succeed: {success: true, positon: {x: 1.0}}\n"
+                 "      navigation.go_to: {succeed: {room: 5}}\n"
+                 "    expect:\n"
+                 "      stauts: success\n"
+                 "    max_ticks: 0\n" % os.path.join(TREES, "find_apple.yaml"))
+    assert bmtree(["test", str(f)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "%s:6:34: vision.find_object has no output 'positon' (did you mean 'position'?)" % f,
+        "%s:7:42: navigation.go_to output 'room' takes text (std_msgs/String), got 5" % f,
+        "%s:9:7: unknown expect key 'stauts' (did you mean 'status'?)" % f,
+        "%s:10:16: max_ticks must be a whole number >= 1, got 0" % f]
+
+
+def test_scenarios_are_checked_even_when_the_tree_is_invalid(tmp_path, capsys):
+    (tmp_path / "bad.yaml").write_text("format: 1\nroot:\n  call: speech.sya\n")
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: bad.yaml\nscenarios:\n  - name: x\n    mokcs: {}\n")
+    assert bmtree(["test", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml:3:9: module 'speech' has no function 'sya'" in err
+    assert "s.yaml:4:5: unknown scenario key 'mokcs' (did you mean 'mocks'?)" in err
+
+
+def test_a_blackboard_key_never_written_is_said_so(tmp_path):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n  - name: typo\n    expect:\n      blackboard: {object_rom: kitchen}\n"
+                 "  - name: unknown\n    expect:\n      blackboard: {zzz: 1}\n" % os.path.join(TREES, "find_apple.yaml"))
+    out = io.StringIO()
+    assert run_scenario_file(str(f), out=out) == [False, False]
+    text = out.getvalue()
+    assert ("    blackboard object_rom was never written in this run (expected 'kitchen') "
+            "(did you mean 'object_room'?)\n") in text
+    assert "    blackboard zzz was never written in this run (expected 1); written: attempts, object, " in text
+    assert " is None, expected" not in text
+
+
+def test_expect_reason_is_a_substring_of_the_runs_reason(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n"
+                 "  - name: blind\n    mocks:\n      vision.find_object: {fail: camera covered}\n"
+                 "    expect: {status: failure, reason: camera covered}\n"
+                 "  - name: blind, another reason\n    mocks:\n      vision.find_object: {fail: camera covered}\n"
+                 "    expect: {status: failure, reason: battery low}\n"
+                 "  - name: succeeds\n    expect: {reason: battery low}\n" % os.path.join(TREES, "find_apple.yaml"))
+    out = io.StringIO()
+    assert run_scenario_file(str(f), out=out) == [True, False, False]
+    text = out.getvalue()
+    assert ("    reason 'look for the object: vision.find_object failed: camera covered' does not contain "
+            "'battery low'\n") in text
+    assert "    no reason (the run succeeded), expected one containing 'battery low'\n" in text
+    f.write_text("tree: %s\nscenarios:\n  - expect: {reason: 5}\n" % os.path.join(TREES, "find_apple.yaml"))
+    assert bmtree(["test", str(f)]) == 2
+    assert "s.yaml:3:22: reason is text that the run's reason must contain, got 5" in capsys.readouterr().err

@@ -122,3 +122,26 @@ def test_load_value_gives_plain_containers_with_the_same_limits():
     assert deep == []
     with pytest.raises(TreeErrors, match="nested too deeply"):
         load_value("[" * 500 + "]" * 500, "--set v")
+
+
+@pytest.mark.parametrize("text,where,says", [
+    # a key indented less than the list item it belongs to (the audit's m4.yaml)
+    ("format: 1\nroot:\n  sequence:\n    - call: speech.say\n      inputs: {text: hi}\n  - call: speech.say\n",
+     "t.yaml:6:3", "did not find expected key (in the mapping that starts at line 3, column 3): check the "
+                   "indentation of this line and the one before"),
+    # a key indented one column short of the item's keys
+    ("root:\n  - call: speech.say\n    inputs: {text: hi}\n   name: x\n",
+     "t.yaml:4:4", "did not find expected '-' indicator (in the list that starts at line 2, column 3): check "
+                   "the indentation of this line and the one before: every item of a list starts with '- '"),
+    # a key indented deeper than the keys above it
+    ("root:\n  call: speech.say\n  name: x\n    inputs: {text: hi}\n",
+     "t.yaml:4:11", "mapping values are not allowed in this context: a ': ' inside a value that is not quoted, "
+                    "or a key indented deeper than the keys above it"),
+    ("root:\n  name: note: hi\n", "t.yaml:2:13", "quote the value"),
+    ("root:\n\tsequence: []\n", "t.yaml:2:1", "a tab: YAML indents with spaces only"),
+])
+def test_common_yaml_syntax_errors_say_what_to_fix(text, where, says):
+    with pytest.raises(TreeErrors) as info:
+        load_yaml(text, "t.yaml")
+    (error,) = info.value.errors
+    assert str(error).startswith(where + ": YAML syntax error: ") and says in error.message, str(error)
