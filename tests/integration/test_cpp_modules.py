@@ -439,6 +439,33 @@ def test_example_runs_clean_under_address_and_undefined_sanitizers(ros_graph, gr
     assert "AddressSanitizer" not in log and "runtime error" not in log, log[-4000:]
 
 
+def test_a_cpp_node_stopped_during_a_call_stops_the_function_too(ros_graph, gripper_exe, tmp_path):
+    """Ctrl-C (SIGINT) to the C++ node during a 30 s squeeze: sleepFor() sees the shutdown, so the
+    process ends at once instead of finishing the squeeze (a respawned node would drive the
+    fingers beside it)."""
+    cpp, _bridge = start_gripper(ros_graph, gripper_exe)
+    tree = tmp_path / "long.yaml"
+    tree.write_text("format: 1\nroot:\n  call: gripper.squeeze\n  inputs: {seconds: 30.0, label: long}\n")
+    run_proc = subprocess.Popen(bmtree_cmd("run", str(tree)), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        for line in run_proc.stdout:
+            if "RUNNING" in line and "gripper.squeeze" in line:
+                break
+        time.sleep(0.3)
+        cpp.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        assert cpp.wait(30) == 0
+        stopped = time.monotonic() - t0
+        ros_graph.nodes.remove(cpp)
+        out, _ = run_proc.communicate(timeout=60)
+    finally:
+        if run_proc.poll() is None:
+            run_proc.kill()
+    assert stopped < 5.0, stopped  # not after the squeeze's 30 s
+    assert "the C++ node /gripper exited during the call" in out, out
+
+
 def test_modules_cpp_is_also_a_catkin_package(tmp_path):
     """Configured as catkin configures a package of a workspace; it exports the library's headers."""
     build = tmp_path / "build"

@@ -182,16 +182,26 @@ class BasicModule {
   const std::string& moduleName() const { return module_; }
 
  protected:
-  /// True once the running call was cancelled: stop what the function does and return.
-  bool cancelled() const { return cancelled_.load(); }
+  /// True once the running call was cancelled, or the node is shutting down (Ctrl-C, rosnode
+  /// kill: a respawned node must not drive the hardware beside this one): stop and return.
+  bool cancelled() const { return cancelled_.load() || !ros::ok(); }
 
-  /// Wait `seconds` unless the running call is cancelled first; true if the whole time passed.
-  /// Use it instead of sleeping, so that a halted tree stops the function at once.
+  /// Wait `seconds` unless the running call is cancelled (or the node shuts down) first; true if
+  /// the whole time passed. Use it instead of sleeping, so that a halted tree stops the function
+  /// at once.
   bool sleepFor(double seconds) {
     std::unique_lock<std::mutex> lock(cancel_mutex_);
-    if (!(seconds > 0)) return !cancelled_.load();  // also NaN: no wait
-    auto wait = std::chrono::duration<double>(std::min(seconds, 1e9));
-    return !cancel_cv_.wait_for(lock, wait, [this]() { return cancelled_.load(); });
+    auto stop = [this]() { return cancelled(); };
+    if (!(seconds > 0)) return !stop();  // also NaN: no wait
+    using Clock = std::chrono::steady_clock;
+    const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(std::min(seconds, 1e9)));
+    while (Clock::now() < end) {  // a shutdown notifies nobody: look at it every 50 ms
+      if (cancel_cv_.wait_until(lock, std::min(end, Clock::now() + std::chrono::milliseconds(50)), stop)) {
+        return false;
+      }
+    }
+    return !stop();
   }
 
   /// Register `fn` as the function `name`; its inputs are its parameters, in the definition's
