@@ -25,7 +25,7 @@ from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_
 if TYPE_CHECKING:
     from coordinator.ros_transport import RosTransport
 
-__all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
+__all__ = ["wait_ready", "blackboard_listeners", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
 
 PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
 ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
@@ -133,7 +133,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             originals.update(legacy_nodes([n for n in wanted if n not in announced and n not in originals
                                            and n not in given]))
             originals.update(_given_nodes(given))
-            blackboards = _blackboard_listeners()
+            blackboards = blackboard_listeners()
             tr._set_routes([announced[n] for n in wanted if n in announced])
             next_look = now + ANNOUNCEMENTS_EVERY
         problems: Dict[str, List[str]] = {}
@@ -226,7 +226,7 @@ def _given_nodes(given: Mapping[str, str]) -> Dict[str, Tuple[str, str]]:
     return found
 
 
-def _blackboard_listeners() -> List[str]:
+def blackboard_listeners() -> List[str]:
     """Running Blackboard nodes that listen to the calls (a killed node stays registered)."""
     import rosgraph
 

@@ -45,6 +45,22 @@ def _report(result: Any, tree_name: str) -> None:
         print("  +%7.3fs  %-26s %-11s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
 
 
+def _warn_without_blackboard() -> None:
+    """A tree that never recalls runs without a Blackboard node, but its results are then kept nowhere."""
+    import rosgraph
+
+    from coordinator.preflight import blackboard_listeners
+
+    try:
+        if blackboard_listeners():
+            return
+    except (OSError, rosgraph.masterapi.Error) as exc:  # the master went away meanwhile: the run will say so
+        log.debug("asking for the Blackboard node: %s", exc)
+        return
+    err("warning: no Blackboard node is running on this master: the results of this run's calls are not stored "
+        "(start one: bmtree-blackboard, or roslaunch bmtree blackboard.launch)")
+
+
 def first_uses(tree: Any) -> Dict[str, str]:
     """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
     from coordinator.treeast import walk
@@ -261,6 +277,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             err("error: %s" % exc)
             return EXIT_ENV
         stream_sink.settle()
+        if not recall and not args.sim:
+            _warn_without_blackboard()
         ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
         root = build_tree(tree, ctx, given)
         from coordinator.watch import run_view

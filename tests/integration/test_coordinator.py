@@ -128,6 +128,15 @@ root:
     out = run("run", str(tree), "--modules", REFERENCE, "-q")
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count("succeeded") == 3
+    # no Blackboard node on this graph: the tree needs none, but its results are stored nowhere
+    assert "warning: no Blackboard node is running on this master: the results of this run's calls are not " \
+        "stored" in out.stderr, out.stderr
+    ros_graph.start_node(["-m", "blackboard.node", "--db", str(tmp_path / "bb.sqlite")], "/blackboard")
+    deadline = time.monotonic() + 30
+    while "warning: no Blackboard" in out.stderr:
+        assert time.monotonic() < deadline, out.stderr
+        out = run("run", str(tree), "--modules", REFERENCE, "-q")
+        assert out.returncode == 0, out.stdout + out.stderr
 
 
 def first_use(tree, prefix):
