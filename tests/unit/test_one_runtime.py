@@ -172,7 +172,9 @@ def test_the_runtime_answers_alike_on_threads_and_on_a_simulated_clock(sim_defs)
     assert clock.now() == pytest.approx(0.3)                  # simulated time: nothing waited for real
 
 
-def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_module(sim_defs):
+def cancelled_while_it_runs(sim_defs):
+    """A navigation.go_to whose code runs until ``release`` is set, cancelled at once, on worker
+    threads and the wall clock: (release, Answers, the navigation definition, the call)."""
     release = threading.Event()
     mocks = Mocks(sim_defs)
     mocks["navigation.go_to"].respond(lambda place: {"room": place} if release.wait(10) else {})
@@ -181,6 +183,11 @@ def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_mod
     go = nav.function("go_to").build_call({"place": "kitchen"})
     a.server.handle_call(go.encode())
     a.server.handle_cancel(CancelRequest(go.call_id, "navigation", "go_to").encode())
+    return release, a, nav, go
+
+
+def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_module(sim_defs):
+    release, a, nav, go = cancelled_while_it_runs(sim_defs)
     assert a.wait(go.call_id).status == "cancelled"          # after the grace: the function ignores it
     busy = nav.function("approach").build_call({"target": {"x": 1.0}})
     a.server.handle_call(busy.encode())
@@ -200,14 +207,7 @@ def test_a_running_function_is_answered_after_the_cancel_grace_and_keeps_its_mod
 def test_a_call_sent_while_the_holder_is_being_cancelled_waits_for_it_and_runs(sim_defs):
     """The tree halts a call and goes on at once (a retry, the next child): the module's cancelled code
     needs a moment to stop, and the next call waits for it instead of being refused busy."""
-    release = threading.Event()
-    mocks = Mocks(sim_defs)
-    mocks["navigation.go_to"].respond(lambda place: {"room": place} if release.wait(10) else {})
-    a = Answers(sim_defs, mocks, executor=WorkerThreads("t"), scheduler=TimerThread())
-    nav = sim_defs["navigation"]
-    go = nav.function("go_to").build_call({"place": "kitchen"})
-    a.server.handle_call(go.encode())
-    a.server.handle_cancel(CancelRequest(go.call_id, "navigation", "go_to").encode())
+    release, a, nav, go = cancelled_while_it_runs(sim_defs)
     nxt = nav.function("approach").build_call({"target": {"x": 1.0}})
     a.server.handle_call(nxt.encode())
     third = nav.function("approach").build_call({"target": {"x": 2.0}})

@@ -346,11 +346,13 @@ def _args(**kw):
     return types.SimpleNamespace(**base)
 
 
-def test_replay_of_a_retried_failure_prints_its_reason_as_the_live_display_did(sim_defs, tmp_path):
+def shown_live_and_replayed(path, sim_defs, tmp_path):
+    """Run ``path`` (navigation blocked once) with the live display and a log; (what the display
+    showed, what the replay of the log shows, the log's path)."""
     from coordinator.runner import Display
 
     live = io.StringIO()
-    t = TreeTest(GO_RETRY, definitions=sim_defs)
+    t = TreeTest(path, definitions=sim_defs)
     blocked_once(t.mocks)
     log = str(tmp_path / "run.jsonl")
     t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), Display(live, tty=False)])
@@ -359,25 +361,19 @@ def test_replay_of_a_retried_failure_prints_its_reason_as_the_live_display_did(s
     display = Display(shown, tty=False)
     while replay.next(display) is not None:
         pass
-    assert "FAILURE   navigation.go_to (navigation.go_to failed: blocked)" in live.getvalue()
-    assert shown.getvalue() == live.getvalue()
+    return live.getvalue(), shown.getvalue(), log
+
+
+def test_replay_of_a_retried_failure_prints_its_reason_as_the_live_display_did(sim_defs, tmp_path):
+    live, shown, _log = shown_live_and_replayed(GO_RETRY, sim_defs, tmp_path)
+    assert "FAILURE   navigation.go_to (navigation.go_to failed: blocked)" in live
+    assert shown == live
 
 
 def test_replay_prints_what_the_live_display_printed(sim_defs, tmp_path, capsys):
-    from coordinator.runner import Display
-
-    live = io.StringIO()
-    t = TreeTest(GO, definitions=sim_defs)
-    blocked_once(t.mocks)
-    log = str(tmp_path / "run.jsonl")
-    t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), Display(live, tty=False)])
-    replay = Replay(read_log(log))
-    shown = io.StringIO()
-    display = Display(shown, tty=False)
-    while replay.next(display) is not None:
-        pass
-    assert "FAILURE   go to the kitchen (navigation.go_to failed: blocked)" in shown.getvalue()
-    assert shown.getvalue() == live.getvalue()  # the same view as while it ran
+    live, shown, log = shown_live_and_replayed(GO, sim_defs, tmp_path)
+    assert "FAILURE   go to the kitchen (navigation.go_to failed: blocked)" in shown
+    assert shown == live  # the same view as while it ran
     log_path = log
     assert cmd_replay(_args(run=log_path)) == 0
     out = capsys.readouterr().out
