@@ -129,8 +129,9 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
             to = c.get("timeout")
             plines.append(Text("  %-24s %6.1fs / %s  %s" % (
                 c.get("target"), el, ("%gs" % to) if to else "-", _short(c.get("inputs"), 40))))
-        written = [k for k in state.written if k in state.blackboard]
-        written += [k for k in state.blackboard if k not in set(written)]
+        written = [k for k in state.written if k in state.blackboard]  # oldest write first
+        known = set(written)
+        written = [k for k in state.blackboard if k not in known] + written
         ev = [Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
                    style="yellow" if e.get("type") == "notice" else "") for e in state.events]
         ev += [Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)), style="magenta")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import re
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -11,7 +13,7 @@ import time
 import pytest
 
 from tests.conftest import DATA
-from tests.integration.watchkit import SimRun, slow_world
+from tests.integration.watchkit import SimRun, ask_tree, slow_world
 
 LONG = os.path.join(DATA, "watch", "long_errand.yaml")
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -70,8 +72,9 @@ def test_watch_in_a_real_terminal(tmp_path, width, height):
         assert "pending calls" in shown and "tree blackboard" in shown and "call log" in shown
         if height == 24:  # the finished and the untouched branches fold to one line each
             assert "prepare" in shown and "(+8 folded)" in shown and "before 3" not in shown
-        else:  # everything fits
+        else:  # everything fits, the panels too: the lines the tree does not use are theirs
             assert "before 8" in shown and "after 8" in shown and "folded" not in shown
+            assert not re.search(r"\(\d+ of \d+", shown), shown
         # redrawn in place: the screen follows the run to its end, nothing is left in the scrollback
         shown = term.wait_screen("SUCCESS in", timeout=120)
         history = term.tmux("capture-pane", "-p", "-S", "-1000", "-t", term.name).stdout
@@ -84,19 +87,60 @@ def test_watch_in_a_real_terminal(tmp_path, width, height):
         run.close()
 
 
+def _clock(shown):
+    """The header's run time and the pending navigation call's elapsed time on a screen (or None)."""
+    head = re.search(r"  t=(\d+\.\d)s  tick (\d+)", shown.split("\n")[0])
+    call = re.search(r"navigation\.go_to +(\d+\.\d)s / 30s", shown)
+    return (float(head.group(1)), float(call.group(1))) if head and call else None
+
+
 def test_run_shows_the_same_view_on_a_terminal(tmp_path):
+    """... titled ``bmtree run TREE``, its clock moving on while a call runs (no record comes then)."""
     env = dict(os.environ, ROS_HOME=str(tmp_path / "home"))
-    world = slow_world(tmp_path, speed=2.0)
+    world = slow_world(tmp_path, speed=1.0)
     # the pane's shell prints the exit status: tmux shows "Pane is dead" only once it has reaped
     # the child, which it sometimes does long after the pane's output has ended
     command = "sh -c %s" % shlex.quote('%s; echo "[bmtree exited $?]"' % _cmd("run", "--sim", "--world", world, LONG))
     term = Tmux(tmp_path, "run", 80, 24, command, env)
     try:
-        shown = term.wait_screen("bmtree watch long_errand", "navigation.go_to", "/ 30s", "pending calls")
+        shown = term.wait_screen("bmtree run long_errand", "navigation.go_to", "/ 30s", "pending calls")
         assert all(len(line) <= 80 for line in shown.split("\n"))
+        first = _clock(shown)
+        time.sleep(1.5)
+        later = _clock(term.screen())
+        assert first and later, term.screen()
+        # the header's clock moved on as the call's elapsed time did (redrawn every 0.2 s)
+        assert later[0] - first[0] >= 1.0 and abs((later[0] - first[0]) - (later[1] - first[1])) < 0.5, (first, later)
         term.wait_screen("[bmtree exited 0]", timeout=150)
         history = term.tmux("capture-pane", "-p", "-S", "-1000", "-t", term.name).stdout
         assert "long_errand: SUCCESS in" in history and "result: SUCCESS" in history
         assert "Traceback" not in history
     finally:
         term.close()
+
+
+def test_a_reset_node_keeps_its_last_outcome_and_ctrl_c_after_the_run_is_quiet(tmp_path):
+    """A selector's failed child, reset by py_trees a tick later, shows ``was FAILURE`` (not ``-``,
+    never ticked) while the next child runs; an interrupted run's finished nodes ``was SUCCESS``.
+    Then Ctrl-C of a ``--follow`` watch whose ``--sim`` master is gone ends it without warnings."""
+    run = SimRun(tmp_path, tree=ask_tree(tmp_path), world=slow_world(tmp_path, speed=0.5))
+    term = None
+    try:
+        run.out.wait_for("RUNNING   ask a person")
+        # the pane's shell outlives the Ctrl-C (a trap) to print the watch's exit status
+        command = "sh -c %s" % shlex.quote('trap : INT; %s; echo "[watch exited $?]"' % _cmd(
+            "watch", "--follow", "--wait", "60"))
+        term = Tmux(tmp_path, "was", 100, 24, command, run.env)
+        shown = term.wait_screen("ask a person  RUNNING", "look for it  was FAILURE")
+        assert "x look for it  was FAILURE" in shown and "+ announce  SUCCESS" in shown
+        run.proc.send_signal(signal.SIGINT)  # Ctrl-C: the run stops its tree, and its master
+        assert run.finish() == 3, run.out.text()
+        shown = term.wait_screen("announce  was SUCCESS", "ask a person  HALTED", "look for it  was FAILURE")
+        term.tmux("send-keys", "-t", term.name, "C-c")
+        term.wait_screen("[watch exited 0]", timeout=60)
+        history = term.tmux("capture-pane", "-p", "-S", "-1000", "-t", term.name).stdout
+        assert "out of sync" not in history and "[WARN]" not in history and "Traceback" not in history, history
+    finally:
+        if term is not None:
+            term.close()
+        run.close()

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 
 from tests.integration.conftest import bmtree_cmd
-from tests.integration.watchkit import LONG_TREE, Lines, SimRun, slow_world
+from tests.integration.watchkit import LONG_TREE, Lines, SimRun, ask_tree, slow_world
 
 
 def browser(tmp_path):
@@ -88,7 +89,7 @@ def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
     web = None
     try:
         run.out.wait_for("RUNNING   go to the kitchen")
-        web, _out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
+        web, out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
         driver.get(url)
         wait_until(driver, lambda d: node_status(d, "go to the kitchen") == "RUNNING")
         assert text(driver, "title") == "long_errand"
@@ -102,8 +103,12 @@ def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
         wait_until(driver, lambda d: "result: SUCCESS" in text(d, "result"), timeout=150)
         assert node_status(driver, "after 8") == "SUCCESS" and node_status(driver, "long errand") == "SUCCESS"
         assert "none" == text(driver, "pending")
+        # the watch ends with the run, as on a terminal, once the page has shown the result
+        assert web.wait(30) == 0, out.text()
+        assert "the run ended: SUCCESS" in out.all_text() and "Traceback" not in out.all_text()
+        wait_until(driver, lambda d: d.find_element("id", "gone").is_displayed())
+        assert "result: SUCCESS" in text(driver, "result") and node_status(driver, "after 8") == "SUCCESS"
         assert run.finish() == 0, run.out.text()
-        stop(web)
 
         env = dict(run.env)
         web, _out, url = start_web("replay", with_a_notice(env, tmp_path), "--web", env=env)
@@ -118,6 +123,40 @@ def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
         assert node_status(driver, "after 1") == "IDLE"
         assert "navigation.go_to" in text(driver, "pending")
         keep(driver, tmp_path, "replay-web.png")
+    finally:
+        driver.quit()
+        if web is not None:
+            stop(web)
+        run.close()
+
+
+def test_a_reset_node_is_drawn_faded_with_its_last_outcome_and_ctrl_c_after_the_run_is_quiet(tmp_path):
+    """A selector's failed child, reset by py_trees a tick later, is drawn ``was FAILURE`` (faded,
+    not as never ticked) while the next child runs. ``--follow`` keeps serving after the run; its
+    Ctrl-C once the ``--sim`` master is gone ends it without rospy's unregistering warnings."""
+    driver = browser(tmp_path)
+    run = SimRun(tmp_path, tree=ask_tree(tmp_path), world=slow_world(tmp_path, speed=0.8))
+    web = None
+    try:
+        run.out.wait_for("running ask_around")
+        web, out, url = start_web("watch", "--web", "--follow", "--wait", "60", env=run.env)
+        driver.get(url)
+        wait_until(driver, lambda d: node_status(d, "ask a person") == "RUNNING")
+        wait_until(driver, lambda d: node_status(d, "look for it") == "was FAILURE")
+        faded = driver.execute_script(
+            "const g=[...document.querySelectorAll('#tree g.node')].find(e=>e.dataset.name==='look for it');"
+            "return [g.getAttribute('class'), getComputedStyle(g).opacity, g.textContent];")
+        assert faded[0] == "node was-FAILURE" and float(faded[1]) < 1, faded
+        assert "call · was FAILURE" in faded[2] and "answered success: false" in faded[2], faded
+        assert node_status(driver, "announce") == "SUCCESS"
+        keep(driver, tmp_path, "watch-web-was.png")
+        assert run.finish() == 0, run.out.text()
+        wait_until(driver, lambda d: "result: SUCCESS" in text(d, "result"))
+        assert node_status(driver, "look for it") == "was FAILURE" and node_status(driver, "ask a person") == "SUCCESS"
+        web.send_signal(signal.SIGINT)  # the run and its master are gone
+        assert web.wait(30) == 0
+        assert "out of sync" not in out.all_text() and "[WARN]" not in out.all_text(), out.all_text()
+        wait_until(driver, lambda d: d.find_element("id", "gone").is_displayed())
     finally:
         driver.quit()
         if web is not None:

@@ -61,6 +61,15 @@ class Lines:
         with self.cond:
             return "\n".join(self.lines)
 
+    def all_text(self, timeout=30.0):
+        """Everything the process wrote, once its output has ended (it has exited)."""
+        end = time.monotonic() + timeout
+        with self.cond:
+            while not self.done and time.monotonic() < end:
+                self.cond.wait(min(1.0, max(0.0, end - time.monotonic())))
+            assert self.done, "the output has not ended:\n" + "\n".join(self.lines)
+            return "\n".join(self.lines)
+
 
 class SimRun:
     """``bmtree run --sim`` of ``tree`` in the background; ``env`` reaches its master once up."""
@@ -93,3 +102,33 @@ class SimRun:
 
 
 LONG_TREE = os.path.join(DATA, "watch", "long_errand.yaml")
+
+ASK = """\
+# announce, then a selector whose first child fails at once and whose second drives: py_trees
+# resets the failed child a tick later, while the second one runs
+format: 1
+name: ask_around
+root:
+  sequence:
+    name: find the apple
+    children:
+      - call: speech.say
+        name: announce
+        inputs: {text: "Looking for it."}
+      - selector:
+          name: find it
+          children:
+            - call: vision.find_object
+              name: look for it
+              inputs: {object: unicorn}
+            - call: navigation.go_to
+              name: ask a person
+              inputs: {place: kitchen}
+              timeout: 60
+"""
+
+
+def ask_tree(tmp_path):
+    path = tmp_path / "ask_around.yaml"
+    path.write_text(ASK)
+    return str(path)
