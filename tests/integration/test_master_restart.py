@@ -121,7 +121,7 @@ def _the_run_recorded_the_restart(out, log):
     """The run's display, its log and its replay say when the master went away and came back."""
     down = out.index("does not answer: calls on open connections go on")
     back = out.index("answers again; this run's topics are registered with it again")
-    assert "] NOTICE    the ROS master at " in out[down - 80:down] and down < back, out
+    assert "] NOTICE    the ROS master at " in out[max(0, down - 80):down] and down < back, out
     records = [json.loads(line) for line in open(str(log))]
     notices = [r["what"] for r in records if r["type"] == "notice"]
     assert notices == ["master_down", "master_back"], notices
