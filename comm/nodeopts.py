@@ -12,9 +12,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import socket
 import xmlrpc.client
 from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from comm.rpc import proxy
 
 __all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "count",
            "PORT", "node_name"]
@@ -104,16 +105,12 @@ def _private_params(argv: Sequence[str], default_name: Optional[str], timeout: f
     uri = os.environ.get("ROS_MASTER_URI", "")
     if uri and (default_name or "__name" in _mappings(argv)):
         namespace = private_namespace(argv, default_name or "")
-        old = socket.getdefaulttimeout()
-        socket.setdefaulttimeout(timeout)
         try:
-            code, _msg, value = xmlrpc.client.ServerProxy(uri).getParam(namespace.rstrip("/") + "/_", namespace)
+            code, _msg, value = proxy(uri, timeout).getParam(namespace.rstrip("/") + "/_", namespace)
             if code == 1 and isinstance(value, dict):
                 out.update(value)
         except (OSError, xmlrpc.client.Error):
             pass
-        finally:
-            socket.setdefaulttimeout(old)
     for a in argv:
         key, sep, value = a.partition(":=")
         if sep and key.startswith("_") and not key.startswith("__"):

@@ -31,6 +31,7 @@ from __future__ import annotations
 import collections
 import io
 import logging
+import select
 import socket
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -39,7 +40,7 @@ from typing import Any, Callable, Deque, List, Optional, Tuple
 from comm import sync_publisher
 from comm.rpc import proxy
 
-__all__ = ["TopicSender", "topic_senders", "widen_accept_queue"]
+__all__ = ["TopicSender", "peer_gone", "topic_senders", "widen_accept_queue"]
 
 ACCEPT_QUEUE = 128  # pending TCP connections to this node's TCPROS port (rospy listens with 5)
 
@@ -61,6 +62,20 @@ def _frame(msg: Any) -> bytes:
     buff = io.BytesIO()
     serialize_message(buff, 0, msg)
     return buff.getvalue()
+
+
+def peer_gone(sock: socket.socket) -> bool:
+    """Whether the peer of a subscriber connection went away (the socket is at its end or broken).
+    A subscriber never writes after its handshake, so a readable end means gone."""
+    try:
+        # select first: with a timeout on the socket, recv would wait and then raise
+        if not select.select([sock], [], [], 0)[0]:
+            return False
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+    except (BlockingIOError, InterruptedError):
+        return False
+    except (OSError, ValueError):
+        return True
 
 
 class TopicSender:
@@ -114,18 +129,8 @@ class TopicSender:
         """Close the connections whose subscriber is gone (its process died: the socket is at its
         end), so that what is sent next waits for a new subscriber instead of going into them;
         how many. A subscriber never writes after its handshake, so a readable end means gone."""
-        gone = []
-        for conn in list(self.impl.connections):
-            sock = conn.socket
-            if sock is None or conn.done:
-                continue
-            try:
-                if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"":
-                    gone.append(conn)
-            except BlockingIOError:
-                pass
-            except OSError:
-                gone.append(conn)
+        gone = [conn for conn in list(self.impl.connections)
+                if conn.socket is not None and not conn.done and peer_gone(conn.socket)]
         for conn in gone:
             _close(conn)
         return len(gone)

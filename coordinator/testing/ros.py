@@ -5,7 +5,6 @@ test session against the session's master; nodes under test run as processes.
 """
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Set
@@ -148,15 +147,11 @@ def drop_closed(pub: Any) -> None:
     """Close ``pub``'s connections to subscribers that went away (their socket is at EOF): rospy
     keeps them until a write fails, and one to an earlier node of the same name would pass for
     the new node's and swallow the first message."""
+    from coordinator.sender import peer_gone
+
     for c in list(pub.impl.connections):
         sock = getattr(c, "socket", None)
-        try:
-            closed = sock is not None and sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
-        except (BlockingIOError, InterruptedError):
-            closed = False
-        except OSError:
-            closed = True
-        if closed:
+        if sock is not None and peer_gone(sock):
             c.close()
 
 

@@ -151,6 +151,7 @@ def test_a_connection_whose_subscriber_died_is_dropped_and_later_messages_wait_f
     dead, dead_peer = _pair()
     alive, alive_peer = _pair()
     sender = TopicSender("/bmtree/call/probe", String, pub=_Pub([dead, alive]))
+    alive.socket.settimeout(0.5)  # a socket with a timeout (a process-wide default) is not a dead one
     dead_peer.close()
     assert sender.drop_closed() == 1 and dead.done and not alive.done
     alive.close()  # now nobody listens: kept until one connects
