@@ -5,11 +5,30 @@ import threading
 import time
 from typing import Any, Dict, List
 
-from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST
+from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL
 from comm.errors import ProtocolError
 from comm.messages import BlackboardAnswer, BlackboardRequest
 
-__all__ = ["BlackboardClient", "BlackboardError"]
+__all__ = ["BlackboardClient", "BlackboardError", "blackboard_listeners"]
+
+
+def blackboard_listeners(caller: str = "/bmtree_ready", timeout: float = 0.5) -> List[str]:
+    """The running Blackboard nodes on the master: those that take requests and listen to the
+    calls (a node killed outright stays registered, so each is asked for its pid)."""
+    import rosgraph
+
+    from comm.rpc import node_alive
+
+    master = rosgraph.Master(caller)
+    subs_of = {t: set(n) for t, n in master.getSystemState()[1]}
+    out = []
+    for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
+        try:
+            if node_alive(master.lookupNode(node), timeout):
+                out.append(node)
+        except rosgraph.masterapi.MasterError:
+            continue
+    return out
 
 
 class BlackboardError(Exception):

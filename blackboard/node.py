@@ -44,6 +44,30 @@ def _announcements() -> Any:
         return {}
 
 
+def _running_blackboard() -> str:
+    """The Blackboard node already running on the master, if any (asked before this node registers:
+    a node of the same name would stop it, one of another name would store everything twice)."""
+    import rosgraph
+
+    from blackboard.client import blackboard_listeners
+
+    try:
+        if not rosgraph.is_master_online():
+            return ""  # init_node waits for it; nothing can be registered there yet
+        found = blackboard_listeners("/blackboard_start")
+    except (OSError, rosgraph.masterapi.Error):
+        return ""
+    return ", ".join(found)
+
+
+def _kicked_out(reason: str) -> None:
+    import rospy
+
+    if "new node registered with same name" in reason:
+        sys.stderr.write("error: another node registered with this node's name %s, so the master stopped this "
+                         "Blackboard node (give each node its own name: __name:=)\n" % rospy.get_name())
+
+
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bmtree-blackboard", description="Run the Blackboard node.")
     p.add_argument("--db", help="SQLite file (default $ROS_HOME/bmtree/blackboard.sqlite; ':memory:' allowed)")
@@ -59,8 +83,15 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     args = parse_node_args(make_parser(), (argv if argv is not None else sys.argv)[1:], "blackboard")
     stop = StopSignals()  # a stop during start-up ends it cleanly too
+    other = _running_blackboard()
+    if other:
+        sys.stderr.write("error: a Blackboard node already runs on this master (%s): two would each store every "
+                         "result and both answer every request; stop it first, or start this one with another "
+                         "master\n" % other)
+        return 3
     if not stop.init_node("blackboard"):
         return 0
+    rospy.core.add_preshutdown_hook(_kicked_out)
     log_to_rosout()
     path = os.path.expanduser(args.db or rospy.get_param("~db", "") or default_db_path())  # ~/ from a launch file
     keep = args.keep if args.keep is not None else DEFAULT_KEEP

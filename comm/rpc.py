@@ -8,7 +8,7 @@ import urllib.parse
 import xmlrpc.client
 from typing import Any, Mapping, Optional, Set, Tuple
 
-__all__ = ["proxy", "PidLine", "wait_closed"]
+__all__ = ["proxy", "node_alive", "PidLine", "wait_closed"]
 
 
 class _TimeoutTransport(xmlrpc.client.Transport):
@@ -25,6 +25,15 @@ class _TimeoutTransport(xmlrpc.client.Transport):
 def proxy(uri: str, timeout: float) -> Any:
     """An ``xmlrpc.client.ServerProxy`` whose every request gives up after ``timeout`` seconds."""
     return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+
+
+def node_alive(uri: str, timeout: float = 1.0) -> bool:
+    """True if the node at ``uri`` answers ``getPid`` (a node killed outright stays registered)."""
+    try:
+        code, _, _ = proxy(uri, timeout).getPid("/bmtree")
+        return code == 1
+    except (OSError, socket.timeout, xmlrpc.client.Error):
+        return False
 
 
 KEEPALIVE = (("TCP_KEEPIDLE", 5), ("TCP_KEEPINTVL", 2), ("TCP_KEEPCNT", 3))  # a dead peer noticed in ~11 s

@@ -15,7 +15,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
-from comm import TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_RESULT
+from blackboard.client import blackboard_listeners
+from comm import TOPIC_CALL, TOPIC_RESULT
 from comm.addressing import PING_FUNCTION
 from comm.errors import EnvironmentProblem
 from comm.messages import FunctionCall, new_id
@@ -25,7 +26,7 @@ from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_
 if TYPE_CHECKING:
     from coordinator.ros_transport import RosTransport
 
-__all__ = ["wait_ready", "blackboard_listeners", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
+__all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
 
 PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
 ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
@@ -224,22 +225,6 @@ def _given_nodes(given: Mapping[str, str]) -> Dict[str, Tuple[str, str]]:
         except rosgraph.masterapi.MasterError:
             pass
     return found
-
-
-def blackboard_listeners() -> List[str]:
-    """Running Blackboard nodes that listen to the calls (a killed node stays registered)."""
-    import rosgraph
-
-    master, subs = _system_state()
-    subs_of = {t: set(n) for t, n in subs}
-    out = []
-    for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
-        try:
-            if node_alive(master.lookupNode(node), 0.5):
-                out.append(node)
-        except rosgraph.masterapi.MasterError:
-            continue
-    return out
 
 
 def _announce_legacy(found: Mapping[str, str], definitions: Mapping[str, ModuleDefinition]) -> None:

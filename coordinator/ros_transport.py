@@ -13,6 +13,7 @@ oldest messages). The preflight is :mod:`coordinator.preflight`.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import socket
@@ -34,6 +35,7 @@ from comm import (
 )
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
 from comm.errors import ProtocolError
+from comm.limits import check_depth
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
@@ -90,7 +92,8 @@ class RosTransport(Transport):
                  liveness: float = DEFAULT_PERIOD):
         self.node_name = node_name
         self.max_bytes = max_bytes
-        self._early: List[Event] = []  # events that came during the preflight, for the run
+        self._early: List[Any] = []  # events and notices that came during the preflight, for the run
+        self._other_runs: Set[str] = set()  # nodes of other runs on this master, each noticed once
         self._deliver: Callable[[Any], None] = self._hold
         self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
         self.watchdog = Watchdog(self._from_watchdog, self._node_of, self._uri_of, period=liveness)
@@ -192,9 +195,9 @@ class RosTransport(Transport):
 
     def _hold(self, item: Any) -> None:
         """Before the run connects: keep events (a module may announce something while the
-        preflight runs), drop the rest (nothing was called yet)."""
+        preflight runs) and notices, drop the rest (nothing was called yet)."""
         with self._cond:
-            if isinstance(item, Event) and len(self._early) < 1000:
+            if isinstance(item, (Event, Notice)) and len(self._early) < 1000:
                 self._early.append(item)
 
     def connect(self, deliver: Callable[[Any], None]) -> None:
@@ -373,9 +376,40 @@ class RosTransport(Transport):
             self._cond.notify_all()
 
     def stream_sink(self, namespace: str = "/bmtree/run") -> Any:
-        """A run-stream sink that publishes each channel on ``namespace/<channel>`` (README, "Run stream")."""
+        """A run-stream sink that publishes each channel on ``namespace/<channel>`` (README, "Run stream").
+
+        It also listens there for the tree records of other runs: a run started on this master
+        while this one runs gets a notice (both store under the same Blackboard names)."""
+        import rospy
+
         self.open()
-        return RosStreamSink(namespace, self._String)
+        sink = RosStreamSink(namespace, self._String)
+        with registering():
+            self._subs.append(rospy.Subscriber("%s/tree" % namespace.rstrip("/"), self._String, self._other_run,
+                                               queue_size=10))
+        return sink
+
+    def _other_run(self, msg: Any) -> None:
+        """Another run's (latched) tree record: the first one of each node becomes a notice."""
+        import rospy
+
+        node = (getattr(msg, "_connection_header", None) or {}).get("callerid", "")
+        if not node or node == rospy.get_name() or node in self._other_runs:
+            return
+        self._other_runs.add(node)
+        tree = ""
+        try:
+            if len(msg.data) <= self.max_bytes:
+                check_depth(msg.data)
+                record = json.loads(msg.data)
+                if isinstance(record, dict):
+                    tree = str(record.get("path") or record.get("name") or "")
+        except (ValueError, ProtocolError, RecursionError):
+            pass
+        self._deliver(Notice("other_run", "another bmtree run is running on this master (node %s%s): both store "
+                                          "results under the same Blackboard names, so a recall may read its "
+                                          "values, and bmtree control commands reach both"
+                             % (node, ", tree %s" % tree if tree else "")))
 
     def _master_down(self) -> None:
         self._deliver(Notice("master_down", "the ROS master at %s does not answer: calls on open connections go on, "

@@ -49,7 +49,7 @@ def _warn_without_blackboard() -> None:
     """A tree that never recalls runs without a Blackboard node, but its results are then kept nowhere."""
     import rosgraph
 
-    from coordinator.preflight import blackboard_listeners
+    from blackboard.client import blackboard_listeners
 
     try:
         if blackboard_listeners():
@@ -267,8 +267,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         from coordinator.watch import STREAM_NS
 
         for other in [] if args.sim else _other_runs():  # a private graph has no other run
-            err("warning: another bmtree run is running on this master (node %s): both publish the run stream on "
-                "%s (bmtree watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
+            err("warning: another bmtree run is running on this master (node %s): both store results under the "
+                "same Blackboard names (a recall may read its values), both publish the run stream on %s (bmtree "
+                "watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
         try:
             left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
             transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err,

@@ -28,7 +28,7 @@ class Notice:
     """Something that happened to the ROS graph under the run, which explains what follows
     (the master went away, came back), delivered by the transport like a result."""
 
-    what: str   # master_down, master_back
+    what: str   # master_down, master_back, other_run
     text: str
 
 

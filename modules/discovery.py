@@ -10,8 +10,6 @@ whose node does not answer is not listed.
 from __future__ import annotations
 
 import json
-import socket
-import xmlrpc.client
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Dict, Mapping, Optional
@@ -21,7 +19,7 @@ import rosgraph
 from comm.addressing import valid_topic
 from comm.errors import ProtocolError
 from comm.limits import check_depth
-from comm.rpc import proxy
+from comm.rpc import node_alive
 from modules.definition import DefinitionError, ModuleDefinition, parse_definition
 
 __all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "announced_modules", "announcement", "legacy_announcement",
@@ -57,15 +55,6 @@ def announcement(node: str, definition: ModuleDefinition, instance: str = "",
 def legacy_announcement(node: str, definition: ModuleDefinition) -> Dict[str, Any]:
     """What ``bmtree run`` writes for an original module (which does not announce itself)."""
     return dict(announcement(node, definition), legacy=True)
-
-
-def node_alive(uri: str, timeout: float = 1.0) -> bool:
-    """True if the node at ``uri`` answers ``getPid``."""
-    try:
-        code, _, _ = proxy(uri, timeout).getPid("/bmtree")
-        return code == 1
-    except (OSError, socket.timeout, xmlrpc.client.Error):
-        return False
 
 
 _PARSED: Dict[str, ModuleDefinition] = {}  # announcement text -> definition, so that waiting re-reads cheaply

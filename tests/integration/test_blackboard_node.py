@@ -130,3 +130,27 @@ def test_a_thousand_bad_payloads_on_both_topics(ros_graph, ros_probe, bb_db):
     assert sorted(m.data for m in final.msgs) == list(range(0, 1000, 50))
     assert proc.poll() is None
     ros_probe.close_collector(a.answers)
+
+
+@pytest.mark.parametrize("name", [[], ["__name:=blackboard2"]])
+def test_a_second_blackboard_on_the_master_refuses_to_start_and_the_first_goes_on(ros_graph, ros_probe, bb_db,
+                                                                                   tmp_path, name):
+    """Of the same name it would stop the first (the master keeps one node per name), of another
+    name both would store every result and answer every request."""
+    import subprocess
+    import sys
+
+    first = start_bb(ros_graph, bb_db)
+    second = subprocess.run([sys.executable, "-m", "blackboard.node", "--db", str(tmp_path / "second.sqlite"), *name],
+                            env=ros_graph.env, capture_output=True, text=True, timeout=60)
+    assert second.returncode == 3, second.stderr
+    assert "error: a Blackboard node already runs on this master (/blackboard)" in second.stderr, second.stderr
+    assert "Traceback" not in second.stderr and not (tmp_path / "second.sqlite").exists()
+    assert first.poll() is None
+    acks = ros_probe.collect("/blackboard/stored", publishers=1)
+    ros_probe.publisher("/function/output", 1).publish(String(result(7, call_id="after-refused")))
+    wait_stored(acks, 1)
+    a = Asker(ros_probe)
+    assert a.ask(call_id="after-refused").names == ["seq"]
+    ros_probe.close_collector(acks)
+    ros_probe.close_collector(a.answers)

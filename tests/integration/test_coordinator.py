@@ -313,8 +313,11 @@ def test_closing_a_graph_stops_its_nodes_together_and_the_stop_last_ones_after(t
     assert (tmp_path / "last").read_text() == "gone gone"
 
 
-def test_a_second_run_on_the_master_is_told_of_the_first(ros_graph, tmp_path):
-    """Two runs on one master share the run stream and the control topics: the second one says so."""
+def test_two_runs_on_one_master_are_each_told_of_the_other(ros_graph, tmp_path):
+    """Two runs on one master share the Blackboard's names, the run stream and the control topics:
+    the second one says so before it starts, and the first one, already running, gets a notice
+    (on its display and in its run log) when the second starts."""
+    from coordinator.runlog import read_log
     from tests.integration.faultkit import PROBE_JSON, slow_run, start_probe, stop_run
 
     start_probe(ros_graph)
@@ -325,9 +328,16 @@ def test_a_second_run_on_the_master_is_told_of_the_first(ros_graph, tmp_path):
         out = run("run", str(quick), "--modules", PROBE_JSON, "-q")
     finally:
         stop_run(first)
+    first_out = first.stdout.read() if first.stdout else ""
     alone = run("run", str(quick), "--modules", PROBE_JSON, "-q")
     assert out.returncode == 0, out.stdout + out.stderr
     assert "warning: another bmtree run is running on this master (node /bmtree_%d_" % first.pid in out.stderr, \
         out.stderr
-    assert "both publish the run stream on /bmtree/run" in out.stderr
+    assert "same Blackboard names" in out.stderr and "both publish the run stream on /bmtree/run" in out.stderr
     assert alone.returncode == 0 and "another bmtree run" not in alone.stderr, alone.stderr
+    told = [line for line in first_out.splitlines() if "NOTICE" in line]
+    assert len(told) == 1 and "another bmtree run is running on this master (node /bmtree_" in told[0] \
+        and str(quick) in told[0] and "a recall may read its values" in told[0], first_out
+    log_path = next(line.split("run log: ", 1)[1].split()[0] for line in first_out.splitlines() if "run log: " in line)
+    notices = read_log(log_path).of_type("notice")
+    assert [n["what"] for n in notices] == ["other_run"] and str(quick) in notices[0]["text"], notices

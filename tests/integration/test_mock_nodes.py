@@ -101,7 +101,7 @@ def test_blackboard_client(ros_graph, ros_probe, tmp_path):
         ros_probe.close_collector(acks)
 
 
-def test_no_blackboard_node_is_a_clear_timeout(ros_master):
+def test_no_blackboard_node_is_a_clear_timeout(ros_probe):  # the probe: this process's rospy node
     from blackboard.client import BlackboardClient, BlackboardError
 
     client = BlackboardClient(connect_timeout=0.2)
