@@ -41,6 +41,25 @@ DEFAULT_INPUT_GAP = 0.01
 _POLL = 0.2  # how often a running call checks that the C++ node is still there (s)
 
 
+def _refuses(uri: str) -> bool:
+    """True if nothing listens at a node's XML-RPC port any more: its process is gone."""
+    try:
+        host, port = urlsplit(uri).hostname, urlsplit(uri).port
+        with socket.create_connection((host, port), timeout=1.0):
+            return False
+    except ConnectionRefusedError:
+        return True
+    except (OSError, ValueError):
+        return False
+
+
+def _some(names: List[str], shown: int = 3) -> str:
+    """A few names and how many more: a node connected to nothing is said in one line, not one per topic."""
+    if len(names) <= shown + 1:
+        return ", ".join(names)
+    return "%s and %d more" % (", ".join(names[:shown]), len(names) - shown)
+
+
 class BridgeError(EnvironmentError):
     """The C++ node is not there or not connected (the message names what is missing)."""
 
@@ -124,8 +143,8 @@ class CppBridge(BasicModule):
         self._info_sub = rospy.Subscriber("/%s/BM_info" % name, String, self._on_info, queue_size=1)
         missing = self._wait_connected(self.connect_timeout)
         if missing:
-            raise BridgeError("the C++ node of module %r is not ready after %gs: %s" % (
-                name, self.connect_timeout, "; ".join(missing)))
+            raise BridgeError("the C++ node of module %r is not ready after %gs: %s (the bridge waits --wait seconds "
+                              "for it)" % (name, self.connect_timeout, "; ".join(missing)))
         self._check_signatures()
         rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
                       ("bmtree library, no input gap, %s" % ("takes cancels" if self.cancellable else "no cancels"))
@@ -150,17 +169,22 @@ class CppBridge(BasicModule):
         pubs, subs, _ = master.getSystemState()
         listeners = next((n for t, n in subs if t == "/%s/BM_input" % name), [])
         talkers = next((n for t, n in pubs if t == "/%s/BM_output" % name), [])
-        nodes = [n for n in listeners if n != self._self_name]
+        uris = {}
+        for n in listeners:
+            if n != self._self_name:
+                try:
+                    uris[n] = master.lookupNode(n)
+                except rosgraph.masterapi.Error:
+                    continue
+        # one killed outright stays registered: live ones first (its restart under another name)
+        nodes = [n for n in uris if not _refuses(uris[n])] or list(uris)
         nodes = [n for n in nodes if n in talkers] or nodes  # a tool may listen to BM_input too
         if not nodes:
             return None
         if len(nodes) > 1:
             log.warning("several nodes subscribe /%s/BM_input (%s); using %s", name, ", ".join(nodes), nodes[0])
         node = nodes[0]
-        try:
-            self.cpp_uri = master.lookupNode(node)
-        except rosgraph.masterapi.Error:
-            return None
+        self.cpp_uri = uris[node]
         self.cpp_node = node
         self.library = node in next((n for t, n in pubs if t == "/%s/BM_info" % name), [])
         self.cancellable = node in next((n for t, n in subs if t == "/%s/BM_cancel" % name), [])
@@ -172,16 +196,19 @@ class CppBridge(BasicModule):
         node = self._find_node()
         if node is None:
             return ["no node subscribes /%s/BM_input (is the C++ node running?)" % name]
-        out = []
+        if self._gone():  # killed outright: the master still lists it, but nothing listens at its port
+            return ["the C++ node %s is registered with the master but not running (its process is gone: start it "
+                    "again)" % node]
         sync = [("/%s/BM_input" % name, self._in_pub)]
         if self.cancellable:
             sync.append(("/%s/BM_cancel" % name, self._cancel_pub))
-        for topic, pub in sync + sorted(self._pubs.items()):
-            if not pub.impl.has_connection(node):
-                out.append("%s does not receive %s" % (node, topic))
-        for sub in [self._out_sub] + self._subs:
-            if not sub.impl.has_connection(self.cpp_uri):
-                out.append("%s does not publish %s to the bridge" % (node, sub.resolved_name))
+        deaf = [topic for topic, pub in sync + sorted(self._pubs.items()) if not pub.impl.has_connection(node)]
+        mute = [sub.resolved_name for sub in [self._out_sub] + self._subs if not sub.impl.has_connection(self.cpp_uri)]
+        out = []
+        if deaf:
+            out.append("%s does not receive %s" % (node, _some(deaf)))
+        if mute:
+            out.append("%s does not publish %s to the bridge" % (node, _some(mute)))
         return out
 
     def _wait_connected(self, timeout: float) -> List[str]:
@@ -203,14 +230,7 @@ class CppBridge(BasicModule):
 
         A node that is merely slow is not gone: only the call's deadline ends its call.
         """
-        try:
-            host, port = urlsplit(self.cpp_uri).hostname, urlsplit(self.cpp_uri).port
-            with socket.create_connection((host, port), timeout=1.0):
-                return False
-        except ConnectionRefusedError:
-            return True
-        except (OSError, ValueError):
-            return False
+        return _refuses(self.cpp_uri)
 
     # -- what the C++ node provides (BM_info of bmtree's library) ----------------------
     def _on_info(self, msg: Any) -> None:
@@ -360,8 +380,8 @@ class CppBridge(BasicModule):
                     self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
                     self._owed_id = call.call_id
                     self._send_cancel(call)  # a node that takes cancels stops and answers soon
-                    raise Failure("no BM_output from the C++ node %s within %gs: it hangs or crashed" % (
-                        self.cpp_node, self.call_timeout))
+                    raise Failure("no BM_output from the C++ node %s within %gs (the bridge's --call-timeout): it "
+                                  "hangs or crashed" % (self.cpp_node, self.call_timeout))
                 left = self.call_timeout - (now - start) if self.call_timeout else _POLL
                 self._cond.wait(min(_POLL, left))
                 if call.output is not None or time.monotonic() - pinged < _POLL:

@@ -1,0 +1,48 @@
+"""What bmtree-bridge says when its C++ node is not there to serve: one clear sentence, exit 3."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from tests.conftest import REFERENCE
+from tests.integration.conftest import NODES
+
+DEMO_JSON = os.path.join(REFERENCE, "DEMO_BM.json")
+
+_DEAF = """
+import rospy
+from std_msgs.msg import String
+rospy.init_node("deaf_tool")
+rospy.Subscriber("/DEMO_BM/BM_input", String, lambda m: None)  # a tool that only listens to BM_input
+rospy.spin()
+"""
+
+
+def _bridge(ros_graph):
+    return subprocess.run([sys.executable, "-m", "modules.bridge", "--definition", DEMO_JSON, "--wait", "0.5"],
+                          capture_output=True, text=True, timeout=60, env=ros_graph.env, stdin=subprocess.DEVNULL)
+
+
+def test_a_cpp_node_killed_outright_is_said_to_be_not_running(ros_graph):
+    """Its registration stays on the master: the bridge says it is gone, not every topic it misses."""
+    cpp = ros_graph.start_node([sys.executable, os.path.join(NODES, "original_cpp_demo_bm.py")], "/DEMO_BM")
+    ros_graph.kill_node(cpp)
+    out = _bridge(ros_graph)
+    assert out.returncode == 3, out.stdout + out.stderr
+    assert "the C++ node of module 'DEMO_BM' is not ready after 0.5s: the C++ node /DEMO_BM is registered with " \
+           "the master but not running (its process is gone: start it again) (the bridge waits --wait seconds " \
+           "for it)" in out.stderr, out.stderr
+    assert "does not receive" not in out.stderr and "Traceback" not in out.stderr
+
+
+def test_a_node_connected_to_nothing_is_said_in_one_clause_per_direction(ros_graph, tmp_path):
+    """A live node goes before one killed outright (the earlier test's /DEMO_BM, still registered)."""
+    script = tmp_path / "deaf.py"
+    script.write_text(_DEAF)
+    ros_graph.start_node([sys.executable, str(script)], "/deaf_tool")
+    out = _bridge(ros_graph)
+    assert out.returncode == 3, out.stdout + out.stderr
+    said = out.stderr.split("is not ready after 0.5s: ", 1)[1]
+    assert said.startswith("/deaf_tool does not receive /DEMO_BM/bool, /DEMO_BM/string; /deaf_tool does not publish "
+                           "/DEMO_BM/BM_output, /DEMO_BM/string, /DEMO_BM/bool to the bridge"), out.stderr
