@@ -17,6 +17,7 @@ from comm.messages import (
     new_id,
 )
 from comm.rostypes import from_message, resolve_type, suggest_type, to_message
+from comm.typewords import ValueMisfit, said_of
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -29,9 +30,11 @@ __all__ = [
     "FunctionCall",
     "FunctionResult",
     "ProtocolError",
+    "ValueMisfit",
     "from_message",
     "new_id",
     "resolve_type",
+    "said_of",
     "settle_new_connection",
     "suggest_type",
     "to_message",

@@ -18,6 +18,7 @@ from comm.errors import ProtocolError
 from comm.limits import MAX_DEPTH, check_depth
 from comm.rostypes import from_message, message_from_json, resolve_type, rostype_of, unknown_type_error
 from comm.textenum import TextEnum
+from comm.typewords import ValueMisfit
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -124,8 +125,10 @@ def _get_str_list(d: Dict[str, Any], key: str, required: bool = True) -> Optiona
     return value
 
 
-def _decode_values(d: Dict[str, Any], names_required: bool) -> Tuple[Optional[List[str]], List[Any]]:
-    """The (names, msgs) of a payload, every value converted and type-checked."""
+def _decode_values(d: Dict[str, Any], names_required: bool, kind: str) -> Tuple[Optional[List[str]], List[Any]]:
+    """The (names, msgs) of a payload, every value converted and type-checked. A value that does not
+    fit its type is said as the checker says it, of the ``kind`` named (``input 'seconds' takes a
+    number (std_msgs/Float64), got 'five' (msgs[0])``), or of ``msgs[0]`` in a payload without names."""
     rostypes = _get_str_list(d, "rostypes")
     raw = d.get("msgs")
     if raw is None:
@@ -144,6 +147,10 @@ def _decode_values(d: Dict[str, Any], names_required: bool) -> Tuple[Optional[Li
             raise ProtocolError("rostypes[%d]: %s" % (i, unknown_type_error(rostype)))
         try:
             msgs.append(message_from_json(rostype, text))
+        except ValueMisfit as exc:
+            if names is None:
+                raise ProtocolError("msgs[%d] %s" % (i, exc.said))
+            raise ProtocolError("%s %r %s (msgs[%d])" % (kind, names[i], exc.said, i))
         except ProtocolError as exc:
             raise ProtocolError("msgs[%d] %s" % (i, exc))
     return names, msgs
@@ -205,7 +212,7 @@ class FunctionCall(_Values):
         basic_mod = _get_str(d, "basic_mod")
         function = _get_str(d, "function")
         call_id = _get_str(d, "call_id", required=False)
-        names, msgs = _decode_values(d, names_required=False)
+        names, msgs = _decode_values(d, names_required=False, kind="input")
         return cls(basic_mod=basic_mod, function=function, msgs=msgs, names=names, call_id=call_id)
 
 
@@ -254,7 +261,7 @@ class FunctionResult(_Values):
     @classmethod
     def from_obj(cls, d: Dict[str, Any]) -> FunctionResult:
         """From an already parsed payload (the Blackboard keeps its raw value texts)."""
-        names, msgs = _decode_values(d, names_required=True)
+        names, msgs = _decode_values(d, names_required=True, kind="output")
         text = _get_str(d, "status", required=False) or "succeeded"
         status = _STATUS.get(text)
         if status is None:
@@ -307,7 +314,7 @@ class Event(_Values):
         d = load_payload(text, max_bytes)
         basic_mod = _get_str(d, "basic_mod")
         event = _get_str(d, "event")
-        names, msgs = _decode_values(d, names_required=True)
+        names, msgs = _decode_values(d, names_required=True, kind="event param")
         return cls(basic_mod=basic_mod, event=event, names=names or [], msgs=msgs)
 
 
@@ -393,7 +400,7 @@ class BlackboardAnswer(_Values):
     @classmethod
     def decode(cls, text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> BlackboardAnswer:
         d = load_payload(text, max_bytes)
-        names, msgs = _decode_values(d, names_required=True)
+        names, msgs = _decode_values(d, names_required=True, kind="key")
         sources = d.get("sources") or []
         if not isinstance(sources, list) or not all(isinstance(s, dict) for s in sources):
             raise ProtocolError("key 'sources' must be a list of objects")

@@ -21,6 +21,7 @@ from rospy_message_converter import message_converter
 
 from comm.errors import ProtocolError
 from comm.limits import check_depth
+from comm.typewords import ValueMisfit, misfit_text
 
 __all__ = [
     "resolve_type",
@@ -171,7 +172,8 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
     """Build and type-check a message from a dict (or a scalar for one-field types).
 
     Raises:
-        ProtocolError: unknown type, unknown field, or a value of the wrong type.
+        ProtocolError: unknown type, or a value that does not fit: then a
+            :class:`comm.typewords.ValueMisfit` saying why in a tree's words, when the reason is found.
     """
     cls = resolve_type(rostype)
     if cls is None:
@@ -179,12 +181,14 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
     if isinstance(value, cls):
         msg = value
     else:
+        given = value
         if not isinstance(value, dict):
             field = single_field(cls)
             if allow_scalar and field is not None:
                 value = {field: value}
             else:
-                raise ProtocolError("expected a mapping of fields for %s, got %s" % (rostype, _kind(value)))
+                raise _refusal(rostype, given, allow_scalar,
+                               "expected a mapping of fields for %s, got %s" % (rostype, _kind(value)))
         fields = _flat_fields(cls)
         try:
             if fields is not None and all(k in fields for k in value):
@@ -194,11 +198,26 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
             else:
                 msg = message_converter.convert_dictionary_to_ros_message(rostype, value)
         except ValueError as exc:
-            raise ProtocolError("%s: %s" % (rostype, exc))
+            raise _refusal(rostype, given, allow_scalar, "%s: %s" % (rostype, exc))
         except (TypeError, AttributeError, KeyError, OverflowError, RecursionError) as exc:
-            raise ProtocolError("%s: malformed value (%s)" % (rostype, exc))
+            raise _refusal(rostype, given, allow_scalar, "%s: malformed value (%s)" % (rostype, exc))
+        try:
+            check_message(msg, rostype)
+        except ProtocolError as exc:
+            raise _refusal(rostype, given, allow_scalar, str(exc))
+        return msg
     check_message(msg, rostype)
     return msg
+
+
+def _refusal(rostype: str, value: Any, allow_scalar: bool, fallback: str) -> ProtocolError:
+    """Why ``value`` is no ``rostype``, in a tree's words (a ValueMisfit); ``fallback`` when the walk
+    finds no reason (the converter's or genpy's own words). Only ever after a failure: never slower."""
+    try:
+        said = misfit_text(rostype, value, scalar=allow_scalar)
+    except (RecursionError, TypeError, ValueError, AttributeError):  # odd values: the converter's words
+        said = ""
+    return ValueMisfit(rostype, said) if said else ProtocolError(fallback)
 
 
 def check_message(msg: Any, rostype: str = "") -> None:
@@ -239,6 +258,8 @@ def message_from_json(rostype: str, text: Any) -> Any:
     try:
         return to_message(rostype, value)
     except ProtocolError as exc:
+        if isinstance(exc, ValueMisfit):  # said after the caller's subject (msgs[0], input 'x')
+            raise
         text_ = str(exc)
         if text_.startswith("unknown ROS type"):
             raise

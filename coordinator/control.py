@@ -184,10 +184,13 @@ class Controller(RunObserver):
         if isinstance(old, genpy.Message):  # a call's output
             from comm.errors import ProtocolError
             from comm.rostypes import from_message, rostype_of, to_message
+            from comm.typewords import ValueMisfit
 
             rostype = rostype_of(old)
             try:  # as a call input takes it: the message's fields, or its one field's value
                 value = to_message(rostype, value, allow_scalar=True)
+            except ValueMisfit as exc:  # in the words the checker uses for a call's input
+                return False, "%s %s" % (key, exc.said)
             except ProtocolError as exc:
                 return False, "%s holds a %s; %s" % (key, rostype, exc)
             self.ctx.write(key, value)

@@ -15,8 +15,8 @@ from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
-__all__ = ["ExprValue", "Template", "at_value_errors", "literal", "loose_dollars", "misfit_text", "read_at", "ref_kind",
-           "ref_type", "type_words", "value_type_errors"]
+__all__ = ["ExprValue", "Template", "at_value_errors", "literal", "loose_dollars", "read_at", "ref_kind", "ref_type",
+           "value_type_errors"]
 
 _LOOSE = re.compile(r"(?<![$\w])\$([^\W\d]\w*)")
 
@@ -250,122 +250,6 @@ def read_at(value: Any, at: Pos, key: str) -> Optional[Pos]:
     elif any(r.key == key for r in refs_in(value)):
         return at
     return None if offset is None else Pos(at.file, at.line, at.column + offset)
-
-
-# what a ROS type takes, in the words of a tree file -----------------------------------------------
-_INT_RANGES = {"int8": (-1 << 7, (1 << 7) - 1), "uint8": (0, 255), "int16": (-1 << 15, (1 << 15) - 1),
-               "uint16": (0, (1 << 16) - 1), "int32": (-1 << 31, (1 << 31) - 1), "uint32": (0, (1 << 32) - 1),
-               "int64": (-1 << 63, (1 << 63) - 1), "uint64": (0, (1 << 64) - 1), "byte": (-1 << 7, (1 << 7) - 1),
-               "char": (0, 255)}
-
-
-def type_words(t: str) -> str:
-    """What a ROS type (a message or a field type) takes, as a tree file writes it: ``a number``,
-    ``text``, ``true or false``, ``a list``, ``a mapping of fields x, y, z``."""
-    from comm.rostypes import resolve_type
-
-    if t.endswith("]"):
-        return "a list"
-    if t in _INT_RANGES:
-        return "a whole number"
-    if t in ("float32", "float64"):
-        return "a number"
-    if t == "string":
-        return "text"
-    if t == "bool":
-        return "true or false"
-    if t in ("time", "duration"):
-        return "a %s" % t
-    cls = resolve_type(t)
-    if cls is None:
-        return "a %s" % t
-    if len(cls.__slots__) == 1:
-        return type_words(cls._slot_types[0])
-    return "a mapping of fields %s" % ", ".join(cls.__slots__)
-
-
-def _shown(value: Any) -> str:
-    import genpy
-
-    if isinstance(value, genpy.Message):
-        return "a %s" % value._type
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _misfit(t: str, value: Any, field: str, top: bool) -> Optional[Tuple[str, str, Any, str]]:
-    """The first place where ``value`` does not fit the ROS type ``t``: (field path, type there, the
-    value there, or '' and the problem said whole), None if none is found."""
-    import genpy
-
-    from comm.rostypes import resolve_type
-
-    if t.endswith("]"):
-        inner, size = t[:t.rindex("[")], t[t.rindex("[") + 1:-1]
-        if isinstance(value, bytes) and inner in ("uint8", "char"):
-            return None
-        if not isinstance(value, (list, tuple)):
-            return field, t, value, ""
-        if size and len(value) != int(size):
-            return field, t, value, "%stakes a list of %s items, got %d" % (
-                "field %s " % field if field else "", size, len(value))
-        for i, item in enumerate(value):
-            found = _misfit(inner, item, "%s[%d]" % (field, i), False)
-            if found is not None:
-                return found
-        return None
-    if t in _INT_RANGES:
-        if isinstance(value, bool) or not isinstance(value, int):
-            return field, t, value, ""
-        low, high = _INT_RANGES[t]
-        if not low <= value <= high:
-            return field, t, value, "%stakes a whole number from %d to %d (%s), got %d" % (
-                "field %s " % field if field else "", low, high, t, value)
-        return None
-    if t in ("float32", "float64"):
-        return None if isinstance(value, (int, float)) else (field, t, value, "")
-    if t == "string":
-        return None if isinstance(value, (str, bytes)) else (field, t, value, "")
-    if t == "bool":
-        return None if isinstance(value, int) else (field, t, value, "")
-    cls = resolve_type(t)
-    if cls is None:
-        return None
-    if isinstance(value, genpy.Message):
-        return None if value._type == t else (field, t, value, "")
-    slots, slot_types = list(cls.__slots__), list(cls._slot_types)
-    if top and len(slots) == 1 and not (isinstance(value, dict) and slots[0] in value):
-        return _misfit(slot_types[0], value, field, False)   # a value stands for the one field's
-    if not isinstance(value, dict):
-        return field, t, value, ""
-    for k, v in value.items():
-        path = "%s.%s" % (field, k) if field else str(k)
-        if k not in slots:
-            from comm.errors import did_you_mean
-
-            return field, t, v, "%s(%s) has no field %r%s" % (
-                "field %s " % field if field else "", t, k, did_you_mean(k, slots)
-                or " (its fields: %s)" % ", ".join(slots))
-        found = _misfit(slot_types[slots.index(k)], v, path, False)
-        if found is not None:
-            return found
-    return None
-
-
-def misfit_text(rostype: str, value: Any, got: str = "") -> str:
-    """Why ``value`` cannot be a ``rostype`` message, said after ``input 'name'``: ``takes a number
-    (std_msgs/Float64), got 'five'``, ``(geometry_msgs/Point): field x takes a number (float64), got
-    'a'``; ``got`` says the value itself in other words (a reference). '' when no reason is found here."""
-    found = _misfit(rostype, value, "", True)
-    if found is None:
-        return ""
-    field, t, there, said = found
-    if said:
-        return said if not field else "(%s): %s" % (rostype, said)
-    shown = got if got and not field else _shown(there)
-    if not field:
-        return "takes %s (%s), got %s" % (type_words(rostype), rostype, shown)
-    return "(%s): field %s takes %s (%s), got %s" % (rostype, field, type_words(t), t, shown)
 
 
 def value_type_errors(value: Any, types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:

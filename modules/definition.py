@@ -17,6 +17,7 @@ from comm.errors import InvalidInput, ProtocolError, did_you_mean
 from comm.limits import check_depth
 from comm.messages import FunctionCall, FunctionResult, new_id
 from comm.rostypes import resolve_type, rostype_of, suggest_type, to_message
+from comm.typewords import said_of
 
 __all__ = [
     "DefinitionError",
@@ -110,7 +111,7 @@ def _convert_values(kind: str, params: Sequence[Param], values: Mapping[str, Any
             try:
                 msgs.append(p.convert(values[p.name]))
             except ProtocolError as exc:
-                problems.append("%s %r: %s" % (kind, p.name, exc))
+                problems.append(said_of("%s %r" % (kind, p.name), exc))
     if problems:
         raise ProtocolError("%s: %s" % (where, "; ".join(problems)))
     return msgs

@@ -280,7 +280,12 @@ class ModuleServer:
             self._reject(call_id, fname, str(exc))
             return
         try:
-            inputs = fn.inputs_of(FunctionCall.from_obj(head))
+            received = FunctionCall.from_obj(head)
+        except ProtocolError as exc:  # a value that does not fit its type: the checker's words, after the function
+            self._reject(call_id, fname, "bad inputs: %s: %s" % (fn.qualified, exc))
+            return
+        try:
+            inputs = fn.inputs_of(received)
         except ProtocolError as exc:
             self._reject(call_id, fname, "bad inputs: %s" % exc)
             return

@@ -10,13 +10,14 @@ from py_trees.common import Status
 from comm.errors import ProtocolError, did_you_mean
 from comm.messages import FunctionCall, new_id
 from comm.rostypes import resolve_type
+from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import NodeKind, Option, param_keys, run_param
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import misfit_text, read_at, ref_type, type_words, value_type_errors
+from coordinator.values import read_at, ref_type, value_type_errors
 from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS"]
@@ -60,9 +61,7 @@ class Call(Leaf):
                 self.reason = "cannot build the call: %s" % (exc.args[0] if exc.args else exc)
                 return
             except ProtocolError as exc:   # said in the tree's words, as the checks say it
-                said = misfit_text(p.rostype, value)
-                self.reason = "cannot build the call: input %r %s" % (p.name, said) if said else \
-                    "cannot build the call: input %r: %s" % (p.name, exc)
+                self.reason = "cannot build the call: %s" % said_of("input %r" % p.name, exc)
                 return
         call = FunctionCall(fn.module, fn.name, msgs, [p.name for p in fn.inputs], new_id())
         self.record = self.ctx.start_call(fn, call, owner=self)
@@ -155,9 +154,7 @@ class CallKind(NodeKind):
                 try:  # converted here, once: the call leaf sends these messages as they are
                     spec.static[q.name] = q.convert(spec.inputs[q.name])
                 except ProtocolError as exc:
-                    said = misfit_text(q.rostype, spec.inputs[q.name])
-                    p.err(inputs_raw.val_pos[q.name], "input %r %s" % (q.name, said) if said
-                          else "input %r: %s" % (q.name, exc))
+                    p.err(inputs_raw.val_pos[q.name], said_of("input %r" % q.name, exc))
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
         return spec
 
@@ -219,9 +216,8 @@ def _cannot_take(name: str, rostype: str, value: Any, sample: Any, types: Dict[s
         if said:
             return "input %r %s" % (name, said)
     held = "; ".join("%s holds %s" % (r, next(iter(types[r.key]))) for r in refs_in(value))
-    said = misfit_text(rostype, sample)
-    if said:
-        return "input %r %s (%s)" % (name, said, held)
+    if isinstance(exc, ValueMisfit):
+        return "input %r %s (%s)" % (name, exc.said, held)
     return "input %r (%s) cannot take %s: %s" % (name, rostype, held, exc)
 
 

@@ -40,12 +40,12 @@ from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
 from py_trees.common import Status
 
 from comm.errors import ProtocolError, did_you_mean
+from comm.typewords import said_of
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
 from coordinator.runevents import RunObserver
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
-from coordinator.values import misfit_text
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
@@ -338,9 +338,7 @@ def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
         try:
             q.convert(value)
         except ProtocolError as exc:
-            said = misfit_text(q.rostype, value)
-            out.add(outputs.val_pos[name], "%s output %r %s" % (fn.qualified, name, said) if said
-                    else "%s output %r: %s" % (fn.qualified, name, exc))
+            out.add(outputs.val_pos[name], said_of("%s output %r" % (fn.qualified, name), exc))
 
 
 def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None) -> List[_Scenario]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 from geometry_msgs.msg import Point
@@ -147,16 +148,18 @@ MALFORMED = [
     (_with(rostypes=["std_msgs/Strin"]), "unknown ROS type 'std_msgs/Strin' (did you mean 'std_msgs/String'?)"),
     (_with(rostypes=["float"]), "unknown ROS type 'float'"),
     (_with(rostypes=["os/system"]), "unknown ROS type 'os/system'"),
-    (_with(msgs=['{"x": "abc"}']), "msgs[0] is not valid JSON for geometry_msgs/Point: field x must be float type"),
-    (_with(msgs=['{"q": 1.0}']), "msgs[0] is not valid JSON for geometry_msgs/Point"),
+    (_with(msgs=['{"x": "abc"}']), "msgs[0] (geometry_msgs/Point): field x takes a number (float64), got 'abc'"),
+    (_with(msgs=['{"q": 1.0}']), "msgs[0] (geometry_msgs/Point) has no field 'q' (its fields: x, y, z)"),
     (_with(msgs=["{not json"]), "msgs[0] is not valid JSON for geometry_msgs/Point"),
     (_with(msgs=[{"x": 1.0}]), "msgs[0] is not a JSON string for geometry_msgs/Point"),
-    (_with(msgs=['[1, 2]']), "msgs[0] is not valid JSON for geometry_msgs/Point: expected a mapping"),
+    (_with(msgs=['[1, 2]']), "msgs[0] takes a mapping of fields x, y, z (geometry_msgs/Point), got [1, 2]"),
     (_with(msgs=[]), "'msgs' has 0 items but 'rostypes' has 1"),
     (_with(names=["a", "b"]), "'names' has 2 items but 'msgs' has 1"),
     (_with(names="a"), "key 'names' must be a list"),
     (_with(call_id=7), "key 'call_id' must be a string"),
-    (_with(msgs=['{"x": 1.0, "y": [1]}']), "msgs[0] is not valid JSON for geometry_msgs/Point"),
+    (_with(msgs=['{"x": 1.0, "y": [1]}']), "msgs[0] (geometry_msgs/Point): field y takes a number (float64), got [1]"),
+    (_with(names=["goal"], msgs=['{"x": "abc"}']),
+     "input 'goal' (geometry_msgs/Point): field x takes a number (float64), got 'abc' (msgs[0])"),
     ('{"basic_mod": "m", "function": "f", "rostypes": [], "msgs": [], "pad": "%s"}' % ("x" * (1 << 20)),
      "exceeds the limit of 1048576 bytes"),
 ]
@@ -207,7 +210,7 @@ def test_type_resolution_and_suggestions():
     assert suggest_type("float") == "std_msgs/Float64"
     assert suggest_type("std_msgs/string") == "std_msgs/String"
     assert to_message("std_msgs/String", "hi", allow_scalar=True) == String("hi")
-    with pytest.raises(ProtocolError, match="expected a mapping"):
+    with pytest.raises(ProtocolError, match=re.escape("takes a mapping of fields x, y, z (geometry_msgs/Point), got 1.0")):
         to_message("geometry_msgs/Point", 1.0, allow_scalar=True)
-    with pytest.raises(ProtocolError, match="must be float"):
+    with pytest.raises(ProtocolError, match=re.escape("takes a number (std_msgs/Float64), got 'fast'")):
         to_message("std_msgs/Float64", "fast", allow_scalar=True)
