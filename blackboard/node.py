@@ -22,16 +22,13 @@ from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES
 from comm.nodelife import StopSignals
 from comm.nodeopts import count, parse_node_args
+from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 
 TOPIC_STORED = "/blackboard/stored"
 ANNOUNCEMENTS = "/bmtree/modules"  # modules.discovery.PARAM_ROOT (the Blackboard does not import modules)
-
-
-def _callerid(msg: Any) -> Optional[str]:
-    return getattr(msg, "_connection_header", {}).get("callerid")
 
 
 def _announcements() -> Any:
@@ -101,16 +98,21 @@ def main(argv: Optional[List[str]] = None) -> int:
     except Exception as exc:
         sys.stderr.write("error: cannot open the store %s: %s\n" % (path, exc))
         return 3
-    answer_pub = sync_publisher(TOPIC_BB_ANSWER, String)  # from the writer thread, in request order
+    # from the writer thread, in request order; an answer waits for its asker's connection (a Blackboard
+    # restarted mid-run gets requests before the coordinator has connected to its answers)
+    answer_pub = ReplyPublisher(sync_publisher(TOPIC_BB_ANSWER, String))
     ack_pub = rospy.Publisher(TOPIC_STORED, String, queue_size=1000, latch=True)
     service = BlackboardService(store, lambda t: answer_pub.publish(String(t)), lambda t: ack_pub.publish(String(t)),
                                 max_bytes=max_bytes, attribution=Attribution(_announcements))
-    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data, None, _callerid(m)), queue_size=10000,
+    rospy.Subscriber(TOPIC_RESULT, String, lambda m: service.on_result(m.data, None, caller_of(m)), queue_size=10000,
                      tcp_nodelay=True)
     rospy.Subscriber(TOPIC_CALL, String, lambda m: service.on_call(m.data), queue_size=1000, tcp_nodelay=True)
     rospy.Subscriber(TOPIC_CANCEL, String, lambda m: service.on_cancel(m.data), queue_size=1000, tcp_nodelay=True)
-    rospy.Subscriber(TOPIC_BB_REQUEST, String, lambda m: service.on_request(m.data), queue_size=1000,
-                     tcp_nodelay=True)
+    def on_request(msg: Any) -> None:
+        answer_pub.heard(caller_of(msg))
+        service.on_request(msg.data)
+
+    rospy.Subscriber(TOPIC_BB_REQUEST, String, on_request, queue_size=1000, tcp_nodelay=True)
     watch_master()
     rospy.loginfo("blackboard storing in %s (%d values, keeping %d per name)", path, service.total, keep)
     stop.spin()

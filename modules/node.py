@@ -27,6 +27,7 @@ from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, FunctionResult, load_payload, new_id
 from comm.nodelife import StopSignals
 from comm.nodeopts import count, node_name, node_params, parse_node_args
+from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
@@ -54,8 +55,10 @@ class CallInbox:
 
     def __init__(self, module: str, on_call: Callable[[str], None], on_cancel: Callable[[str], None],
                  publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096,
-                 on_parsed: Optional[Callable[[Dict[str, Any]], None]] = None):
+                 on_parsed: Optional[Callable[[Dict[str, Any]], None]] = None,
+                 heard: Optional[Callable[[Optional[str]], None]] = None):
         self.module = module
+        self.heard = heard  # told the node each call came from (its answer waits for that node's connection)
         self.on_call = on_call
         self.on_parsed = on_parsed  # takes the parsed payload instead of on_call: parsed once, not twice
         self.on_cancel = on_cancel
@@ -116,9 +119,17 @@ class CallInbox:
         def sub(topic: str, handler: Callable[[Any], None], size: int) -> Any:
             return rospy.Subscriber(topic, String, lambda m: handler(m.data), queue_size=size, tcp_nodelay=True)
 
+        def take_call(msg: Any) -> None:
+            if self.heard is not None:
+                self.heard(caller_of(msg))
+            self.handle_call(msg.data)
+
+        def sub_calls(topic: str) -> Any:
+            return rospy.Subscriber(topic, String, take_call, queue_size=10000, tcp_nodelay=True)
+
         # rospy drops the oldest queued message past queue_size: a burst of calls for other
         # modules (or garbage) must not push out a good call, so the queues are deep
-        self._subs = [sub(TOPIC_CALL, self.handle_call, 10000), sub(call_topic(self.module), self.handle_call, 10000),
+        self._subs = [sub_calls(TOPIC_CALL), sub_calls(call_topic(self.module)),
                       sub(TOPIC_CANCEL, self.handle_cancel, 10000),
                       sub(cancel_topic(self.module), self.handle_cancel, 10000)]
 
@@ -195,7 +206,9 @@ class ModuleNode:
                                   "module would run every call twice (stop it, or rename this one with "
                                   "_basic_mod:=NAME)" % (self.definition.name, other))
         rospy.core.add_preshutdown_hook(self._on_shutdown)
-        res_pub = sync_publisher(TOPIC_RESULT, String)  # from the call's worker thread
+        # from the call's worker thread; an answer waits for its caller's connection (a node restarted
+        # mid-run gets its first call before the coordinator has connected to its results)
+        res_pub = ReplyPublisher(sync_publisher(TOPIC_RESULT, String))
         ev_pub = rospy.Publisher(TOPIC_EVENT, String, queue_size=1000)
         self.event_publisher = ev_pub  # for setup(): who listens to this module's events
         self.server = ModuleServer(self.definition, self.impl,
@@ -204,7 +217,7 @@ class ModuleNode:
                                    max_bytes=self.max_bytes)
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
-                               on_parsed=self.server.handle_parsed)
+                               on_parsed=self.server.handle_parsed, heard=res_pub.heard)
         self.inbox.subscribe()
         self.impl.setup(self)
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),

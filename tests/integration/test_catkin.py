@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+import xmlrpc.client
 
 import pytest
 
@@ -219,3 +220,58 @@ def test_roslaunch_a_cpp_module_behind_the_bridge(shell, workspace):
     topics = shell.run("rostopic list").stdout.split()
     assert "/right_gripper/BM_input" in topics and "/gripper/BM_input" not in topics, topics
     assert launch.poll() is None
+
+
+SLEEPY = '''import os
+
+from modules import BasicModule
+
+MARK = %r
+
+
+class Sleepy(BasicModule):
+    """Its first open hangs (until killed); the node restarted after that answers at once."""
+
+    def open(self, width):
+        if not os.path.exists(MARK):
+            with open(MARK, "w") as fh:
+                fh.write(str(os.getpid()))
+            self.context.sleep(120)
+        return {"success": True}
+
+    def close(self):
+        return {"success": True, "holding": True}
+'''
+
+# each attempt made while the node is down fails module_lost within half a second: enough for a respawn
+RETRIED_OPEN = "format: 1\nroot:\n  retry: 20\n  child:\n    call: gripper.open\n    inputs: {width: 0.08}\n    timeout: 60\n"
+
+
+def test_roslaunch_respawns_a_killed_module_and_the_run_retries_on_it(shell, workspace):
+    """module.launch respawn:=true: a module node killed during a call is started again by roslaunch;
+    the run notices the death at once (not after the call's 60 s timeout) and its retry reaches
+    the respawned node."""
+    team = workspace / "src" / "my_robot"
+    mark = workspace / ("sleepy-%d.mark" % shell.port)
+    module = workspace / ("sleepy_%d.py" % shell.port)
+    module.write_text(SLEEPY % str(mark))
+    tree = workspace / ("retried-%d.yaml" % shell.port)
+    tree.write_text(RETRIED_OPEN)
+    shell.start("roslaunch -p %d bmtree module.launch module:=gripper definition:=%s class:=%s:Sleepy respawn:=true "
+                "respawn_delay:=0.5" % (shell.port, team / "definitions" / "gripper.json", module), "sleepy")
+    shell.wait_modules("gripper")
+    run = shell.start("rosrun bmtree bmtree run %s" % tree, "retried")
+    end = time.monotonic() + 60
+    while not (mark.exists() and mark.read_text()):
+        assert run.poll() is None and time.monotonic() < end, open(run.log_path).read()
+        time.sleep(0.05)
+    first = int(mark.read_text())
+    os.kill(first, signal.SIGKILL)
+    run.wait(50)
+    out = open(run.log_path).read()
+    assert run.returncode == 0, out
+    calls = [line.split() for line in out.split("calls:")[1].splitlines() if "gripper.open" in line]
+    assert calls[0][3] == "module_lost" and calls[-1][3] == "succeeded", out
+    assert all(c[3] == "module_lost" for c in calls[1:-1]), out
+    code, _, uri = xmlrpc.client.ServerProxy(shell.env()["ROS_MASTER_URI"]).lookupNode("/test", "/bm_gripper")
+    assert code == 1 and xmlrpc.client.ServerProxy(uri).getPid("/test")[2] not in (first, 0)  # respawned
