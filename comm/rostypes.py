@@ -5,6 +5,7 @@ message built here goes through genpy's ``_check_types`` before anyone sees it.
 """
 from __future__ import annotations
 
+import base64
 import difflib
 import importlib
 import importlib.util
@@ -14,7 +15,8 @@ import os
 import pkgutil
 import re
 import struct
-from typing import Any, Dict, List, Optional
+import time
+from typing import Any, Dict, List, Optional, Tuple
 
 import genpy
 from rospy_message_converter import message_converter
@@ -168,6 +170,65 @@ def _flat_fields(cls: type) -> Optional[tuple]:
     return fields  # type: ignore[return-value]
 
 
+_BINARY = re.compile(r"^(uint8|char)\[\d*\]$")
+_SPECIAL: Dict[type, bool] = {}
+
+
+def _special(cls: type, seen: Tuple[type, ...] = ()) -> bool:
+    """Whether a message type has, at any depth, a ``uint8[]``/``char[]`` field or a time (cached):
+    the fields :func:`_prepared` gives the converter in the form it takes."""
+    found = _SPECIAL.get(cls)
+    if found is None:
+        found = False
+        for t in getattr(cls, "_slot_types", ()):
+            inner = resolve_type(t.split("[", 1)[0]) if "/" in t else None
+            if _BINARY.match(t) or t in ("time", "duration") or (
+                    inner is not None and inner not in seen and _special(inner, seen + (cls,))):
+                found = True
+                break
+        _SPECIAL[cls] = found
+    return found
+
+
+def _now() -> Dict[str, int]:
+    """``now`` for a time field: the ROS time in a node, the wall clock offline (``bmtree check``, tests)."""
+    import rospy
+
+    try:
+        stamp = rospy.get_rostime()
+    except rospy.exceptions.ROSInitException:
+        stamp = rospy.Time.from_sec(time.time())
+    return {"secs": stamp.secs, "nsecs": stamp.nsecs}
+
+
+def _prepared(cls: type, value: Dict[Any, Any]) -> Dict[Any, Any]:
+    """``value`` with what the converter mishandles put as it takes it: the byte lists of
+    ``uint8[]``/``char[]`` fields as base64 text (a list of numbers, what a tree or JSON writes, it
+    turns into a bytearray genpy cannot serialise), and a time given as ``now`` as a time (it
+    asks rospy's clock, which raises in a process that is no ROS node)."""
+    out = dict(value)
+    for name, t in zip(getattr(cls, "__slots__", ()), getattr(cls, "_slot_types", ())):
+        v = out.get(name)
+        if _BINARY.match(t):
+            if isinstance(v, (list, tuple, bytes, bytearray)):
+                try:
+                    out[name] = base64.standard_b64encode(bytes(v)).decode("ascii")
+                except (TypeError, ValueError):  # not bytes: the type check says what is wrong
+                    pass
+            continue
+        if t == "time" and v == "now":
+            out[name] = _now()
+            continue
+        inner = resolve_type(t.split("[", 1)[0]) if "/" in t else None
+        if inner is None or not _special(inner):
+            continue
+        if t.endswith("]") and isinstance(v, (list, tuple)):
+            out[name] = [_prepared(inner, x) if isinstance(x, dict) else x for x in v]
+        elif isinstance(v, dict):
+            out[name] = _prepared(inner, v)
+    return out
+
+
 def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
     """Build and type-check a message from a dict (or a scalar for one-field types).
 
@@ -196,6 +257,8 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
                 for k, v in value.items():
                     setattr(msg, k, v)
             else:
+                if _special(cls):
+                    value = _prepared(cls, value)
                 msg = message_converter.convert_dictionary_to_ros_message(rostype, value)
         except ValueError as exc:
             raise _refusal(rostype, given, allow_scalar, "%s: %s" % (rostype, exc))

@@ -214,3 +214,39 @@ def test_type_resolution_and_suggestions():
         to_message("geometry_msgs/Point", 1.0, allow_scalar=True)
     with pytest.raises(ProtocolError, match=re.escape("takes a number (std_msgs/Float64), got 'fast'")):
         to_message("std_msgs/Float64", "fast", allow_scalar=True)
+
+
+def test_byte_fields_take_a_list_of_numbers_bytes_or_base64_text_at_any_depth():
+    """``uint8[]`` as a tree or JSON writes it (a list of numbers): the converter alone made a
+    bytearray genpy cannot serialise, so every Image or UInt8MultiArray given that way was refused."""
+    from comm.rostypes import from_message, to_message
+
+    for given in ([1, 2, 255], b"\x01\x02\xff", "AQL/"):
+        assert to_message("std_msgs/UInt8MultiArray", {"data": given}).data == b"\x01\x02\xff"
+        assert to_message("sensor_msgs/Image", {"height": 1, "width": 3, "data": given}).data == b"\x01\x02\xff"
+    assert from_message(to_message("sensor_msgs/Image", {"data": [7, 8]}))["data"] == "Bwg="
+
+    class Stereo:  # a message holding images (stereo_msgs is not installed here)
+        __slots__ = ["left", "views", "name"]
+        _slot_types = ["sensor_msgs/Image", "sensor_msgs/Image[]", "string"]
+
+    from comm.rostypes import _prepared, _special
+
+    assert _special(Stereo) and _prepared(Stereo, {"left": {"data": [7, 8]}, "views": [{"data": b"\x01"}, 5],
+                                                              "name": [1]}) == {
+        "left": {"data": "Bwg="}, "views": [{"data": "AQ=="}, 5], "name": [1]}
+    with pytest.raises(ProtocolError, match=r"field data\[1\] takes a whole number from 0 to 255 \(uint8\), got 300"):
+        to_message("std_msgs/UInt8MultiArray", {"data": [1, 300]})
+
+
+def test_a_time_given_as_now_is_the_wall_clock_in_a_process_that_is_no_ros_node():
+    """``bmtree check`` and tree tests build messages without a node: rospy's clock raised there."""
+    import time
+
+    from comm.rostypes import to_message
+
+    before = time.time()
+    stamp = to_message("std_msgs/Header", {"stamp": "now", "frame_id": "map"}).stamp.to_sec()
+    assert before - 1 <= stamp <= time.time() + 1
+    assert to_message("sensor_msgs/Image", {"header": {"stamp": "now"}, "data": [1]}).header.stamp.to_sec() >= before - 1
+    assert to_message("std_msgs/Header", {"frame_id": "now"}).frame_id == "now"  # only a time field means the time
