@@ -1,17 +1,21 @@
 """C++ basic modules: the example built with bmtree's library, behind bmtree-bridge, driven by bmtree run."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+import xmlrpc.client
 
 import pytest
 
+from coordinator.graph import RosGraph
 from tests.conftest import REFERENCE, ROOT
 from tests.integration.conftest import NODES, bmtree_cmd, wait_announced
+from tests.integration.test_master_restart import _restart_master
 
 CPP = os.path.join(ROOT, "modules", "cpp")
 GRIPPER_JSON = os.path.join(CPP, "example", "gripper.json")
@@ -437,6 +441,103 @@ def test_example_runs_clean_under_address_and_undefined_sanitizers(ros_graph, gr
     log = _node_log(ros_graph, "gripper")
     assert "squeeze cancelled, fingers stopped" in log, log[-4000:]  # the cancel thread ran, under ASan
     assert "AddressSanitizer" not in log and "runtime error" not in log, log[-4000:]
+
+
+@pytest.fixture
+def own_graph(tmp_path):
+    """A master of the test's own, to kill (the session's must not die)."""
+    graph = RosGraph(str(tmp_path / "ros"))
+    graph.start_master()
+    try:
+        yield graph
+    finally:
+        graph.close()
+
+
+def _wait_until(what, check, graph, node, proc, timeout=20.0):
+    """Until ``check()``; fails at once, with its log, if the node ``node`` (process ``proc``) ends."""
+    end = time.monotonic() + timeout
+    while not check():
+        assert proc.poll() is None, "%s exited with %s before %s:\n%s" % (
+            node, proc.returncode, what, _node_log(graph, node)[-3000:])
+        assert time.monotonic() < end, "no %s within %gs:\n%s" % (what, timeout, _node_log(graph, node)[-3000:])
+        time.sleep(0.05)
+
+
+def _wait_served(graph, bridge, uri):
+    """Until the bridge ``bridge`` (at ``uri``) announces the gripper (it found and checked the C++ node)."""
+    from modules.discovery import live_modules
+
+    _wait_until("announcement", lambda: getattr(live_modules(graph.uri).get("gripper"), "uri", None) == uri, graph,
+                "gripper_bridge", bridge, 30)
+
+
+def _start_bridge(graph, *options):
+    bridge = graph.start_node(["-m", "modules.bridge", "--definition", GRIPPER_JSON, *options], "/gripper_bridge")
+    _, _, uri = xmlrpc.client.ServerProxy(graph.uri).lookupNode("/t", "/gripper_bridge")
+    _wait_served(graph, bridge, uri)
+    return bridge, uri
+
+
+def _inbound(node_uri, publisher_uri):
+    """The topics on which the node at ``node_uri`` is connected to the publisher ``publisher_uri``."""
+    _, _, links = xmlrpc.client.ServerProxy(node_uri).getBusInfo("/t")
+    return {link[4] for link in links if link[2] == "i" and link[1] == publisher_uri}
+
+
+GRIP = """format: 1
+root:
+  sequence:
+    - call: gripper.set_fingers
+      inputs: {left: 0.02, right: 0.07}
+      outputs: {opening: opening}
+    - check: 'opening > 0.0499 and opening < 0.0501'
+"""
+
+
+@pytest.mark.parametrize("build", ["gripper_exe", "gripper_asan_exe"])
+def test_a_cpp_module_registers_again_after_a_master_restart(own_graph, build, request, tmp_path):
+    """kill -9 of rosmaster and a new one on the same port: the C++ node registers its topics again
+    (roscpp never does), keeping its connections to a bridge that has not registered again yet; a
+    run through that bridge goes on, and a bridge started afterwards finds the C++ node. Its prints
+    reach its log file while it runs (stdout line-buffered), and it stops clean (ASan too)."""
+    graph = own_graph
+    cpp = graph.start_node([request.getfixturevalue(build)], "/gripper",
+                           env={"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"})
+    log = functools.partial(_node_log, graph, "gripper")
+    _wait_until("'ready' line in the log while it runs", lambda: "C++ basic module gripper ready" in log(), graph,
+                "gripper", cpp, 10)
+    bridge, bridge_uri = _start_bridge(graph)
+    master = xmlrpc.client.ServerProxy(graph.uri)
+    cpp_uri = master.lookupNode("/t", "/gripper")[2]
+    linked = _inbound(cpp_uri, bridge_uri)
+    assert {"/gripper/BM_input", "/gripper/float64"} <= linked, linked
+    tree = tmp_path / "grip.yaml"
+    tree.write_text(GRIP)
+
+    bridge.send_signal(signal.SIGSTOP)  # so that it cannot register again before the C++ node does
+    try:
+        _restart_master(graph)
+        _wait_until("new registration", lambda: "registered again with the restarted ROS master" in log(), graph,
+                    "gripper", cpp, 10)
+        _, _, (_, subs, _) = master.getSystemState("/t")
+        assert ["/gripper/BM_input", ["/gripper"]] in subs, subs
+        assert _inbound(cpp_uri, bridge_uri) == linked  # roscpp drops a publisher missing from an update
+    finally:
+        bridge.send_signal(signal.SIGCONT)
+    for new_bridge in (False, True):  # the bridge that ran on, then one started after the restart
+        if new_bridge:
+            graph.stop_node(bridge)
+            _start_bridge(graph, "--wait", "10")
+        else:
+            _wait_served(graph, bridge, bridge_uri)  # registered again, announcement set again
+        out = subprocess.run(bmtree_cmd("run", str(tree), "-q"), capture_output=True, text=True, timeout=120,
+                             env=graph.env, stdin=subprocess.DEVNULL)
+        assert out.returncode == 0, out.stdout + out.stderr + _node_log(graph, "gripper_bridge")[-3000:]
+    cpp.send_signal(signal.SIGINT)
+    assert cpp.wait(30) == 0, log()[-4000:]
+    graph.nodes.remove(cpp)
+    assert "AddressSanitizer" not in log() and "runtime error" not in log(), log()[-4000:]
 
 
 def test_a_cpp_node_stopped_during_a_call_stops_the_function_too(ros_graph, gripper_exe, tmp_path):

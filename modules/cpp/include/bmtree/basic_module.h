@@ -32,6 +32,9 @@
 // sleepFor(seconds), stops the hardware and returns; its answer then says "cancelled" (the bridge
 // throws its outputs away) and the module takes calls again at once. A call cancelled before it
 // started is answered "cancelled" without running. The original bridge sends no cancels.
+//
+// A restarted ROS master is survived (master_watch.h): the module registers its topics again.
+// stdout is line-buffered, so that prints reach a log file as they happen.
 #ifndef BMTREE_BASIC_MODULE_H
 #define BMTREE_BASIC_MODULE_H
 
@@ -47,6 +50,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdio>
 #include <deque>
 #include <mutex>
 #include <functional>
@@ -59,6 +63,8 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "master_watch.h"
 
 namespace bmtree {
 
@@ -82,6 +88,12 @@ inline std::string dataTopic(const std::string& module, const std::string& datat
 }
 
 namespace detail {
+
+/// A module's output mostly goes to a log file (roslaunch, systemd), where stdout is
+/// block-buffered: prints (ROS_INFO too) would show up kilobytes late, or never after a kill.
+/// Set before main(), so before any output.
+inline bool lineBufferedStdout() { return std::setvbuf(stdout, nullptr, _IOLBF, 0) == 0; }
+static const bool kStdoutLineBuffered = lineBufferedStdout();
 
 /// One data topic: publisher, subscriber, and the messages received for the current call.
 class ChannelBase {
@@ -171,6 +183,7 @@ class BasicModule {
     cancel_spinner_.reset(new ros::AsyncSpinner(1, &cancel_queue_));
     cancel_spinner_->start();
     publishInfo();
+    master_watch_.start();
   }
   virtual ~BasicModule() {
     cancel_spinner_->stop();
@@ -469,6 +482,7 @@ class BasicModule {
   std::atomic<bool> cancelled_{false};
   std::string running_;
   std::deque<std::string> early_cancels_;
+  detail::MasterWatch master_watch_;  // its thread ends before the rest goes
 };
 
 /// The node's name: `module`, or the new module name of a `_basic_mod:=NAME` argument, so that
