@@ -113,8 +113,9 @@ function draw(s) {
 
 let anchor = [null, 0];
 function drawPending(s) {
-  // the run's time moves on between records: count it on here (not in a replay or after the end)
-  const now = mode === "replay" || s.end || s.paused || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
+  // the run's time moves on between records, and while it is paused (its calls run on): count it on
+  // here, as the terminal does (not in a replay or after the end)
+  const now = mode === "replay" || s.end || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
   rows("pending", s.pending, (c) => [c.target, sec(now - c.t) + " / " + (c.timeout ? c.timeout + "s" : "-"), js(c.inputs)]);
 }

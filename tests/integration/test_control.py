@@ -7,7 +7,7 @@ import os
 import subprocess
 
 from coordinator.runlog import read_log
-from tests.conftest import DATA
+from tests.conftest import DATA, until
 from tests.integration.conftest import bmtree_cmd
 from tests.integration.watchkit import Lines, SimRun, slow_world
 
@@ -117,6 +117,11 @@ def test_a_run_without_control_refuses_every_command(tmp_path):
         run.close()
 
 
+def _clock(text: str) -> float:
+    """The seconds of a view's clock, ``t=12.3s  tick 40`` or ``12.3s``."""
+    return float(text.replace("t=", "").split()[0].rstrip("s"))
+
+
 def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
     from tests.integration.test_watch_terminal import Tmux, _cmd
     from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
@@ -145,6 +150,41 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
         assert "forced to FAILURE by control" in text(driver, "events") + str(driver.execute_script(
             "return [...document.querySelectorAll('#tree g.node title')].map(t=>t.textContent).join('|')"))
         assert run.finish() == 1, run.out.text()
+    finally:
+        driver.quit()
+        if web is not None:
+            stop(web)
+        if term is not None:
+            term.close()
+        run.close()
+
+
+QUIET = "format: 1\nname: quiet\nroot:\n  wait: 120\n"
+
+
+def test_the_page_clock_counts_on_while_the_run_is_paused(tmp_path):
+    """A paused run makes no records while it waits; its time goes on (calls would run on), and
+    the page's clock counts it as the terminal's does (it used to stop at the last record)."""
+    from tests.integration.test_watch_terminal import Tmux, _cmd
+    from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
+
+    tree = tmp_path / "quiet.yaml"
+    tree.write_text(QUIET)
+    driver = browser(tmp_path)
+    run = SimRun(tmp_path, tree=str(tree), extra=("--control",))
+    term = web = None
+    try:
+        run.out.wait_for("RUNNING   wait 120")
+        assert "paused" in ok(run, "pause")
+        web, _out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
+        driver.get(url)
+        wait_until(driver, lambda d: d.find_element("id", "paused").is_displayed())
+        shown = _clock(text(driver, "clock"))
+        wait_until(driver, lambda d: _clock(text(d, "clock")) >= shown + 1.5)
+        assert driver.find_element("id", "paused").is_displayed()
+        term = Tmux(tmp_path, "quiet", 80, 24, _cmd("watch", "--wait", "60"), run.env)
+        shown = _clock(term.wait_screen("PAUSED").split("t=", 1)[1])
+        until(lambda: _clock(term.screen().split("t=", 1)[1]) >= shown + 1.5, 30)
     finally:
         driver.quit()
         if web is not None:
