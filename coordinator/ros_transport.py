@@ -418,8 +418,8 @@ class RosTransport(Transport):
     def _master_back(self) -> None:
         self._deliver(Notice("master_back", "the ROS master at %s answers again; this run's topics are registered "
                                             "with it again (plain rospy/roscpp nodes, such as original modules and "
-                                            "C++ modules, do not register again: they are unknown to it until "
-                                            "restarted)" % self._watch.master_uri))
+                                            "C++ modules not built with bmtree's library, do not register again: "
+                                            "they are unknown to it until restarted)" % self._watch.master_uri))
 
     def close(self) -> None:
         watch = self._watch
