@@ -216,8 +216,11 @@ def _prepared(cls: type, value: Dict[Any, Any]) -> Dict[Any, Any]:
                 except (TypeError, ValueError):  # not bytes: the type check says what is wrong
                     pass
             continue
-        if t == "time" and v == "now":
-            out[name] = _now()
+        if t in ("time", "duration"):
+            if t == "time" and v == "now":
+                out[name] = _now()
+            elif isinstance(v, dict) and not set(v) <= {"secs", "nsecs"}:
+                raise ValueError("field %s has keys other than secs and nsecs" % name)  # the converter drops them
             continue
         inner = resolve_type(t.split("[", 1)[0]) if "/" in t else None
         if inner is None or not _special(inner):

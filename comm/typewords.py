@@ -133,6 +133,11 @@ def _misfit(t: str, value: Any, field: str, named: str, scalar: bool, got: str =
             return None
         if not isinstance(value, dict):
             return wrong_kind()
+        names = [k for k, _kt in _TIME_FIELDS[t]]
+        for k in value:
+            if k not in names:  # the converter would drop it: {sec: 5} would be time 0
+                return field, "(%s) has no field %r%s" % (t, k, did_you_mean(str(k), names) or " (its fields: secs, "
+                                                                                              "nsecs)")
         for k, kt in _TIME_FIELDS[t]:
             if k in value:
                 found = _misfit(kt, value[k], "%s.%s" % (field, k) if field else k, kt, False)

@@ -4,8 +4,9 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import xmlrpc.client
 
-from tests.conftest import REFERENCE
+from tests.conftest import REFERENCE, until
 from tests.integration.conftest import NODES
 
 DEMO_JSON = os.path.join(REFERENCE, "DEMO_BM.json")
@@ -27,6 +28,8 @@ def _bridge(ros_graph):
 def test_a_cpp_node_killed_outright_is_said_to_be_not_running(ros_graph):
     """Its registration stays on the master: the bridge says it is gone, not every topic it misses."""
     cpp = ros_graph.start_node([sys.executable, os.path.join(NODES, "original_cpp_demo_bm.py")], "/DEMO_BM")
+    master = xmlrpc.client.ServerProxy(ros_graph.uri)
+    until(lambda: "/DEMO_BM" in dict(master.getSystemState("/test")[2][1]).get("/DEMO_BM/BM_input", []), 20)
     ros_graph.kill_node(cpp)
     out = _bridge(ros_graph)
     assert out.returncode == 3, out.stdout + out.stderr
@@ -41,6 +44,8 @@ def test_a_node_connected_to_nothing_is_said_in_one_clause_per_direction(ros_gra
     script = tmp_path / "deaf.py"
     script.write_text(_DEAF)
     ros_graph.start_node([sys.executable, str(script)], "/deaf_tool")
+    master = xmlrpc.client.ServerProxy(ros_graph.uri)
+    until(lambda: "/deaf_tool" in dict(master.getSystemState("/test")[2][1]).get("/DEMO_BM/BM_input", []), 20)
     out = _bridge(ros_graph)
     assert out.returncode == 3, out.stdout + out.stderr
     said = out.stderr.split("is not ready after 0.5s: ", 1)[1]

@@ -250,3 +250,14 @@ def test_a_time_given_as_now_is_the_wall_clock_in_a_process_that_is_no_ros_node(
     assert before - 1 <= stamp <= time.time() + 1
     assert to_message("sensor_msgs/Image", {"header": {"stamp": "now"}, "data": [1]}).header.stamp.to_sec() >= before - 1
     assert to_message("std_msgs/Header", {"frame_id": "now"}).frame_id == "now"  # only a time field means the time
+
+
+def test_a_misspelt_key_of_a_time_is_refused_not_dropped():
+    """The converter dropped a time's unknown keys: ``{sec: 5}`` was time 0, silently."""
+    from comm.rostypes import to_message
+
+    with pytest.raises(ProtocolError, match=r"field stamp \(time\) has no field 'sec' \(did you mean 'secs'\?\)"):
+        to_message("std_msgs/Header", {"stamp": {"sec": 5}})
+    with pytest.raises(ProtocolError, match=r"has no field 'at' \(its fields: secs, nsecs\)"):
+        to_message("std_msgs/Header", {"stamp": {"secs": 5, "at": 1}})
+    assert to_message("std_msgs/Header", {"stamp": {"secs": 5, "nsecs": 7}}).stamp.to_nsec() == 5000000007
