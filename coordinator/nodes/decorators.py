@@ -12,7 +12,7 @@ from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
 from coordinator.treeast import TreeNode
 from coordinator.values import at_value_errors, read_at
 
-__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "Timeout", "TimesSpec", "SecondsSpec"]
+__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec"]
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,13 @@ class TimesSpec:
 @dataclass(frozen=True)
 class SecondsSpec:
     seconds: Optional[float]
+
+
+@dataclass(frozen=True)
+class RetrySpec:
+    times: Any
+    delay: Any = None  # seconds between a failed attempt and the next (a number or a reference)
+    delay_pos: Optional[Pos] = None
 
 
 class Guarded(py_trees.decorators.Decorator):
@@ -50,13 +57,17 @@ class Guarded(py_trees.decorators.Decorator):
             self.early = None
             self.feedback_message = ""
             self.initialise()
-        if self.early is None:
+        if self.early is None and not self.holding():
             yield from self.decorated.tick()
         new_status = self.early if self.early is not None else self.update()
         if new_status != Status.RUNNING:
             self.stop(new_status)
         self.status = new_status
         yield self
+
+    def holding(self) -> bool:
+        """True while the child is not to be ticked (a retry waiting out its delay)."""
+        return False
 
     def rerun(self, message: str) -> Status:
         """Run the child again from the start, at once (not at the next period)."""
@@ -90,21 +101,45 @@ class Timeout(Guarded):
 
 
 class Retry(Guarded):
-    """Re-run a failing child, at most ``times`` attempts in all."""
+    """Re-run a failing child, at most ``times`` attempts in all, ``delay`` seconds apart (on the
+    run's clock; the child is not ticked meanwhile)."""
 
-    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: Any, ctx: Any):
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: Any, ctx: Any, delay: Any = None):
         super().__init__(name, child, ctx)
         self.times_param = times
+        self.delay_param = delay
+        self.resume_at: Optional[float] = None
 
     def initialise(self) -> None:
         self.runs = 0
+        self.resume_at = None
         self.times = self.param(self.times_param, "count", "count of retry")
+        self.delay = 0.0
+        if self.times is not None and self.delay_param is not None:
+            self.delay = self.param(self.delay_param, "seconds0", "delay of retry")
+
+    def holding(self) -> bool:
+        if self.resume_at is None:
+            return False
+        if self.ctx.clock.now() >= self.resume_at:
+            self.resume_at = None  # the next attempt starts in this tick
+            return False
+        return True
 
     def update(self) -> Status:
+        if self.resume_at is not None:
+            return Status.RUNNING
         if self.decorated.status == Status.FAILURE:
             self.runs += 1
             if self.runs < self.times:
-                return self.rerun("run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value))
+                said = "run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value)
+                if not self.delay:
+                    return self.rerun(said)
+                self.decorated.stop(Status.INVALID)
+                self.resume_at = self.ctx.clock.now() + self.delay
+                self.ctx.wake_after(self.delay)
+                self.feedback_message = "%s; the next in %gs" % (said, self.delay)
+                return Status.RUNNING
             self.feedback_message = "failed in run %d of %d" % (self.runs, self.times)  # not the last rerun's
         return self.decorated.status
 
@@ -156,7 +191,30 @@ class RetryKind(Counted):
     value = ("count", "attempts in all (≥ 1)")
     label = "count"
     summary = "re-run the child while it fails"
+    options = (CHILD, Option("delay", "seconds0", "seconds between a failed attempt and the next (a module "
+                                                 "restarting, a door opening)", shown="`0`"))
     behaviour = Retry
+
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
+        times = super().parse(p, node, raw, value, at).times
+        return RetrySpec(times, p.opt(node, raw, self.option("delay")), raw.val_pos.get("delay"))
+
+    def reads(self, node: TreeNode) -> Iterable[str]:
+        return param_keys(node.spec.times, node.spec.delay)
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        super().check_types(node, types, errors)
+        s = node.spec
+        if s.delay is not None:
+            at_value_errors(s.delay, s.delay_pos or node.pos, types, errors)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        s = node.spec
+        return super().read_pos(node, key) or (read_at(s.delay, s.delay_pos, key) if s.delay_pos is not None
+                                               else None)
+
+    def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
+        return Retry(node.name, child(node.children[0]), node.spec.times, ctx, node.spec.delay)
 
 
 class TimeoutKind(Counted):

@@ -243,8 +243,9 @@ class Sleepy(BasicModule):
         return {"success": True, "holding": True}
 '''
 
-# each attempt made while the node is down fails module_lost within half a second: enough for a respawn
-RETRIED_OPEN = "format: 1\nroot:\n  retry: 20\n  child:\n    call: gripper.open\n    inputs: {width: 0.08}\n    timeout: 60\n"
+# each attempt made while the node is down fails module_lost within half a second: the delay between
+# attempts leaves the respawn time
+RETRIED_OPEN = "format: 1\nroot:\n  retry: 5\n  delay: 1\n  child:\n    call: gripper.open\n    inputs: {width: 0.08}\n    timeout: 60\n"
 
 
 def test_roslaunch_respawns_a_killed_module_and_the_run_retries_on_it(shell, workspace):

@@ -156,6 +156,24 @@ root:
     assert run.duration == pytest.approx(1.5)
 
 
+def test_retry_waits_its_delay_between_attempts_without_ticking_the_child(tmp_path):
+    """``delay``: a module restarting or a door opening needs time; attempts back to back would
+    all fail within it."""
+    t = TreeTest(tree(tmp_path, """
+inputs:
+  pause: {default: 2.5}
+root:
+  retry: 3
+  delay: $pause
+  child: {call: navigation.go_to, inputs: {place: kitchen}}
+"""))
+    t.mocks["navigation.go_to"].fail_first(2, "blocked", room="kitchen")
+    run = t.run()
+    assert run.succeeded and run.duration == pytest.approx(5.0)
+    assert [round(c.started - run.result.started, 3) for c in run.calls("navigation.go_to")] == [0.0, 2.5, 5.0]
+    assert run.statuses("retry x3") == ["RUNNING", "SUCCESS"]
+
+
 def test_wait_event_timeout_and_set(tmp_path):
     t = TreeTest(tree(tmp_path, """
 root:
