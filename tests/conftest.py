@@ -43,9 +43,10 @@ def private_ros_home():
 collect_ignore = [] if os.environ.get("BMTREE_RELIABILITY") == "1" else ["reliability"]
 
 
-def until(check, timeout=10.0):
-    """Wait until ``check()`` is true; fail the test after ``timeout`` seconds."""
+def until(check, timeout=10.0, said=None):
+    """Wait until ``check()`` is true; fail the test after ``timeout`` seconds (``said()``: what the
+    failure adds, a log's tail)."""
     end = time.monotonic() + timeout
     while not check():
-        assert time.monotonic() < end, "condition not met within %gs" % timeout
+        assert time.monotonic() < end, "condition not met within %gs%s" % (timeout, "\n" + said() if said else "")
         time.sleep(0.02)

@@ -166,3 +166,16 @@ def processes_running(text):
 
 def bmtree_cmd(*args):
     return [sys.executable, "-m", "coordinator", *args]
+
+
+@pytest.fixture
+def own_graph(tmp_path):
+    """A master of the test's own, to kill and restart (the session's must not die)."""
+    from coordinator.graph import RosGraph
+
+    graph = RosGraph(str(tmp_path / "ros"))
+    graph.start_master()
+    try:
+        yield graph
+    finally:
+        graph.close()

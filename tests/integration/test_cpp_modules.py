@@ -12,8 +12,7 @@ import xmlrpc.client
 
 import pytest
 
-from coordinator.graph import RosGraph
-from tests.conftest import REFERENCE, ROOT
+from tests.conftest import REFERENCE, ROOT, until
 from tests.integration.conftest import NODES, bmtree_cmd, wait_announced
 from tests.integration.test_master_restart import _restart_master
 
@@ -443,25 +442,14 @@ def test_example_runs_clean_under_address_and_undefined_sanitizers(ros_graph, gr
     assert "AddressSanitizer" not in log and "runtime error" not in log, log[-4000:]
 
 
-@pytest.fixture
-def own_graph(tmp_path):
-    """A master of the test's own, to kill (the session's must not die)."""
-    graph = RosGraph(str(tmp_path / "ros"))
-    graph.start_master()
-    try:
-        yield graph
-    finally:
-        graph.close()
-
-
 def _wait_until(what, check, graph, node, proc, timeout=20.0):
     """Until ``check()``; fails at once, with its log, if the node ``node`` (process ``proc``) ends."""
-    end = time.monotonic() + timeout
-    while not check():
+    def ready():
         assert proc.poll() is None, "%s exited with %s before %s:\n%s" % (
             node, proc.returncode, what, _node_log(graph, node)[-3000:])
-        assert time.monotonic() < end, "no %s within %gs:\n%s" % (what, timeout, _node_log(graph, node)[-3000:])
-        time.sleep(0.05)
+        return check()
+
+    until(ready, timeout, lambda: "no %s:\n%s" % (what, _node_log(graph, node)[-3000:]))
 
 
 def _wait_served(graph, bridge, uri):
@@ -485,14 +473,7 @@ def _inbound(node_uri, publisher_uri):
     return {link[4] for link in links if link[2] == "i" and link[1] == publisher_uri}
 
 
-GRIP = """format: 1
-root:
-  sequence:
-    - call: gripper.set_fingers
-      inputs: {left: 0.02, right: 0.07}
-      outputs: {opening: opening}
-    - check: 'opening > 0.0499 and opening < 0.0501'
-"""
+GRIP = ALL_FUNCTIONS.split("    - call: gripper.reach")[0]  # set_fingers and its check
 
 
 @pytest.mark.parametrize("build", ["gripper_exe", "gripper_asan_exe"])

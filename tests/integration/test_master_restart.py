@@ -14,9 +14,6 @@ import sys
 import time
 import xmlrpc.client
 
-import pytest
-
-from coordinator.graph import RosGraph
 from tests.integration.faultkit import FULL, PROBE_CLASS, PROBE_JSON, figure, scale
 
 NODES_EXPECTED = {
@@ -25,16 +22,6 @@ NODES_EXPECTED = {
     ("sub", "/master/output", "/bm_probe"),
     ("pub", "/function/output", "/bm_probe"),
 }
-
-
-@pytest.fixture
-def own_graph(tmp_path):
-    graph = RosGraph(str(tmp_path / "ros"))
-    graph.start_master()
-    try:
-        yield graph
-    finally:
-        graph.close()
 
 
 def _restart_master(graph):
