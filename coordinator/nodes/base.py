@@ -8,6 +8,7 @@ generated from these objects).
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
@@ -44,7 +45,8 @@ class ValueType:
 
 
 def _num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A finite number: ``.inf`` seconds would make a bounded loop or wait endless."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 _NODE = {"$ref": "#/definitions/node"}

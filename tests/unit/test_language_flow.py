@@ -277,6 +277,8 @@ def test_counts_and_durations_from_inputs_and_expressions(tree):
     ("call: speech.say\n  inputs: {text: hi}\n  timeout: $word", "timeout of call $word is 'soon', not a positive"),
     ("recall: {x: thing}\n  timeout: $n", "timeout of recall $n is 0"),
     ("wait_event: navigation.arrived\n  timeout: $word", "timeout of wait_event $word is 'soon'"),
+    ("retry: 2\n  delay: $(n - 1)\n  child: {call: speech.say, inputs: {text: hi}}",
+     "delay of retry $(n - 1) is -1, not a number of seconds >= 0"),
 ])
 def test_bad_parameters_fail_when_the_node_starts(tree, node, reason):
     t = tree("  " + node + "\n", inputs="  n: {default: 0}\n  word: {default: soon}\n")
@@ -409,3 +411,12 @@ root:
     assert errs == ["bad.yaml:7:23: cannot multiply a string and a number",
                     "bad.yaml:9:26: cannot subtract a string and a number",
                     "bad.yaml:12:17: cannot negate a string"], errs
+
+
+@pytest.mark.parametrize("node", ["wait: .inf", "retry: 2\n  delay: .inf\n  child: {wait: 1}",
+                                  "timeout: .inf\n  child: {wait: 1}",
+                                  "call: speech.say\n  inputs: {text: hi}\n  timeout: .inf"])
+def test_endless_seconds_are_refused_by_the_check(tmp_path, node):
+    """``.inf`` would make a bounded wait, delay or timeout endless."""
+    errs = errors_of(tmp_path, "format: 1\nroot:\n  " + node + "\n")
+    assert len(errs) == 1 and "inf" in errs[0] and ("seconds" in errs[0]), errs
