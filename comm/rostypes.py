@@ -11,6 +11,7 @@ import importlib
 import importlib.util
 import io
 import json
+import math
 import os
 import pkgutil
 import re
@@ -201,6 +202,23 @@ def _now() -> Dict[str, int]:
     return {"secs": stamp.secs, "nsecs": stamp.nsecs}
 
 
+def _time_value(t: str, name: str, v: Any) -> Any:
+    """A time or duration field's value as the converter takes it: ``now`` (a time), seconds, or
+    ``{secs, nsecs}``. The converter turned any other text, and unknown keys, into 0 silently."""
+    if isinstance(v, str):
+        if t == "time" and v == "now":
+            return _now()
+        raise ValueError("field %s takes %s, got text" % (name, t))
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        if not math.isfinite(v) or (t == "time" and v < 0):
+            raise ValueError("field %s: %r is not a %s" % (name, v, t))
+        stamp = (genpy.Time if t == "time" else genpy.Duration).from_sec(v)
+        return {"secs": stamp.secs, "nsecs": stamp.nsecs}
+    if isinstance(v, dict) and not set(v) <= {"secs", "nsecs"}:
+        raise ValueError("field %s has keys other than secs and nsecs" % name)
+    return v
+
+
 def _prepared(cls: type, value: Dict[Any, Any]) -> Dict[Any, Any]:
     """``value`` with what the converter mishandles put as it takes it: the byte lists of
     ``uint8[]``/``char[]`` fields as base64 text (a list of numbers, what a tree or JSON writes, it
@@ -217,10 +235,8 @@ def _prepared(cls: type, value: Dict[Any, Any]) -> Dict[Any, Any]:
                     pass
             continue
         if t in ("time", "duration"):
-            if t == "time" and v == "now":
-                out[name] = _now()
-            elif isinstance(v, dict) and not set(v) <= {"secs", "nsecs"}:
-                raise ValueError("field %s has keys other than secs and nsecs" % name)  # the converter drops them
+            if name in out:
+                out[name] = _time_value(t, name, v)
             continue
         inner = resolve_type(t.split("[", 1)[0]) if "/" in t else None
         if inner is None or not _special(inner):
@@ -246,6 +262,10 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
         msg = value
     else:
         given = value
+        if allow_scalar and isinstance(value, dict) and value and set(value) <= {"secs", "nsecs"}:
+            field = single_field(cls)
+            if field is not None and cls._slot_types[0] in ("time", "duration"):  # type: ignore[attr-defined]
+                value = {field: value}  # std_msgs/Time written as its one field's time
         if not isinstance(value, dict):
             field = single_field(cls)
             if allow_scalar and field is not None:

@@ -69,7 +69,7 @@ def type_words(t: str, scalar: bool = True) -> str:
     if t == "bool":
         return "true or false"
     if t in _TIME_FIELDS:
-        return "a mapping of fields secs, nsecs"
+        return "seconds, {secs, nsecs}%s" % (" or now" if t == "time" else "")
     cls = _resolve(t)
     if cls is None:
         return "a %s" % t
@@ -130,6 +130,11 @@ def _misfit(t: str, value: Any, field: str, named: str, scalar: bool, got: str =
         return None if isinstance(value, int) else wrong_kind()
     if t in _TIME_FIELDS:
         if isinstance(value, genpy.TVal) or (t == "time" and isinstance(value, str) and value == "now"):
+            return None
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not math.isfinite(value) or (t == "time" and value < 0):
+                return field, "takes %s (%s), got %s" % ("a time from 0 seconds" if t == "time" else
+                                                         "finite seconds", named, _shown(value))
             return None
         if not isinstance(value, dict):
             return wrong_kind()

@@ -261,3 +261,23 @@ def test_a_misspelt_key_of_a_time_is_refused_not_dropped():
     with pytest.raises(ProtocolError, match=r"has no field 'at' \(its fields: secs, nsecs\)"):
         to_message("std_msgs/Header", {"stamp": {"secs": 5, "at": 1}})
     assert to_message("std_msgs/Header", {"stamp": {"secs": 5, "nsecs": 7}}).stamp.to_nsec() == 5000000007
+
+
+@pytest.mark.parametrize("value,seconds", [({"secs": 100, "nsecs": 5}, 100.000000005), (100.5, 100.5), (0, 0.0)])
+def test_a_time_input_takes_seconds_or_secs_and_nsecs(value, seconds):
+    """As a call's input (a one-field std_msgs/Time written as its time) and as a field."""
+    from comm.rostypes import to_message
+
+    assert to_message("std_msgs/Time", value, allow_scalar=True).data.to_sec() == pytest.approx(seconds)
+    assert to_message("std_msgs/Header", {"stamp": value}).stamp.to_sec() == pytest.approx(seconds)
+    assert to_message("std_msgs/Duration", value, allow_scalar=True).data.to_sec() == pytest.approx(seconds)
+
+
+@pytest.mark.parametrize("rostype,value", [("std_msgs/Time", "2024-01-01"), ("std_msgs/Duration", "5s"),
+                                           ("std_msgs/Duration", "now"), ("std_msgs/Time", float("inf"))])
+def test_a_time_given_as_other_text_is_refused_not_made_zero(rostype, value):
+    """The converter made any text but ``now`` time 0, silently."""
+    from comm.rostypes import to_message
+
+    with pytest.raises(ProtocolError, match="takes"):
+        to_message(rostype, value, allow_scalar=True)
