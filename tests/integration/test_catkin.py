@@ -19,7 +19,7 @@ import xmlrpc.client
 import pytest
 
 from coordinator.graph import LOOPBACK, free_port
-from tests.conftest import DATA, ROOT
+from tests.conftest import DATA, ROOT, until
 
 GRIPPER = os.path.join(DATA, "gripper")
 IGNORE = shutil.ignore_patterns(".git", ".venv*", "build", "devel", "install", "*.egg-info", "__pycache__",
@@ -276,3 +276,49 @@ def test_roslaunch_respawns_a_killed_module_and_the_run_retries_on_it(shell, wor
     assert all(c[3] == "module_lost" for c in calls[1:-1]), out
     code, _, uri = xmlrpc.client.ServerProxy(shell.env()["ROS_MASTER_URI"]).lookupNode("/test", "/bm_gripper")
     assert code == 1 and xmlrpc.client.ServerProxy(uri).getPid("/test")[2] not in (first, 0)  # respawned
+
+
+RECALL_OPEN = "format: 1\nroot:\n  sequence:\n    - recall: {opened: gripper/open/success}\n    - check: opened\n"
+OPEN = "format: 1\nroot:\n  call: gripper.open\n  inputs: {width: 0.05}\n"
+
+
+def _pid_of(shell, node):
+    """The pid of ``node`` on the shell's master (None: no master, not registered, or gone)."""
+    try:
+        code, _, uri = xmlrpc.client.ServerProxy(shell.env()["ROS_MASTER_URI"]).lookupNode("/test", node)
+        return xmlrpc.client.ServerProxy(uri).getPid("/test")[2] if code == 1 else None
+    except OSError:
+        return None
+
+
+def test_nodes_respawned_after_a_master_restart_keep_their_options(shell, workspace):
+    """A restarted master has lost every private parameter: nodes launched with their options as
+    parameters came back without them (a module without --definition, in a respawn loop; a
+    Blackboard on the default store, its values gone)."""
+    team = workspace / "src" / "my_robot"
+    master = shell.start("rosmaster --core -p %d" % shell.port, "master")
+    db = workspace / ("kept-%d.sqlite" % shell.port)
+    shell.start("roslaunch bmtree blackboard.launch db:=%s respawn:=true respawn_delay:=0.2" % db, "bb")
+    until(lambda: _pid_of(shell, "/blackboard"), 30)  # one roslaunch at a time: they race for the run_id
+    shell.start("roslaunch bmtree module.launch module:=gripper definition:=%s class:=%s:Gripper respawn:=true "
+                "respawn_delay:=0.2" % (team / "definitions" / "gripper.json", team / "nodes" / "gripper.py"),
+                "respawned")
+    shell.wait_modules("gripper")
+    for name, text in (("open", OPEN), ("recall_open", RECALL_OPEN)):
+        (workspace / ("%s-%d.yaml" % (name, shell.port))).write_text(text)
+    out = shell.run("rosrun bmtree bmtree run -q %s" % (workspace / ("open-%d.yaml" % shell.port)))
+    assert out.returncode == 0, out.stdout + out.stderr
+    os.kill(master.pid, signal.SIGKILL)
+    master.wait(10)
+    shell.procs.remove(master)
+    shell.start("rosmaster --core -p %d" % shell.port, "master2")
+    until(lambda: _pid_of(shell, "/bm_gripper") and _pid_of(shell, "/blackboard"), 30)  # registered again
+    for node in ("/bm_gripper", "/blackboard"):
+        first = _pid_of(shell, node)
+        os.kill(first, signal.SIGKILL)
+        until(lambda n=node, f=first: _pid_of(shell, n) not in (None, f), 30)  # respawned
+    shell.wait_modules("gripper")
+    out = shell.run("rosrun bmtree bmtree run -q %s" % (workspace / ("recall_open-%d.yaml" % shell.port)))
+    assert out.returncode == 0, out.stdout + out.stderr  # the Blackboard came back on its own store
+    out = shell.run("rosrun bmtree bmtree run -q %s" % (workspace / ("open-%d.yaml" % shell.port)))
+    assert out.returncode == 0, out.stdout + out.stderr  # the module came back with its definition and class
