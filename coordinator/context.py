@@ -8,6 +8,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from comm.liveness import BlackboardLost, ModuleLost
 from comm.messages import (
     BlackboardAnswer,
     BlackboardRequest,
@@ -19,7 +20,6 @@ from comm.messages import (
 from comm.rostypes import from_message
 from comm.textenum import TextEnum
 from coordinator.clock import Clock
-from coordinator.liveness import BlackboardLost, ModuleLost
 from coordinator.refs import resolve, unwrap
 from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport

@@ -36,6 +36,7 @@ from comm import (
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
 from comm.errors import ProtocolError
 from comm.limits import check_depth
+from comm.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, Watchdog
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
@@ -46,7 +47,6 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.nodelife import registering
-from coordinator.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, Watchdog
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runevents import Notice
 from coordinator.runstream import CHANNELS, Sink

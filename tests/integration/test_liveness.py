@@ -9,7 +9,7 @@ import sys
 import time
 
 from comm import BlackboardRequest, FunctionResult
-from coordinator.liveness import BlackboardLost, ModuleLost
+from comm.liveness import BlackboardLost, ModuleLost
 from coordinator.ros_transport import RosTransport
 from tests.integration.conftest import bmtree_cmd
 from tests.integration.faultkit import (

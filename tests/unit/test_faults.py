@@ -12,12 +12,12 @@ from blackboard.service import BlackboardService
 from blackboard.store import Store
 from comm import BlackboardAnswer, BlackboardRequest, FunctionCall, FunctionResult, ProtocolError
 from comm.limits import check_depth
+from comm.liveness import BlackboardLost, ModuleLost
 from comm.messages import load_payload
 from comm.rostypes import resolve_type
 from coordinator.cli import main as bmtree
 from coordinator.clock import SimClock
 from coordinator.context import RunContext
-from coordinator.liveness import BlackboardLost, ModuleLost
 from coordinator.transport import Transport
 from modules.definition import DefinitionError, load_definition, parse_definition
 from modules.runtime import BasicModule, ModuleServer
@@ -312,7 +312,7 @@ class _AskEveryTime:
 
 
 def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls():
-    from coordinator import liveness
+    from comm import liveness
 
     state = {"uri": "http://h:1/", "pid": 10}
 
@@ -369,7 +369,7 @@ def test_a_call_answered_by_two_nodes_is_reported(probe):
 
 
 def test_watchdog_asks_only_about_calls_in_flight_for_a_period(monkeypatch):
-    from coordinator import liveness
+    from comm import liveness
 
     clock = {"now": 100.0}
 

@@ -419,19 +419,27 @@ def test_launch_file_path_args_resolve_with_roslaunch_substitution(monkeypatch):
         return {"%s %s" % (e.get("name"), k): substitution_args.resolve_args(v, {"arg": dict(args)})
                 for e, k, v in uses if "optenv('PWD')" in v}
 
-    assert resolved("module", module="g", definition="defs/g.json", **{"class": "g.py:G"}) == {
-        "definition value": "/home/me/robot/defs/g.json", "class value": "/home/me/robot/g.py:G",
-        "bm_$(arg module) args": "--definition /home/me/robot/defs/g.json "}
-    assert resolved("module", module="g", definition="/opt/g.json", bridge_args="-x 1", **{"class": "my.g:G"}) == {
-        "definition value": "/opt/g.json", "class value": "my.g:G",  # a module, not a file: as given
-        "bm_$(arg module) args": "--definition /opt/g.json -x 1"}
-    assert resolved("module", module="g", definition="g.json", **{"class": "/opt/g.py:G"})["class value"] == "/opt/g.py:G"
+    def values(name, **given):  # in order (module.launch's two nodes have one name)
+        decl, uses = _launch_uses(name)
+        args = dict({a.get("name"): a.get("default", "") for a in decl}, **given)
+        return [substitution_args.resolve_args(v, {"arg": dict(args)}) for _e, _k, v in uses if "optenv('PWD')" in v]
+
+    # module.launch: the options on the command line (a node respawned after a master restart finds no parameters)
+    assert values("module", module="g", definition="defs/g.json", **{"class": "g.py:G"}) == [
+        "--definition '/home/me/robot/defs/g.json' --class '/home/me/robot/g.py:G' --max-bytes 1048576 _basic_mod:=g",
+        "--definition '/home/me/robot/defs/g.json' _basic_mod:=g "]
+    assert values("module", module="g", definition="/opt/g.json", bridge_args="-x 1", **{"class": "my.g:G"}) == [
+        "--definition '/opt/g.json' --class 'my.g:G' --max-bytes 1048576 _basic_mod:=g",  # a module: as given
+        "--definition '/opt/g.json' _basic_mod:=g -x 1"]
+    assert "--class '/opt/g.py:G'" in values("module", module="g", definition="g.json", **{"class": "/opt/g.py:G"})[0]
     assert resolved("run", tree="trees/t.yaml", set="object=book", modules="defs") == {
         "coordinator args": "run -q /home/me/robot/trees/t.yaml --set object=book", "modules value": "/home/me/robot/defs"}
     assert resolved("run", tree="/srv/t.yaml")["coordinator args"] == "run -q /srv/t.yaml"
     assert set(resolved("sim", world="w.yaml").values()) == {"/home/me/robot/w.yaml"}
     assert set(resolved("sim", world="/srv/w.yaml").values()) == {"/srv/w.yaml"}
-    assert resolved("blackboard", db="bb.sqlite") == {"db value": "/home/me/robot/bb.sqlite"}
-    assert resolved("blackboard", db=":memory:") == {"db value": ":memory:"}
+    assert resolved("blackboard", db="bb.sqlite") == {
+        "blackboard args": "--db '/home/me/robot/bb.sqlite' --keep 1000 --max-bytes 1048576"}
+    assert resolved("blackboard", db=":memory:") == {"blackboard args": "--db ':memory:' --keep 1000 --max-bytes 1048576"}
+    assert resolved("blackboard") == {"blackboard args": "--keep 1000 --max-bytes 1048576"}
     monkeypatch.delenv("PWD")  # no $PWD: the path is passed on as given
-    assert resolved("blackboard", db="bb.sqlite") == {"db value": "bb.sqlite"}
+    assert resolved("blackboard", db="bb.sqlite") == {"blackboard args": "--db 'bb.sqlite' --keep 1000 --max-bytes 1048576"}

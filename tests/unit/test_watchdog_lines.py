@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from coordinator.liveness import ModuleLost, Watchdog
+from comm.liveness import ModuleLost, Watchdog
 from tests.conftest import until
 from tests.unit.xmlrpc_standin import StandIn
 
@@ -35,7 +35,7 @@ def _watching(node, period):
 
 
 def test_a_watched_node_that_dies_is_reported_at_once_not_a_period_later(node, monkeypatch):
-    from coordinator import liveness
+    from comm import liveness
 
     shift = {"s": 0.0}
 
