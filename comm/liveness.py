@@ -65,12 +65,17 @@ class Watchdog:
         period: seconds between checks (a call is watched once it is a period old).
         line: makes the connection that asks a node (URI, timeout, caller id) for its pid: a
             :class:`~comm.rpc.PidLine`.
+        say: log each loss.
+
+    A module node uses one over the callers of its running calls (keys are then node names):
+    a call whose caller's process is gone is cancelled.
     """
 
     def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
-                 ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine):
+                 ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine, say: bool = True):
         self.deliver = deliver
+        self.say = say  # log each loss (a module node watching its callers says it in its own words)
         self.resolve = resolve
         self.lookup = lookup
         self.period = period
@@ -82,6 +87,7 @@ class Watchdog:
         self._requests: Set[str] = set()
         self._known: Dict[str, Tuple[str, str, int]] = {}  # module -> (node, uri, pid)
         self._stop = threading.Event()
+        self._owing = threading.Event()  # set while something is owed (and on stop): an idle watchdog sleeps
         self._thread: Optional[threading.Thread] = None
 
     def start(self) -> None:
@@ -91,11 +97,13 @@ class Watchdog:
 
     def stop(self) -> None:
         self._stop.set()
+        self._owing.set()
 
     # bookkeeping, from any thread ----------------------------------------------------
     def call_sent(self, call_id: str, module: str) -> None:
         with self._lock:
             self._calls[call_id] = (module, time.monotonic())
+        self._owing.set()
 
     def owes(self, call_id: str) -> bool:
         """True while the call is in flight (sent, neither answered nor given up as lost)."""
@@ -110,6 +118,7 @@ class Watchdog:
     def request_sent(self, request_id: str) -> None:
         with self._lock:
             self._requests.add(request_id)
+        self._owing.set()
 
     def request_done(self, request_id: Optional[str]) -> None:
         if request_id is not None:
@@ -133,7 +142,14 @@ class Watchdog:
 
     def _wait(self) -> None:
         """Wait a period, or less when a kept connection closes (that line is dropped: its node
-        is asked afresh)."""
+        is asked afresh); while nothing is owed, until something is (an idle node costs nothing)."""
+        with self._lock:
+            idle = not self._calls and not self._requests
+            if idle:
+                self._owing.clear()
+        if idle and not self._lines:
+            self._owing.wait()
+            return
         kept = {key: line for key, line in self._lines.items() if line.fileno() >= 0}
         if not kept:
             self._stop.wait(self.period)
@@ -176,7 +192,8 @@ class Watchdog:
                 log.warning("Blackboard node %s lost: %s", node, reason)
                 self.deliver(BlackboardLost(node=node, reason=reason, request_ids=ids))
             else:
-                log.warning("module %s (node %s) lost: %s", key, node, reason)
+                if self.say:
+                    log.warning("module %s (node %s) lost: %s", key, node, reason)
                 self.deliver(ModuleLost(module=key, node=node, reason=reason, call_ids=ids))
 
     def _ask(self, key: str, uri: str) -> Optional[int]:

@@ -23,6 +23,7 @@ from typing import Any, Callable, Dict, List, Optional
 from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
 from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, surely_not_for
 from comm.errors import ProtocolError
+from comm.liveness import Watchdog
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, FunctionResult, load_payload, new_id
 from comm.nodelife import StopSignals
@@ -37,6 +38,8 @@ __all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_par
            "run_module"]
 
 log = logging.getLogger("bmtree.module")
+
+CALLER_PERIOD = 0.5  # seconds: a call's caller is watched once the call is this old, then at once on its death
 
 
 class CallInbox:
@@ -55,7 +58,7 @@ class CallInbox:
 
     def __init__(self, module: str, on_call: Callable[[str], None], on_cancel: Callable[[str], None],
                  publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096,
-                 on_parsed: Optional[Callable[[Dict[str, Any]], None]] = None,
+                 on_parsed: Optional[Callable[[Dict[str, Any], Optional[str]], None]] = None,
                  heard: Optional[Callable[[Optional[str]], None]] = None):
         self.module = module
         self.heard = heard  # told the node each call came from (its answer waits for that node's connection)
@@ -69,8 +72,8 @@ class CallInbox:
         self._seen = RecentIds(remember)
         self._subs: List[Any] = []
 
-    def handle_call(self, text: Any) -> None:
-        """One payload from either call topic; never raises."""
+    def handle_call(self, text: Any, caller: Optional[str] = None) -> None:
+        """One payload from either call topic, sent by node ``caller``; never raises."""
         try:
             if surely_not_for(text, self.module):
                 self.skipped += 1
@@ -96,7 +99,7 @@ class CallInbox:
                 log.debug("call %s of %s came twice; ran once", call_id, self.module)
                 return
             if self.on_parsed is not None:
-                self.on_parsed(head)
+                self.on_parsed(head, caller)
             else:
                 self.on_call(text)
         except Exception:
@@ -120,9 +123,10 @@ class CallInbox:
             return rospy.Subscriber(topic, String, lambda m: handler(m.data), queue_size=size, tcp_nodelay=True)
 
         def take_call(msg: Any) -> None:
+            caller = caller_of(msg)
             if self.heard is not None:
-                self.heard(caller_of(msg))
-            self.handle_call(msg.data)
+                self.heard(caller)
+            self.handle_call(msg.data, caller)
 
         def sub_calls(topic: str) -> Any:
             return rospy.Subscriber(topic, String, take_call, queue_size=10000, tcp_nodelay=True)
@@ -155,6 +159,7 @@ class ModuleNode:
         self.max_bytes = max_bytes  # None: the private parameter ~max_bytes, else 1 MiB
         self.server: Optional[ModuleServer] = None
         self.inbox: Optional[CallInbox] = None
+        self.callers: Optional[Watchdog] = None
         self.event_publisher: Any = None
         self._param = ""
         self.instance = "%s:%d:%s" % (socket.gethostname(), os.getpid(), new_id()[:8])
@@ -218,6 +223,9 @@ class ModuleNode:
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard)
+        self.callers = Watchdog(self._orphaned, lambda node: node, _uri_of, period=CALLER_PERIOD, say=False)
+        self.server.callers = self.callers
+        self.callers.start()
         self.inbox.subscribe()
         self.impl.setup(self)
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
@@ -226,9 +234,19 @@ class ModuleNode:
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
         rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))
 
+    def _orphaned(self, lost: Any) -> None:
+        """The node that sent these calls is gone (killed, crashed): nobody waits for their answers,
+        and running on they would drive the hardware and hold the module. Cancel them."""
+        for call_id in lost.call_ids:
+            if self.server is not None and self.server.cancel(call_id):
+                log.warning("cancelled call %s of module %s: its caller %s is gone (%s)", call_id,
+                            self.definition.name, lost.module, lost.reason)
+
     def stop(self) -> None:
         import rospy
 
+        if self.callers is not None:
+            self.callers.stop()
         if self.inbox is not None:
             self.inbox.close()
         try:
@@ -238,6 +256,16 @@ class ModuleNode:
         except Exception:  # the master may be gone already
             pass
         self.impl.shutdown()
+
+
+def _uri_of(node: str) -> Optional[str]:
+    """A node's XML-RPC URI from the master (None once it is no longer registered)."""
+    import rosgraph
+
+    try:
+        return rosgraph.Master("/bmtree_callers").lookupNode(node)
+    except rosgraph.masterapi.MasterError:
+        return None
 
 
 class DuplicateModule(Exception):

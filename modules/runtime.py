@@ -217,6 +217,9 @@ class ModuleServer:
         self._calls: Dict[str, _Call] = {}
         self._exclusive: Optional[_Call] = None
         self._waiting: Optional[_Call] = None  # the next exclusive call, while the holder is being cancelled
+        #: a :class:`comm.liveness.Watchdog` over the callers (a node sets it): a call whose caller's
+        #: process is gone is cancelled, not left running the hardware and holding the module
+        self.callers: Optional[Any] = None
         self._bind()
         impl._server = self
 
@@ -246,11 +249,11 @@ class ModuleServer:
         except Exception as exc:
             log.error("could not handle a call (%s: %s)", type(exc).__name__, exc)
 
-    def handle_parsed(self, head: Dict[str, Any]) -> None:
+    def handle_parsed(self, head: Dict[str, Any], caller: Optional[str] = None) -> None:
         """Handle a call payload already parsed (and its size and depth checked) by
-        :func:`~comm.messages.load_payload`, as the node's inbox does; never raises."""
+        :func:`~comm.messages.load_payload`, as the node's inbox does, from node ``caller``; never raises."""
         try:
-            self._take(head)
+            self._take(head, caller)
         except Exception as exc:
             log.error("could not handle a call (%s: %s)", type(exc).__name__, exc)
 
@@ -266,7 +269,7 @@ class ModuleServer:
             return
         self._take(head)
 
-    def _take(self, head: Dict[str, Any]) -> None:
+    def _take(self, head: Dict[str, Any], caller: Optional[str] = None) -> None:
         if head.get("basic_mod") != self.definition.name:
             return
         call_id = head.get("call_id") if isinstance(head.get("call_id"), str) else None
@@ -304,7 +307,10 @@ class ModuleServer:
                     self._calls[call_id] = call
         if busy is not None:
             self._reject(call_id, fname, "busy with call %s (%s)" % (busy.ctx.call_id, busy.ctx.function))
-        elif waits:
+            return
+        if self.callers is not None and caller and call_id is not None:
+            self.callers.call_sent(call_id, caller)
+        if waits:
             holder = self._exclusive
             self.scheduler.call_later(self.cancel_grace, lambda: self._stop_waiting(call, holder))
         else:
@@ -318,6 +324,8 @@ class ModuleServer:
             self._waiting = None
             if call.ctx.call_id is not None and self._calls.get(call.ctx.call_id) is call:
                 del self._calls[call.ctx.call_id]
+        if self.callers is not None:
+            self.callers.call_done(call.ctx.call_id)
         who = "%s (%s)" % (holder.ctx.call_id, holder.ctx.function) if holder is not None else "?"
         self._reject(call.ctx.call_id, call.ctx.function, "busy with call %s: it was cancelled, but its code has not "
                      "returned within %gs" % (who, self.cancel_grace))
@@ -335,26 +343,30 @@ class ModuleServer:
         except ProtocolError as exc:
             log.warning("ignored a malformed cancel: %s", exc)
             return
-        if req.basic_mod != self.definition.name:
-            return
+        if req.basic_mod == self.definition.name:
+            self.cancel(req.call_id)
+
+    def cancel(self, call_id: str) -> bool:
+        """Cancel a call as a cancel request would (its caller went away); False if it is not running."""
         with self._lock:
-            call = self._calls.get(req.call_id)
+            call = self._calls.get(call_id)
             queued = call is not None and self._waiting is call
             if queued:  # never started: nothing to stop
                 self._waiting = None
                 call.running = False
         if call is None:
-            return
+            return False
         call.ctx.cancel()
         if queued:
             self._finish(call, self._cancelled(call))
-            return
+            return True
         with self._lock:
             running = call.running
         if running:  # its code may still stop the hardware: wait for it, but not forever
             self.scheduler.call_later(self.cancel_grace, lambda: self._finish(call, self._cancelled(call)))
         else:        # waiting on an outcome's delay, or hanging: nothing to stop
             self._finish(call, self._cancelled(call))
+        return True
 
     # -- running ---------------------------------------------------------------------
     def _run(self, call: _Call, work: Optional[Callable[..., Any]]) -> None:
@@ -450,6 +462,8 @@ class ModuleServer:
         if nxt is not None:
             self.executor.submit(self._run, nxt, None)
         if first:
+            if self.callers is not None:
+                self.callers.call_done(call.ctx.call_id)
             text = result.encode()
             size = len(text) if text.isascii() else len(text.encode("utf-8"))
             if size > self.max_bytes:  # the coordinator would drop it: the call would end as a timeout

@@ -11,6 +11,7 @@ import time
 from comm import BlackboardRequest, FunctionResult
 from comm.liveness import BlackboardLost, ModuleLost
 from coordinator.ros_transport import RosTransport
+from tests.conftest import until
 from tests.integration.conftest import bmtree_cmd
 from tests.integration.faultkit import (
     FULL,
@@ -173,3 +174,23 @@ def test_a_retry_sent_while_the_killed_module_restarts_reaches_the_new_process(r
     calls = [line for line in out.splitlines() if "probe.work" in line and line.strip().startswith("+")]
     assert "module_lost" in calls[0] and "succeeded" in calls[-1], out
     assert "timeout" not in out.split("calls:")[1], out
+
+
+def test_a_call_whose_caller_was_killed_is_cancelled_by_the_module(ros_graph, tmp_path):
+    """kill -9 of ``bmtree run`` mid-call: nothing cancels the call from the run's side, and it used
+    to drive the hardware to its end and refuse every other call meanwhile (``busy with call …``).
+    The module watches the caller of a running call and cancels it when that process is gone."""
+    start_probe(ros_graph)
+    first = slow_run(tmp_path, 100)
+    first.kill()  # no Ctrl-C: the run cannot cancel anything
+    first.wait(10)
+    first.stdout.close()
+    log_path = os.path.join(ros_graph.ros_home, "bm_probe.out")
+    until(lambda: "its caller /bmtree_%d_" % first.pid in open(log_path).read(), 30, lambda: open(log_path).read()[-3000:])
+    line = next(x for x in open(log_path).read().splitlines() if "its caller /bmtree_%d_" % first.pid in x)
+    assert "cancelled call" in line and "of module probe" in line and "(its process is gone)" in line, line
+    quick = tmp_path / "quick.yaml"
+    quick.write_text("format: 1\nroot:\n  call: probe.work\n  inputs: {seconds: 0.1, tag: next}\n")
+    out = subprocess.run(bmtree_cmd("run", str(quick), "--modules", PROBE_JSON, "-q"), capture_output=True,
+                         text=True, timeout=120, env=dict(os.environ))
+    assert out.returncode == 0, out.stdout + out.stderr  # the module is free again, long before 100 s
