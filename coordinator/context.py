@@ -8,6 +8,8 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+import genpy
+
 from comm.liveness import BlackboardLost, ModuleLost
 from comm.messages import (
     BlackboardAnswer,
@@ -33,11 +35,21 @@ WAKE = object()
 
 
 def plain(value: Any) -> Any:
-    """A ROS message as test-friendly data: one-field messages unwrap to their value."""
+    """A ROS message as test-friendly data: one-field messages unwrap to their value, and a time or
+    duration is ``{"secs": S, "nsecs": N}`` (as inside a message, and as a tree writes one; run logs
+    before this recorded a ``std_msgs/Time`` as its nanoseconds in text)."""
     v = unwrap(value)
+    if isinstance(v, genpy.TVal):
+        return _time(v)
     if hasattr(v, "__slots__") and hasattr(v, "_type"):
         return from_message(v)
+    if isinstance(v, (list, tuple)) and v and isinstance(v[0], genpy.TVal):  # a time[] field unwrapped
+        return [_time(t) if isinstance(t, genpy.TVal) else t for t in v]
     return v
+
+
+def _time(t: Any) -> Dict[str, int]:
+    return {"secs": t.secs, "nsecs": t.nsecs}
 
 
 class RecordStatus(TextEnum):

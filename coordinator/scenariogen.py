@@ -2,10 +2,18 @@
 
 Every module answers as it did (per function, in call order: outputs, failure or
 rejection text, and how long it took); a call that never got an answer (timed out,
-halted, still running at the end) hangs; events come at their recorded times. The
-expectations are the recorded result and the calls in order with their inputs, so
-``bmtree test`` reproduces the same path on simulated time, and a changed tree
-shows which calls changed.
+halted, still running at the end) hangs. The expectations are the recorded result and
+the calls in order with their inputs, so ``bmtree test`` reproduces the same path on
+simulated time, and a changed tree shows which calls changed.
+
+Events keep their place among the calls, not their clock time: simulated time skips what a
+real run spends between a call's answer and the next call (about a millisecond a call), so
+after twenty calls an event at its recorded time would come later than it did against the
+calls, after a ``wait_event`` that in the run started after it. An event is written tied to
+the call whose start or answer it last followed (``after: module.function``, ``nth`` for its
+2nd, 3rd … call), ``at`` seconds after that call started: below the call's ``delay`` before
+its answer, equal to it with the answer (it came before the tree took the answer), above it
+after the tree took the answer. An event before the first call keeps its time in the run.
 
 A run whose log has no end (the coordinator was killed, the robot lost power), or that was
 interrupted (Ctrl-C, SIGTERM), becomes a scenario of what the tree saw until its last recorded tick: it stops there
@@ -14,6 +22,7 @@ the tree had not ticked on yet are left out, so those calls hang.
 """
 from __future__ import annotations
 
+import heapq
 import math
 import os
 from typing import Any, Dict, List, Optional, Tuple
@@ -21,6 +30,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from coordinator.runlog import RunLog, RunLogError, empty_file
+from coordinator.testing.expected import legacy_times
 
 __all__ = ["scenario_from_log", "seen_until", "write_scenario", "cut_short"]
 
@@ -31,11 +41,37 @@ def cut_short(log: RunLog) -> bool:
     return end is None or end.get("status") == "INVALID"
 
 
-def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
+def _definitions(log: RunLog) -> Dict[str, Any]:
+    """The module definitions the run had in files (none when they cannot be read now)."""
+    from modules.definition import DefinitionError
+    from modules.search import default_definitions
+
+    given = [m for m in log.tree.get("modules") or [] if isinstance(m, str) and os.path.exists(m)]
+    try:
+        return default_definitions(given)
+    except (DefinitionError, OSError):
+        return {}
+
+
+def _times(defs: Dict[str, Any], target: str, kind: str, values: Any) -> Dict[str, Any]:
+    """``values`` (the inputs or outputs of a call of ``target``, or the params of an event) with the
+    times older run logs recorded as nanoseconds in text (``"100000000000"``) as ``{secs, nsecs}``."""
+    values = dict(values or {})
+    mod, _, name = target.partition(".")
+    definition = defs.get(mod)
+    member = None if definition is None else (
+        definition.events.get(name) if kind == "params" else definition.functions.get(name))
+    if member is None:
+        return values
+    types = {q.name: q.rostype for q in getattr(member, kind)}
+    return {k: legacy_times(types[k], v) if k in types else v for k, v in values.items()}
+
+
+def _outcome(end: Dict[str, Any], defs: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     answer = end.get("answer")
     delay = round(float(end.get("duration") or 0.0), 6)
     if answer == "succeeded":
-        out: Dict[str, Any] = {"succeed": dict(end.get("outputs") or {})}
+        out: Dict[str, Any] = {"succeed": _times(defs or {}, str(end.get("target")), "outputs", end.get("outputs"))}
     elif answer == "failed":
         out = {"fail": str(end.get("error") or "failed")}
     elif answer == "rejected":
@@ -44,6 +80,60 @@ def _outcome(end: Dict[str, Any]) -> Dict[str, Any]:
         return {"hang": True}
     if delay:
         out["delay"] = delay
+    return out
+
+
+def _events(seen: RunLog, answered: Dict[Any, float], defs: Dict[str, Any]) -> List[Dict[str, Any]]:
+    """The events of ``seen``, each tied to the call it last followed (see the module's docstring).
+
+    ``answered``: call_id -> how long after its start the call's scripted answer comes (the calls
+    that answer in the scenario; the others hang)."""
+    out: List[Dict[str, Any]] = []
+    calls: Dict[Any, Dict[str, Any]] = {}  # call_id -> target, nth, start, where its call_end is
+    per_target: Dict[str, int] = {}
+    ended_at = {r.get("call_id"): i for i, r in enumerate(seen.records) if r.get("type") == "call_end"}
+    latest: Optional[Tuple[float, Any]] = None     # (when, call_id): the last call start or answer so far
+    answers: List[Tuple[float, int, Any]] = []     # the answers of the calls started, by time
+    for i, r in enumerate(seen.records):
+        kind, cid = r.get("type"), r.get("call_id")
+        if kind == "call_start":
+            target = str(r.get("target"))
+            per_target[target] = per_target.get(target, 0) + 1
+            start = float(r.get("t") or 0.0)
+            calls[cid] = {"target": target, "nth": per_target[target], "start": start, "end": ended_at.get(cid)}
+            latest = (start, cid)
+            if cid in answered:
+                heapq.heappush(answers, (start + answered[cid], i, cid))
+        elif kind == "call_end" and cid in answered and cid in calls:
+            when = calls[cid]["start"] + answered[cid]  # the tree takes it in this tick: it came before
+            if latest is None or when >= latest[0]:
+                latest = (when, cid)
+        elif kind == "event":
+            t = float(r.get("t") or 0.0)
+            while answers and answers[0][0] <= t:  # answers that came before the event
+                when, _, done = heapq.heappop(answers)
+                taken = calls[done]["end"]
+                if (taken is None or taken > i) and (latest is None or when >= latest[0]):  # else counted at its call_end
+                    latest = (when, done)
+            ev: Dict[str, Any] = {"event": "%s.%s" % (r.get("module"), r.get("event"))}
+            if latest is None:  # before the first call: its time in the run
+                ev["at"] = t
+            else:
+                call = calls[latest[1]]
+                ev["after"] = call["target"]
+                if call["nth"] > 1:
+                    ev["nth"] = call["nth"]
+                at = t - call["start"]
+                delay = answered.get(latest[1])
+                if delay is not None:
+                    if call["end"] is None or call["end"] > i:  # the tree had not taken the answer yet
+                        at = min(at, delay)
+                    else:                                       # it had: after that tick
+                        at = max(at, delay + 1e-6)
+                ev["at"] = round(max(at, 0.0), 6)
+            if r.get("params"):
+                ev["params"] = _times(defs, ev["event"], "params", r["params"])
+            out.append(ev)
     return out
 
 
@@ -77,16 +167,20 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
+    defs = _definitions(log)
     ends = {r.get("call_id"): r for r in seen.of_type("call_end")}
     mocks: Dict[str, List[Dict[str, Any]]] = {}
     calls: List[Dict[str, Any]] = []
+    answered: Dict[Any, float] = {}  # call_id -> when its answer comes, after its start
     for start in seen.of_type("call_start"):
         target = str(start.get("target"))
         finished = ends.get(start.get("call_id"))
-        mocks.setdefault(target, []).append(_outcome(finished) if finished else {"hang": True})
-        calls.append({target: dict(start.get("inputs") or {})})
-    events = [{"at": r.get("t"), "event": "%s.%s" % (r.get("module"), r.get("event")),
-               "params": dict(r.get("params") or {})} for r in seen.of_type("event")]
+        outcome = _outcome(finished, defs) if finished else {"hang": True}
+        mocks.setdefault(target, []).append(outcome)
+        if "hang" not in outcome:
+            answered[start.get("call_id")] = float(outcome.get("delay", 0.0))
+        calls.append({target: _times(defs, target, "inputs", start.get("inputs"))})
+    events = _events(seen, answered, defs)
     scenario: Dict[str, Any] = {}
     scenario["name"] = "as recorded in run %s" % tree.get("run")
     if tree.get("inputs"):

@@ -64,6 +64,10 @@ def script_of(mocks: Mocks, module: str, events: Optional[List[Dict[str, Any]]] 
         mock = mocks["%s.%s" % (module, fname)]
         if mock.outcomes:
             functions[fname] = [outcome_to_dict(o) for o in mock.outcomes]
+    tied = [name for _, _, _, mod, name, _ in mocks.call_events if mod == module]
+    if tied:  # a node's events count from when the coordinator connected; it sees no call of another module
+        raise MockError("events tied to a call (event_after: %s.%s) run in process only, not on a mock node"
+                        % (module, tied[0]))
     scheduled = [{"at": at, "event": name, "params": params}
                  for at, mod, name, params in mocks.scheduled_events if mod == module]
     return {"module": module, "functions": functions, "events": scheduled + list(events or [])}

@@ -16,7 +16,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from blackboard.service import BlackboardService
 from blackboard.store import Store
-from comm.errors import ProtocolError
+from comm.errors import ProtocolError, did_you_mean
 from comm.messages import (
     BlackboardAnswer,
     BlackboardRequest,
@@ -161,6 +161,8 @@ class Mocks:
         self.definitions = dict(definitions)
         self._fns: Dict[str, FunctionMock] = {}
         self.scheduled_events: List[Tuple[float, str, str, Dict[str, Any]]] = []
+        # events tied to a call: (module.function, which of its calls from 1, seconds after it started, module, event, params)
+        self.call_events: List[Tuple[str, int, float, str, str, Dict[str, Any]]] = []
         self.errors: List[MockError] = []
 
     def __getitem__(self, target: str) -> FunctionMock:
@@ -177,15 +179,34 @@ class Mocks:
 
     def event(self, at: float, target: str, **params: Any) -> None:
         """Emit ``module.event`` with ``params`` at ``at`` seconds after the start (of the run, or of a mock node)."""
+        mod, name = self._checked_event(target, params)
+        self.scheduled_events.append((float(at), mod, name, dict(params)))
+
+    def event_after(self, call: str, at: float, target: str, params: Optional[Dict[str, Any]] = None,
+                    nth: int = 1) -> None:
+        """Emit ``module.event`` with ``params`` ``at`` seconds after the ``nth`` call (from 1) of
+        ``call`` (``module.function``) started, in process (never if the run makes no such call).
+        Against that call's ``delay``: an ``at`` below it comes before its answer, equal to it with
+        the answer (the tree takes both at its next tick), above it after the tree took the answer."""
+        self[call]  # a function there is
+        if isinstance(nth, bool) or not isinstance(nth, int) or nth < 1:
+            raise MockError("nth is a whole number >= 1, got %r" % (nth,))
+        mod, name = self._checked_event(target, dict(params or {}))
+        self.call_events.append((call, nth, float(at), mod, name, dict(params or {})))
+
+    def _checked_event(self, target: str, params: Dict[str, Any]) -> Tuple[str, str]:
         mod, _, name = target.partition(".")
         ev = self.definitions.get(mod) and self.definitions[mod].events.get(name)
         if not ev:
-            raise MockError("no event %r in the definitions" % target)
+            known = ["%s.%s" % (m, e) for m, d in self.definitions.items() for e in d.events]
+            raise MockError("no event %r in the definitions%s" % (target, did_you_mean(target, known) or (
+                " (module %r has no events)" % mod if mod in self.definitions and not self.definitions[mod].events
+                else "")))
         try:
             ev.build_values(params)
         except ProtocolError as exc:
             raise MockError(str(exc))
-        self.scheduled_events.append((float(at), mod, name, dict(params)))
+        return mod, name
 
 
 class MockModule(BasicModule):
@@ -248,6 +269,7 @@ class InProcessTransport(Transport):
         self._blackboard: Optional[BlackboardService] = None
         self._blackboard_lock = threading.Lock()   # results (timer thread) and requests (tick thread) may race
         self.sent: List[Any] = []
+        self._made: Dict[str, int] = {}  # calls sent, per module.function (for the events tied to them)
         executor = ClockExecutor(clock)
         self.servers: Dict[str, ModuleServer] = {
             name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
@@ -288,6 +310,20 @@ class InProcessTransport(Transport):
         server = self.servers.get(call.basic_mod)
         if server is not None:                               # else nobody listens, as on a robot
             server.handle_call(call.encode())
+        if self.mocks.call_events:
+            self._events_after(call)
+
+    def _events_after(self, call: FunctionCall) -> None:
+        """Schedule the events tied to this call (:meth:`Mocks.event_after`) on the run's clock, from
+        now: an event at the call's answer time reaches the tree with the answer, before its next tick."""
+        target = "%s.%s" % (call.basic_mod, call.function)
+        n = self._made[target] = self._made.get(target, 0) + 1
+        for after, nth, at, mod, name, params in self.mocks.call_events:
+            server = self.servers.get(mod)
+            if after == target and nth == n and server is not None:
+                impl = server.impl
+                assert isinstance(impl, MockModule)
+                self.clock.call_later(at, lambda impl=impl, name=name, params=params: impl.emit(name, **params))
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         self.sent.append(cancel)

@@ -37,6 +37,7 @@ import sys
 import time
 from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
 
+import genpy
 from py_trees.common import Status
 
 from comm.errors import ProtocolError, did_you_mean
@@ -44,13 +45,14 @@ from comm.typewords import said_of
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
 from coordinator.runevents import RunObserver
+from coordinator.testing.expected import Difference, difference, expected_message, legacy_times
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
-__all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_INSTANT", "TickGuard",
+__all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_INSTANT", "ExpectedCall", "TickGuard",
            "calls_diff", "load_scenario_file", "run_scenario_file", "run_scenarios"]
 
 DEFAULT_MAX_DURATION = 3600.0
@@ -62,6 +64,7 @@ DEFAULT_MAX_TICKS_PER_INSTANT = 10000
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
 _SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect") + _LIMITS
 _EXPECT_KEYS = ("status", "calls", "blackboard", "reason")
+_EVENT_KEYS = ("at", "event", "params", "after", "nth")
 
 
 class _Problems:
@@ -119,49 +122,94 @@ def _want(want: Any) -> Any:
     return (want, {}) if isinstance(want, str) else next(iter(want.items()))
 
 
-def _same(want: Any, got: Any) -> bool:
-    target, inputs = _want(want)
-    return got.target == target and all(got.inputs.get(k) == v for k, v in (inputs or {}).items())
+class ExpectedCall:
+    """One call of ``expect: calls``: its ``module.function`` and the inputs it lists (as written),
+    compared normalised (:mod:`coordinator.testing.expected`): each converted once to the type of
+    the input it is compared with, and only the fields it lists."""
+
+    def __init__(self, raw: Any):
+        self.target, inputs = _want(raw)
+        self.inputs: Dict[str, Any] = dict(inputs or {})
+        self.built: Dict[str, Any] = {}  # input -> the value as a message of the input's type, or the ProtocolError
+
+    def difference(self, name: str, got: Any) -> Optional[Difference]:
+        """How the made call's input ``name`` (a message) differs from this one's, if it does."""
+        if name not in self.built and isinstance(got, genpy.Message):
+            try:
+                self.built[name] = expected_message(got._type, self.inputs[name])
+            except ProtocolError as exc:
+                self.built[name] = exc
+        return difference(self.inputs[name], got, self.built.get(name))
+
+    def matches(self, call: Any) -> bool:
+        """The made ``call`` (a CallRecord) is this one."""
+        return call.target == self.target and all(
+            k in call.messages and self.difference(k, call.messages[k]) is None for k in self.inputs)
 
 
 def _show(target: str, inputs: Any) -> str:
-    return "%s %s" % (target, json.dumps(inputs, sort_keys=True, ensure_ascii=False, default=str)) if inputs else target
+    """A call on a diff line: the inputs in name order, each as written or as plain data (times
+    ``{"secs": S, "nsecs": N}``), so an expected and a made call read alike."""
+    if not inputs:
+        return target
+    return "%s %s" % (target, json.dumps({k: inputs[k] for k in sorted(inputs, key=str)}, ensure_ascii=False,
+                                         default=str))
 
 
 def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
-    """Expected vs actual calls as a diff: ``  =`` same, ``  -`` expected only, ``  +`` made only."""
-    n, m = len(expected), len(actual)
-    lcs = [[0] * (m + 1) for _ in range(n + 1)]
-    for i in range(n - 1, -1, -1):
-        for j in range(m - 1, -1, -1):
-            lcs[i][j] = lcs[i + 1][j + 1] + 1 if _same(expected[i], actual[j]) else max(lcs[i + 1][j], lcs[i][j + 1])
-    out, i, j = [], 0, 0
-    while i < n or j < m:
-        if i < n and j < m and _same(expected[i], actual[j]):
-            out.append("  = %s" % _show(*_want(expected[i])))
+    """Expected vs actual calls as a diff: ``  =`` same, ``  -`` expected only, ``  +`` made only.
+    ``expected``: ExpectedCall objects or the written forms."""
+    want = [e if isinstance(e, ExpectedCall) else ExpectedCall(e) for e in expected]
+    n, m = len(want), len(actual)
+    head = 0  # the common start and end are matched in a line; the longest common subsequence in between
+    while head < min(n, m) and want[head].matches(actual[head]):
+        head += 1
+    tail = 0
+    while tail < min(n, m) - head and want[n - 1 - tail].matches(actual[m - 1 - tail]):
+        tail += 1
+    mid_w, mid_a = want[head:n - tail], actual[head:m - tail]
+    n2, m2 = len(mid_w), len(mid_a)
+    lcs = [[0] * (m2 + 1) for _ in range(n2 + 1)]
+    same = [[False] * m2 for _ in range(n2)]
+    for i in range(n2 - 1, -1, -1):
+        for j in range(m2 - 1, -1, -1):
+            if mid_w[i].matches(mid_a[j]):
+                same[i][j] = True
+                lcs[i][j] = lcs[i + 1][j + 1] + 1
+            else:
+                lcs[i][j] = max(lcs[i + 1][j], lcs[i][j + 1])
+    out = ["  = %s" % _show(w.target, w.inputs) for w in want[:head]]
+    i, j = 0, 0
+    while i < n2 or j < m2:
+        if i < n2 and j < m2 and same[i][j]:
+            out.append("  = %s" % _show(mid_w[i].target, mid_w[i].inputs))
             i, j = i + 1, j + 1
-        elif j < m and (i == n or lcs[i][j + 1] >= lcs[i + 1][j]):
-            out.append("  + %s" % _show(actual[j].target, actual[j].inputs))
+        elif j < m2 and (i == n2 or lcs[i][j + 1] >= lcs[i + 1][j]):
+            out.append("  + %s" % _show(mid_a[j].target, mid_a[j].inputs))
             j += 1
         else:
-            out.append("  - %s" % _show(*_want(expected[i])))
+            out.append("  - %s" % _show(mid_w[i].target, mid_w[i].inputs))
             i += 1
+    out.extend("  = %s" % _show(w.target, w.inputs) for w in want[n - tail:])
     return out
 
 
-def _expect_calls(run: TreeRun, expected: List[Any]) -> List[str]:
+def _expect_calls(run: TreeRun, expected: List[ExpectedCall]) -> List[str]:
     problems = []
     actual = run.calls()
     if len(actual) != len(expected):
         problems.append("expected %d calls, got %d: %s" % (len(expected), len(actual), ", ".join(run.targets)))
     for i, (want, got) in enumerate(zip(expected, actual)):
-        target, inputs = _want(want)
-        if got.target != target:
-            problems.append("call %d: expected %s, got %s" % (i + 1, target, got.target))
+        if got.target != want.target:
+            problems.append("call %d: expected %s, got %s" % (i + 1, want.target, got.target))
             continue
-        for k, v in (inputs or {}).items():
-            if got.inputs.get(k) != v:
-                problems.append("call %d (%s): input %s is %r, expected %r" % (i + 1, target, k, got.inputs.get(k), v))
+        for k in want.inputs:
+            if k not in got.messages:
+                problems.append("call %d (%s): it has no input %r" % (i + 1, want.target, k))
+                continue
+            d = want.difference(k, got.messages[k])
+            if d is not None:
+                problems.append("call %d (%s): %s" % (i + 1, want.target, d.said("input %s" % k)))
     if problems:
         problems.append("calls changed (- expected only, + made only, = both):")
         problems.extend(calls_diff(expected, actual))
@@ -171,8 +219,10 @@ def _expect_calls(run: TreeRun, expected: List[Any]) -> List[str]:
 class _Scenario:
     """One scenario of a file, checked and ready to run."""
 
-    def __init__(self, name: str, test: TreeTest, expect: Any, limits: Dict[str, Any], given: Set[str]):
+    def __init__(self, name: str, test: TreeTest, expect: Any, limits: Dict[str, Any], given: Set[str],
+                 calls: Optional[List[ExpectedCall]] = None):
         self.name, self.test, self.expect, self.limits, self.given = name, test, expect, limits, given
+        self.calls = calls if calls is not None else [ExpectedCall(c) for c in expect.get("calls") or []]
 
 
 class TickGuard(RunObserver):
@@ -218,6 +268,7 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str
     inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value", out)
     mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
     expect = _expectations(sc, at, out)
+    calls = _expected_calls(expect, at, defs, out)
     limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
               "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
               "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
@@ -236,23 +287,92 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str
         events = []
     for j, ev in enumerate(events):
         ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
-        if not isinstance(ev, LMap) or "event" not in ev:
-            out.add(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")
-            continue
-        _check_keys(ev, ("at", "event", "params"), "event", out)
-        params = ev.get("params") or {}
-        if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
-            out.add(pos_of(ev, "params", ev_at), "params is a mapping of name: value")
-            continue
-        when = _number(ev, "at", 0.0, ev_at, out)
-        try:
-            mocked.event(when, str(ev["event"]), **dict(params))
-        except MockError as exc:
-            out.add(ev_at, str(exc))
+        _event(mocked, ev, ev_at, defs, out)
     if out.errors or test is None:
         raise TreeErrors(out.errors)
     return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
-                     {k for k in _LIMITS if k in sc})
+                     {k for k in _LIMITS if k in sc}, calls)
+
+
+def _function(defs: Dict[str, ModuleDefinition], target: Any) -> Tuple[Any, str]:
+    """The definition of ``module.function``, or None and why there is none (with a did-you-mean)."""
+    mod, dot, name = str(target).partition(".") if isinstance(target, str) else ("", "", "")
+    if not dot or not mod or not name:
+        return None, "%r is not a module.function" % (target,)
+    definition = defs.get(mod)
+    if definition is None:
+        return None, "no module %r in the definitions%s" % (mod, did_you_mean(mod, defs) or " (known: %s)" % (
+            ", ".join(sorted(defs)) or "none"))
+    try:
+        return definition.function(name), ""
+    except ProtocolError as exc:
+        return None, str(exc)
+
+
+def _event(mocked: Mocks, ev: Any, ev_at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> None:
+    """Check one event of ``events`` and schedule it (its problems to ``out``, each where it is written)."""
+    if not isinstance(ev, LMap) or "event" not in ev:
+        out.add(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")
+        return
+    _check_keys(ev, _EVENT_KEYS, "event", out)
+    params = ev.get("params") or {}
+    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
+        out.add(pos_of(ev, "params", ev_at), "params is a mapping of name: value")
+        return
+    when = _number(ev, "at", 0.0, ev_at, out)
+    after = ev.get("after")
+    if after is not None:
+        fn, why = _function(defs, after)
+        if fn is None:
+            out.add(pos_of(ev, "after", ev_at), "after is the module.function whose call the event follows: %s" % why)
+            return
+    nth = _count(ev, "nth", 1, ev_at, out)
+    if "nth" in ev and after is None:
+        out.add(pos_of(ev, "nth", ev_at), "nth counts the calls of the function 'after' names: give 'after' too")
+    target = str(ev["event"])
+    mod, _, name = target.partition(".")
+    event = defs[mod].events.get(name) if mod in defs else None
+    if event is not None:  # older run logs recorded a time as its nanoseconds in text
+        types = {q.name: q.rostype for q in event.params}
+        params = {k: legacy_times(types[k], v) if k in types else v for k, v in params.items()}
+    try:
+        if after is None:
+            mocked.event(when, target, **dict(params))
+        else:
+            mocked.event_after(str(after), when, target, dict(params), nth)
+    except MockError as exc:
+        out.add(pos_of(ev, "event", ev_at) if event is None else ev_at, str(exc))
+
+
+def _expected_calls(expect: Any, at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> List[ExpectedCall]:
+    """``expect: calls`` checked against the definitions (problems to ``out``, each where it is
+    written): each a function of a module, each input one it has, of a value that fits its type."""
+    calls = expect.get("calls") or []
+    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
+        return []  # said by _expectations
+    found = []
+    for j, c in enumerate(calls):
+        c_at = calls.item_pos[j] if isinstance(calls, LList) else pos_of(expect, "calls", at)
+        want = ExpectedCall(c)
+        found.append(want)
+        fn, why = _function(defs, want.target)
+        if fn is None:
+            out.add(c.key_pos.get(want.target, c_at) if isinstance(c, LMap) else c_at, "expected call: %s" % why)
+            continue
+        inputs = c[want.target] if isinstance(c, dict) else None
+        params = {q.name: q for q in fn.inputs}
+        for name, value in want.inputs.items():
+            q = params.get(name)
+            if q is None:
+                out.add(inputs.key_pos[name] if isinstance(inputs, LMap) else c_at, "%s has no input %r%s" % (
+                    fn.qualified, name, did_you_mean(name, params) or " (its inputs: %s)" % (", ".join(params) or "none")))
+                continue
+            try:
+                want.built[name] = expected_message(q.rostype, value)
+            except ProtocolError as exc:
+                out.add(inputs.val_pos[name] if isinstance(inputs, LMap) else c_at,
+                        said_of("%s input %r" % (fn.qualified, name), exc))
+    return found
 
 
 def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> None:
@@ -310,10 +430,11 @@ def _script(mocked: Mocks, mocks: Any, target: Any, outcomes: Any, at: Pos, out:
     written, before = [], len(out.errors)
     for raw, where in zip(outcomes_list, positions):
         try:
-            written.append(outcome_from_dict(raw))
+            written.append(outcome_from_dict(_legacy_outputs(mock.fn, raw)))
         except MockError as exc:
             out.add(where, str(exc))
             continue
+        _check_reason(raw, where, out)
         _check_outputs(mock.fn, raw, out)
     if len(out.errors) > before:
         return
@@ -321,6 +442,26 @@ def _script(mocked: Mocks, mocks: Any, target: Any, outcomes: Any, at: Pos, out:
         mock.script(*written)
     except MockError as exc:
         out.add(t_at, str(exc))
+
+
+def _legacy_outputs(fn: Any, raw: Any) -> Any:
+    """A ``succeed``'s outputs with the times that older run logs recorded as nanoseconds in text
+    made ``{secs, nsecs}`` (scenarios written from those logs), by the outputs' types."""
+    outputs = raw.get("succeed") if isinstance(raw, dict) else None
+    if not isinstance(outputs, dict):
+        return raw
+    types = {q.name: q.rostype for q in fn.outputs}
+    return dict(raw, succeed={k: legacy_times(types[k], v) if k in types else v for k, v in outputs.items()})
+
+
+def _check_reason(raw: Any, where: Pos, out: _Problems) -> None:
+    """``fail``/``reject`` take the reason as text, ``hang`` takes ``true``."""
+    for kind in ("fail", "reject"):
+        if kind in raw and not isinstance(raw[kind], str):
+            out.add(pos_of(raw, kind, where), "%s takes the reason as text (%s: blocked by a chair), got %r" % (
+                kind, kind, raw[kind]))
+    if "hang" in raw and raw["hang"] is not True:
+        out.add(pos_of(raw, "hang", where), "hang takes true, got %r" % (raw["hang"],))
 
 
 def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
@@ -336,7 +477,7 @@ def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
                 name, params) or " (its outputs: %s)" % (", ".join(params) or "none")))
             continue
         try:
-            q.convert(value)
+            q.convert(legacy_times(q.rostype, value))
         except ProtocolError as exc:
             out.add(outputs.val_pos[name], said_of("%s output %r" % (fn.qualified, name), exc))
 
@@ -406,18 +547,21 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
             problems.append("the run reached the scenario's max_duration (%g s of simulated time); raise it if "
                             "the tree needs longer" % limits["max_duration"])
     if "calls" in expect:
-        problems.extend(_expect_calls(run, list(expect["calls"] or [])))
+        problems.extend(_expect_calls(run, s.calls))
     if "reason" in expect and str(expect["reason"]) not in run.reason:
         problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
                         else "no reason (the run %s), expected one containing %r" % (
                             "succeeded" if run.status == Status.SUCCESS else "gave none", str(expect["reason"])))
-    bb = run.blackboard
+    bb = run.result.blackboard  # the values as the tree holds them: messages keep their types
     for k, v in (expect.get("blackboard") or {}).items():
-        if k not in bb and v is not None:
-            problems.append("blackboard %s was never written in this run (expected %r)%s" % (
-                k, v, did_you_mean(k, bb) or "; written: %s" % (", ".join(sorted(map(str, bb))) or "none")))
-        elif bb.get(k) != v:
-            problems.append("blackboard %s is %r, expected %r" % (k, bb.get(k), v))
+        if k not in bb:
+            if v is not None:
+                problems.append("blackboard %s was never written in this run (expected %r)%s" % (
+                    k, v, did_you_mean(k, bb) or "; written: %s" % (", ".join(sorted(map(str, bb))) or "none")))
+            continue
+        d = difference(v, bb[k])
+        if d is not None:
+            problems.append(d.said("blackboard %s" % k))
     return run, problems
 
 

@@ -216,8 +216,8 @@ def test_the_format_page_shows_the_shipped_file_and_every_key(tmp_path):
     f.write_text("tree: %s\nscenarios:\n%s" % (os.path.join(TREES, "find_apple.yaml"), blocks[1]))
     out = io.StringIO()
     assert run_scenario_file(str(f), out=out) == [True], out.getvalue()
-    for key in scenario._SCENARIO_KEYS + scenario._EXPECT_KEYS + ("tree", "scenarios", "event", "at", "params",
-                                                                  "succeed", "fail", "reject", "hang", "delay"):
+    for key in scenario._SCENARIO_KEYS + scenario._EXPECT_KEYS + scenario._EVENT_KEYS + (
+            "tree", "scenarios", "succeed", "fail", "reject", "hang", "delay"):
         assert "| `%s` |" % key in doc, key
     for default in (scenario.DEFAULT_MAX_DURATION, scenario.DEFAULT_MAX_TICKS, scenario.DEFAULT_MAX_TICKS_PER_INSTANT):
         assert "| `%g` |" % default in doc

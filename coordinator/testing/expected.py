@@ -1,0 +1,203 @@
+"""A scenario's expected values against what the run made: normalised, and only what is listed.
+
+An expected value is converted to the ROS type of the value it is compared with (a call's input
+has the type its definition gives; a message on the tree blackboard its own), the way the tree
+converts what it sends, so every form the tree accepts matches:
+
+- ``uint8[]``: a list of numbers, bytes, or base64 text (the form run logs record) are the same bytes;
+- ``time``/``duration``: ``{secs: S, nsecs: N}``, seconds, or the nanosecond text (``"100000000000"``)
+  that scenarios written from older run logs hold;
+- a one-field message: its value (``text: hello`` for a ``std_msgs/String``).
+
+Inside a message only the fields listed are compared, at any depth: ``{pose: {position: {x: 0.5}}}``
+checks ``x`` and ignores the rest, as ``expect: calls`` ignores the inputs it does not list. A list
+compares whole (its length, then each element, an element's listed fields); a time, a number and
+text compare whole. Plain data (a tree key written by ``set``) compares the same way: a mapping
+on the keys it lists.
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Dict, NamedTuple, Optional
+
+import genpy
+
+from comm.errors import ProtocolError
+from comm.rostypes import resolve_type, single_field, to_message
+from coordinator.context import plain
+
+__all__ = ["Difference", "difference", "expected_message", "legacy_times", "shown"]
+
+_NANOSECONDS = re.compile(r"^-?[0-9]+$")
+_TIMES = ("time", "duration")
+
+
+class Difference(NamedTuple):
+    """Where an actual value differs from the expected one: ``path`` inside it (``''``: the whole
+    value, ``position.x``, ``poses[1].position``), the actual and expected values there, and why
+    the expected value could not be compared, if so."""
+
+    path: str
+    got: Any
+    want: Any
+    why: str = ""
+
+    def said(self, subject: str) -> str:
+        """``input pose.position.x is 0.4, expected 0.5`` (``subject`` names the whole value)."""
+        where = subject + ("" if not self.path else self.path if self.path.startswith("[") else "." + self.path)
+        if self.why:
+            return "%s is %r, expected %r, which %s" % (where, shown(self.got), self.want, self.why)
+        if self.got is _MISSING:
+            return "%s is not there (expected %r)" % (where, self.want)
+        return "%s is %r, expected %r" % (where, shown(self.got), self.want)
+
+
+_MISSING = object()
+
+
+def shown(value: Any) -> Any:
+    """A value as plain data for a message: messages as mappings, times as ``{secs, nsecs}``,
+    bytes as a list of numbers."""
+    if isinstance(value, genpy.Message) or isinstance(value, genpy.TVal):
+        value = plain(value)
+    if isinstance(value, (bytes, bytearray)):
+        return list(value)
+    if isinstance(value, (list, tuple)):
+        return [shown(v) for v in value]
+    if isinstance(value, dict):
+        return {k: shown(v) for k, v in value.items()}
+    return value
+
+
+def _time(text: str, kind: str) -> Dict[str, int]:
+    t = (genpy.Duration if kind == "duration" else genpy.Time)(0, int(text))
+    return {"secs": t.secs, "nsecs": t.nsecs}
+
+
+def _legacy_field(t: str, value: Any) -> Any:
+    base = t.split("[", 1)[0]
+    if t.endswith("]"):
+        if isinstance(value, (list, tuple)) and (base in _TIMES or "/" in base):
+            return [_legacy_field(base, v) for v in value]
+        return value
+    if base in _TIMES:
+        return _time(value, base) if isinstance(value, str) and _NANOSECONDS.match(value) else value
+    if "/" in base and isinstance(value, dict):
+        return legacy_times(base, value)
+    return value
+
+
+def legacy_times(rostype: str, value: Any) -> Any:
+    """``value`` for a ``rostype`` with the nanosecond texts at its times (what run logs recorded
+    for a ``std_msgs/Time`` before they wrote ``{secs, nsecs}``) made ``{secs, nsecs}``; the rest
+    unchanged."""
+    cls = resolve_type(rostype)
+    if cls is None:
+        return value
+    slots, types = getattr(cls, "__slots__", ()), getattr(cls, "_slot_types", ())
+    if not isinstance(value, dict) or not set(value) <= set(slots):
+        field = single_field(cls)
+        return _legacy_field(types[0], value) if field is not None else value
+    return {k: _legacy_field(types[slots.index(k)], v) for k, v in value.items()}
+
+
+def expected_message(rostype: str, value: Any) -> Any:
+    """``value`` as a message of ``rostype``, as the tree would send it (ProtocolError if it is none)."""
+    return to_message(rostype, legacy_times(rostype, value), allow_scalar=True)
+
+
+def _same(a: Any, b: Any) -> bool:
+    return _norm(a) == _norm(b)
+
+
+def _norm(v: Any) -> Any:
+    if isinstance(v, genpy.Message):
+        return {k: _norm(getattr(v, k)) for k in v.__slots__}
+    if isinstance(v, genpy.TVal):
+        return (v.secs, v.nsecs)
+    if isinstance(v, (bytes, bytearray)):
+        return list(v)
+    if isinstance(v, (list, tuple)):
+        return [_norm(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _norm(x) for k, x in v.items()}
+    return v
+
+
+def _join(path: str, step: Any) -> str:
+    if isinstance(step, int):
+        return "%s[%d]" % (path, step)
+    return "%s.%s" % (path, step) if path else str(step)
+
+
+def _walk(built: Any, got: Any, want: Any, path: str) -> Optional[Difference]:
+    """``got`` against ``built`` (``want`` converted), on the fields ``want`` lists."""
+    if isinstance(got, genpy.Message) and isinstance(want, dict) and set(want) <= set(got.__slots__):
+        for k in got.__slots__:  # in the message's order: the first difference is the first field
+            if k in want:
+                d = _walk(getattr(built, k), getattr(got, k), want[k], _join(path, k))
+                if d is not None:
+                    return d
+        return None
+    if isinstance(want, (list, tuple)) and isinstance(got, (list, tuple)) and isinstance(built, (list, tuple)):
+        if len(want) != len(got) or len(built) != len(got):
+            return Difference(path, got, want)
+        for i, (b, g, w) in enumerate(zip(built, got, want)):
+            d = _walk(b, g, w, _join(path, i))
+            if d is not None:
+                return d
+        return None
+    return None if _same(built, got) else Difference(path, got, want)
+
+
+def difference(want: Any, got: Any, built: Any = None, path: str = "") -> Optional[Difference]:
+    """None when ``got`` (a message or plain data) has what ``want`` lists, else the first difference.
+
+    ``built``: ``want`` already converted to ``got``'s type (:func:`expected_message`), or the
+    ProtocolError that conversion raised; made here when not given."""
+    if isinstance(got, genpy.Message):
+        if built is None:
+            try:
+                built = expected_message(got._type, want)
+            except ProtocolError as exc:
+                built = exc
+        if isinstance(built, ProtocolError):
+            return Difference(path, got, want, "is no %s: %s" % (got._type, built))
+        return _walk(built, got, want, path)
+    if isinstance(got, genpy.TVal):  # a time compares whole
+        return None if _as_time(want, got) == (got.secs, got.nsecs) else Difference(path, got, want)
+    g = got
+    if isinstance(want, dict) and isinstance(g, dict):
+        for k, w in want.items():
+            if k not in g:
+                return Difference(_join(path, k), _MISSING, w)
+            d = difference(w, g[k], path=_join(path, k))
+            if d is not None:
+                return d
+        return None
+    if isinstance(want, (list, tuple)) and isinstance(g, (list, tuple)):
+        if len(want) != len(g):
+            return Difference(path, got, want)
+        for i, (w, x) in enumerate(zip(want, g)):
+            d = difference(w, x, path=_join(path, i))
+            if d is not None:
+                return d
+        return None
+    return None if _same(want, g) else Difference(path, got, want)
+
+
+def _as_time(want: Any, like: Any) -> Any:
+    """``want`` as ``(secs, nsecs)`` of the kind of ``like`` (a time or a duration), None if it is none."""
+    kind = type(like)
+    try:
+        if isinstance(want, dict) and want and set(want) <= {"secs", "nsecs"}:
+            t = kind(want.get("secs", 0), want.get("nsecs", 0))
+        elif isinstance(want, (int, float)) and not isinstance(want, bool):
+            t = kind.from_sec(want)
+        elif isinstance(want, str) and _NANOSECONDS.match(want):
+            t = kind(0, int(want))
+        else:
+            return None
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return (t.secs, t.nsecs)
