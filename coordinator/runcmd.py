@@ -183,7 +183,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from coordinator.context import RunContext
     from coordinator.language import load_tree, used_modules
     from coordinator.runlog import plan_run_files
-    from coordinator.runner import Display, TreeRunner
+    from coordinator.runner import Display, NoticeLines, TreeRunner
 
     given = set_values(args.set)
     defs = definitions_from(args.modules)
@@ -293,8 +293,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         from coordinator.control import ros_controller
 
         steer = ros_controller(getattr(args, "control", False))
-        runner = TreeRunner(root, ctx, period=args.period, display=display, observers=[recorder, steer], tree=tree,
-                            gate=steer)
+        quiet_notices = [NoticeLines()] if display is None and view is None else []
+        runner = TreeRunner(root, ctx, period=args.period, display=display,
+                            observers=[recorder, steer] + quiet_notices, tree=tree, gate=steer)
         try:
             result = runner.run(args.max_duration)
         finally:

@@ -19,7 +19,7 @@ from coordinator.context import WAKE, CallRecord, RunContext
 from coordinator.reasons import FailureExplainer
 from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
 
-__all__ = ["Display", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
+__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
 
 
 @dataclass
@@ -74,6 +74,22 @@ def while_running(root: py_trees.behaviour.Behaviour) -> str:
         return ""
     more = " and %d more" % (len(names) - 3) if len(names) > 3 else ""
     return " while %s%s %s running" % (", ".join(names[:3]), more, "was" if len(names) == 1 else "were")
+
+
+class NoticeLines(RunObserver):
+    """Without the display (``-q``, ``run.launch``): the notices about the ROS graph (the master
+    went away and came back, another run started) still reach the operator, on stderr."""
+
+    def __init__(self, stream: TextIO = sys.stderr):
+        self.stream = stream
+        self._start = 0.0
+
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        self._start = ctx.clock.now()
+
+    def on_notice(self, notice: Any, now: float) -> None:
+        self.stream.write("[%7.3fs] NOTICE    %s\n" % (now - self._start, notice.text))
+        self.stream.flush()
 
 
 class Display(RunObserver):

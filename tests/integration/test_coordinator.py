@@ -334,6 +334,9 @@ def test_two_runs_on_one_master_are_each_told_of_the_other(ros_graph, tmp_path):
     assert "warning: another bmtree run is running on this master (node /bmtree_%d_" % first.pid in out.stderr, \
         out.stderr
     assert "same Blackboard names" in out.stderr and "both publish the run stream on /bmtree/run" in out.stderr
+    # -q has no display (run.launch runs so): the notice still reaches the operator, on stderr
+    assert "NOTICE    another bmtree run is running on this master (node /bmtree_%d_" % first.pid in out.stderr, \
+        out.stderr
     assert alone.returncode == 0 and "another bmtree run" not in alone.stderr, alone.stderr
     told = [line for line in first_out.splitlines() if "NOTICE" in line]
     assert len(told) == 1 and "another bmtree run is running on this master (node /bmtree_" in told[0] \
