@@ -3,7 +3,10 @@
 Data flow: every key a node reads is written earlier on every path, or is a declared input; a read
 is reported at its reference, and a key that no node writes is told apart (likely misspelt).
 Types: a ``$reference`` whose value's ROS type (known from the definitions of the nodes that
-write the key) cannot be converted to the input it is passed to.
+write the key) cannot be converted to the input it is passed to, or whose path names a field that
+type does not have (``coordinator.values.follow``); a count, duration or ``for_each`` list of a type
+that cannot be one (``coordinator.nodes.base.param_type_errors``). A key is typed only when all its
+writers give one type (a ``set``, a tree input or an include argument gives none).
 """
 from __future__ import annotations
 

@@ -310,6 +310,11 @@ class Expr:
             self.well_typed = not errors
         return errors
 
+    def kind(self, key_kind: Callable[[Ref], Optional[str]]) -> Optional[str]:
+        """The kind of the expression's value (see :func:`kind_of`) when known before running, else None
+        (also when an operand is of the wrong kind: :meth:`type_errors` says that)."""
+        return _static(self.tree, key_kind, [])
+
 
 def _described(v: Any) -> str:
     return "%s %r" % (kind_of(v), v) if kind_of(v) in ("number", "string", "bool") else kind_of(v)

@@ -16,7 +16,7 @@ from typing import Any, Callable, List, Tuple
 
 import genpy
 
-from comm.errors import InvalidInput
+from comm.errors import InvalidInput, did_you_mean
 
 __all__ = ["Computed", "Ref", "RefError", "field_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap"]
 
@@ -44,7 +44,8 @@ def unwrap(value: Any) -> Any:
 
 
 def field_of(value: Any, step: Any, root: str) -> Any:
-    """``value.step`` or ``value[step]`` for a message, a mapping or a list; RefError names ``root``."""
+    """``value.step`` or ``value[step]`` for a message, a mapping or a list; RefError names ``root`` (what
+    ``value`` is the value of) and, for a field it does not have, the closest one it has."""
     try:
         if isinstance(step, int):
             return unwrap(value)[step]
@@ -54,7 +55,36 @@ def field_of(value: Any, step: Any, root: str) -> Any:
             return getattr(value, step)
     except (IndexError, KeyError, TypeError):
         pass
-    raise RefError("%s has no %s %r" % (root, "index" if isinstance(step, int) else "field", step))
+    if isinstance(step, int):
+        inner = unwrap(value)
+        if isinstance(inner, (list, tuple, str, bytes)):
+            what = "character" if isinstance(inner, str) else "element"
+            raise RefError("%s has no index %d (it has %d %s%s)" % (root, step, len(inner), what,
+                                                                    "" if len(inner) == 1 else "s"))
+        raise RefError("%s has no index %d: it holds %s, not a list" % (root, step, _held(value)))
+    if isinstance(value, genpy.Message):
+        names = list(value.__slots__)
+    elif isinstance(value, dict):
+        names = [k for k in value if isinstance(k, str)]
+    else:
+        raise RefError("%s has no field %r: it holds %s, which has no fields" % (root, step, _held(value)))
+    hint = did_you_mean(step, names) or (" (its fields: %s)" % ", ".join(names) if 0 < len(names) <= 12 else "")
+    raise RefError("%s has no field %r%s" % (root, step, hint))
+
+
+def _held(value: Any) -> str:
+    """What a run-time value is, in an error: ``a geometry_msgs/Pose``, ``a number``, ``text``."""
+    if isinstance(value, genpy.Message):
+        return "a %s" % getattr(value, "_type", type(value).__name__)
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "text"
+    if isinstance(value, (list, tuple, bytes)):
+        return "a list"
+    return "null" if value is None else "a %s" % type(value).__name__
 
 
 @dataclass(frozen=True)
@@ -70,8 +100,14 @@ class Ref:
     def resolve(self, lookup: Callable[[str], Any]) -> Any:
         """The value now; ``lookup`` raises KeyError for an unset key, a missing field is a RefError."""
         value = lookup(self.key)
-        for step in self.path:
-            value = field_of(value, step, self.key)
+        for i, step in enumerate(self.path):
+            try:
+                value = field_of(value, step, self.key)
+            except RefError:
+                if i == 0:
+                    raise
+                field_of(value, step, str(Ref(self.key, self.path[:i]))[1:])   # raises, naming the path so far
+                raise
         return value
 
 

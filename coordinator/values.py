@@ -11,12 +11,13 @@ from __future__ import annotations
 import re
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple, Union
 
+from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
-__all__ = ["ExprValue", "Template", "at_value_errors", "literal", "loose_dollars", "read_at", "ref_kind", "ref_type",
-           "value_type_errors"]
+__all__ = ["ExprValue", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
+           "read_at", "ref_errors", "ref_kind", "ref_type", "value_kind", "value_type_errors"]
 
 _LOOSE = re.compile(r"(?<![$\w])\$([^\W\d]\w*)")
 
@@ -202,30 +203,151 @@ def _field_type(t: str, step: Any) -> Optional[str]:
     return cls._slot_types[list(cls.__slots__).index(step)]
 
 
-def ref_type(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Optional[str]:
-    """The ROS type (or field type) a reference will hold, when the definitions say."""
+def _stands_for(t: str) -> str:
+    """The type a value of type ``t`` is indexed as: a one-field message stands for its field (as
+    :func:`coordinator.refs.unwrap` makes it when running)."""
+    from comm.rostypes import resolve_type
+
+    for _ in range(8):
+        cls = resolve_type(t)
+        if cls is None or len(cls.__slots__) != 1:
+            break
+        t = cls._slot_types[0]
+    return t
+
+
+def held(t: str) -> str:
+    """What a value of ROS type ``t`` is, in an error: ``a geometry_msgs/Pose``, ``text (std_msgs/String)``,
+    ``a number (float64)``, ``a list (string[])``."""
+    from comm.rostypes import resolve_type
+    from comm.typewords import type_words
+
+    cls = None if t.endswith("]") else resolve_type(t)
+    if cls is not None and len(cls.__slots__) != 1:
+        return "a %s" % t
+    return "%s (%s)" % (type_words(t), t)
+
+
+def _shown(ref: Ref, steps: int) -> str:
+    """The reference as an expression writes it (no ``$``), up to ``steps`` steps of its path."""
+    return str(Ref(ref.key, ref.path[:steps]))[1:]
+
+
+def follow(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Tuple[Optional[str], str]:
+    """The ROS type a reference will hold (None: not known), and why its path cannot be followed in the
+    type its key holds ('' when it can, or when that is not known).
+
+    Only what surely fails when running is said: a field that the message type does not have, a field of
+    text, a number or a list, an index into a message that is not a list; a key whose writers do not
+    all give one known type, or a type not known here (``time``, a message not installed), is left alone.
+    """
     known = types.get(ref.key)
     if not known or len(known) != 1 or None in known:
-        return None
-    t: Optional[str] = next(iter(known))
-    for step in ref.path:
-        if t is None:
-            return None
-        inner = _field_type(t, step)
-        if inner is None and not isinstance(step, int):
-            from comm.rostypes import resolve_type
+        return None, ""
+    t: str = next(iter(known))
+    if not ref.path:
+        return t, ""
+    cache_key = (t, ref)
+    done = _FOLLOWED.get(cache_key)
+    if done is None:
+        if len(_FOLLOWED) > 4096:
+            _FOLLOWED.clear()
+        done = _FOLLOWED[cache_key] = _follow(t, ref)
+    return done
 
-            cls = resolve_type(t)   # a one-field message stands for its value
-            if cls is not None and len(cls.__slots__) == 1:
-                inner = _field_type(cls._slot_types[0], step)
-        t = inner
-    return t
+
+_FOLLOWED: Dict[Tuple[str, Ref], Tuple[Optional[str], str]] = {}   # trees repeat their references
+
+
+def _follow(t: str, ref: Ref) -> Tuple[Optional[str], str]:
+    for i, step in enumerate(ref.path):
+        if isinstance(step, int):
+            inner = _stands_for(t)
+            if inner.endswith("]"):
+                t = inner[:inner.rindex("[")]
+                continue
+            if inner in _NUMBERS or inner == "bool" or _message(inner):
+                return None, "reads %s, but %s holds %s, which is not a list" % (_shown(ref, i + 1), _shown(ref, i),
+                                                                                   held(t))
+            return None, ""   # text (indexed by character), time, a type not known here
+        cls = _message(t)
+        if cls is not None:
+            slots = list(cls.__slots__)
+            if step in slots:
+                t = cls._slot_types[slots.index(step)]
+                continue
+            inner_t = _field_type(cls._slot_types[0], step) if len(slots) == 1 else None
+            if inner_t is not None:   # a one-field message stands for its value
+                t = inner_t
+                continue
+            hint = did_you_mean(step, slots) or (" (its fields: %s)" % ", ".join(slots) if slots else
+                                                 " (it has no fields)")
+            return None, "reads %s, but %s holds %s, which has no field %r%s" % (
+                _shown(ref, i + 1), _shown(ref, i), held(t), step, hint)
+        if t.endswith("]"):
+            return None, "reads %s, but %s holds %s, which has no fields (an element is %s[0])" % (
+                _shown(ref, i + 1), _shown(ref, i), held(t), _shown(ref, i))
+        if t in _NUMBERS or t in ("string", "bool"):
+            return None, "reads %s, but %s holds %s, which has no fields" % (_shown(ref, i + 1), _shown(ref, i),
+                                                                             held(t))
+        return None, ""   # time, duration, a type not known here
+    return t, ""
+
+
+def _message(t: str) -> Any:
+    """The message class of ``t`` (None for field types, lists and types not known here)."""
+    from comm.rostypes import resolve_type
+
+    return None if t.endswith("]") else resolve_type(t)
+
+
+def ref_type(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Optional[str]:
+    """The ROS type (or field type) a reference will hold, when the definitions say."""
+    return follow(types, ref)[0]
 
 
 def ref_kind(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Optional[str]:
     """What a reference will hold (number, string, bool, list, message), when the definitions say."""
     t = ref_type(types, ref)
     return _kind_of_type(t) if t is not None else None
+
+
+def value_kind(types: Dict[str, Set[Optional[str]]], value: Any) -> Tuple[Optional[str], str]:
+    """What a parameter's value (a reference or an expression) will hold, when the definitions say:
+    its kind (number, string, bool, list, message, null) and how to say it (``$answer holds text
+    (std_msgs/String)``, ``$(a + "s") is text``); (None, '') when not known."""
+    if isinstance(value, Ref):
+        t = ref_type(types, value)
+        return (_kind_of_type(t), "%s holds %s" % (value, held(t))) if t is not None else (None, "")
+    if isinstance(value, ExprValue):
+        k = value.expr.kind(lambda r: ref_kind(types, r))
+        return (k, "%s is %s" % (value, _KIND_WORDS.get(k, "a " + k))) if k is not None else (None, "")
+    if isinstance(value, Template):
+        return "string", "%r is text" % value.text
+    return None, ""
+
+
+_KIND_WORDS = {"number": "a number", "string": "text", "bool": "true or false", "list": "a list",
+               "message": "a message", "null": "null"}
+
+
+def ref_errors(refs: List[Ref], offsets: List[int], types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:
+    """(offset, message) for each reference whose path cannot be followed in the type its key holds."""
+    out: List[Tuple[int, str]] = []
+    for r, off in zip(refs, offsets):
+        if r.path:
+            why = follow(types, r)[1]
+            if why:
+                out.append((off, why))
+    return out
+
+
+def expr_errors(expr: Expr, types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:
+    """(offset, message) for an expression's references into fields that its keys' types do not have, and
+    for its operands of the wrong kind."""
+    if not expr.refs:
+        return expr.type_errors(lambda r: ref_kind(types, r))
+    return ref_errors(expr.refs, expr.ref_offsets, types) + expr.type_errors(lambda r: ref_kind(types, r))
 
 
 # where a value reads a key ---------------------------------------------------------------------
@@ -252,24 +374,30 @@ def read_at(value: Any, at: Pos, key: str) -> Optional[Pos]:
     return None if offset is None else Pos(at.file, at.line, at.column + offset)
 
 
-def value_type_errors(value: Any, types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:
-    """(offset in its text, message) for operands of the wrong kind in a value's expressions."""
+def value_type_errors(value: Any, types: Dict[str, Set[Optional[str]]], nested: bool = False) -> List[Tuple[int, str]]:
+    """(offset in its text, message) for references into fields that the types of their keys do not have,
+    and for operands of the wrong kind in a value's expressions (a reference inside a mapping or a list:
+    offset 0, the mapping's own position)."""
     out: List[Tuple[int, str]] = []
-
-    def kind(r: Ref) -> Optional[str]:
-        return ref_kind(types, r)
-
-    if isinstance(value, ExprValue):
-        out += [(2 + off, msg) for off, msg in value.expr.type_errors(kind)]
+    if isinstance(value, Ref):
+        if value.path:
+            why = follow(types, value)[1]
+            if why:
+                out.append((0, why))
+    elif isinstance(value, ExprValue):
+        out += [(0 if nested else 2 + off, msg) for off, msg in ref_errors(value.expr.refs, value.expr.ref_offsets,
+                                                                           types)]
+        out += [(2 + off, msg) for off, msg in value.expr.type_errors(lambda r: ref_kind(types, r))]
     elif isinstance(value, Template):
         for expr, base in value.exprs():
-            out += [(base + off, msg) for off, msg in expr.type_errors(kind)]
+            out += [(0 if nested else base + off, msg) for off, msg in ref_errors(expr.refs, expr.ref_offsets, types)]
+            out += [(base + off, msg) for off, msg in expr.type_errors(lambda r: ref_kind(types, r))]
     elif isinstance(value, dict):
         for v in value.values():
-            out += value_type_errors(v, types)
+            out += value_type_errors(v, types, True)
     elif isinstance(value, list):
         for v in value:
-            out += value_type_errors(v, types)
+            out += value_type_errors(v, types, True)
     return out
 
 

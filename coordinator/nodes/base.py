@@ -106,6 +106,50 @@ def run_param(value: Any, lookup: Callable[[str], Any], type_name: str, label: s
     return v, ""
 
 
+_PARAM_KINDS = {"count": "number", "seconds": "number", "seconds0": "number", "list": "list"}
+
+
+def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: str, label: str,
+                      errors: List[TreeError]) -> None:
+    """A count, a duration or ``for_each``'s list that cannot be one, found before running: operands of
+    the wrong kind and references into fields their keys' types do not have, in its expressions; a
+    reference or an expression whose type the definitions give (``$answer`` after ``speech.listen``
+    wrote it: text, not seconds); and a constant expression worked out when the tree loaded
+    (``$(2.5)``: not a count). A value whose type is not known (a tree input, a key ``set`` writes)
+    is left to :func:`run_param`, when the node starts.
+
+    ``where``: the value's position, or a function that makes it (read only when there is an error).
+    """
+    if value is None:
+        return
+    from coordinator.values import value_kind, value_type_errors
+
+    found: List[Tuple[int, str]] = []
+    if isinstance(value, (Ref, Computed)):
+        found = value_type_errors(value, types)
+        if not found:   # (else its own errors say what is wrong)
+            kind, said = value_kind(types, value)
+            if kind is not None and kind != _PARAM_KINDS[type_name]:
+                found.append((0, "%s %s, not %s" % (label, said, TYPES[type_name].expect or "a list")))
+    elif isinstance(value, list):   # a literal list: its elements may hold references
+        found = value_type_errors(value, types)
+    elif type_name == "list":
+        found.append((0, "%s is %r, not a list" % (label, value)))
+    else:   # a literal was checked when parsed: this is a constant expression, worked out then
+        if type_name == "count" and isinstance(value, float) and value.is_integer():
+            value = int(value)   # as run_param takes it
+        t = TYPES[type_name]
+        if t.ok is not None and not t.ok(value):
+            found.append((0, "%s is %r, not %s" % (label, value, t.expect)))
+    if not found:
+        return
+    at = where() if callable(where) else where
+    if at is None:
+        return
+    for off, msg in found:
+        errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
+
+
 @dataclass(frozen=True)
 class Option:
     """An option key beside the kind key."""

@@ -13,7 +13,7 @@ from comm.rostypes import resolve_type
 from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import NodeKind, Option, param_keys, run_param
+from coordinator.nodes.base import NodeKind, Option, param_keys, param_type_errors, run_param
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
@@ -33,6 +33,7 @@ class CallSpec:
     timeout: Optional[float] = None
     check_success: bool = True
     input_pos: Dict[str, Pos] = field(default_factory=dict)
+    timeout_pos: Optional[Pos] = None
 
 
 class Call(Leaf):
@@ -126,6 +127,8 @@ class CallKind(NodeKind):
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> CallSpec:
         spec = CallSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
                         check_success=p.opt(node, raw, self.option("check_success")))
+        if "timeout" in raw:
+            spec.timeout_pos = raw.val_pos["timeout"]
         found = p.target(node, value, at, "function")
         inputs_raw = p.mapping(raw, "inputs", at, "'inputs' must be a mapping of input name: value")
         spec.inputs = {k: p.literal_at(inputs_raw, k, at) for k in inputs_raw}
@@ -182,6 +185,7 @@ class CallKind(NodeKind):
         return [node.spec.function] if node.spec.function is not None else []
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of call", errors)
         fn = node.spec.function
         if fn is None:
             return

@@ -8,9 +8,9 @@ import py_trees
 from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
+from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, param_type_errors, run_param
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors, read_at
+from coordinator.values import read_at
 
 __all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec"]
 
@@ -173,7 +173,8 @@ class Counted(NodeKind):
         return param_keys(self.param(node))
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        at_value_errors(self.param(node), node.value_pos or node.pos, types, errors)
+        param_type_errors(self.param(node), lambda: node.value_pos or node.pos, types, self.value[0],
+                          "%s of %s" % (self.label, self.name), errors)
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         return read_at(self.param(node), node.value_pos, key) if node.value_pos is not None else None
@@ -206,7 +207,7 @@ class RetryKind(Counted):
         super().check_types(node, types, errors)
         s = node.spec
         if s.delay is not None:
-            at_value_errors(s.delay, s.delay_pos or node.pos, types, errors)
+            param_type_errors(s.delay, s.delay_pos or node.pos, types, "seconds0", "delay of retry", errors)
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         s = node.spec

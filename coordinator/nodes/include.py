@@ -7,12 +7,12 @@ from typing import Any, Dict, FrozenSet, Iterable, List, Optional
 import py_trees
 
 from comm.errors import did_you_mean
-from coordinator.errors import Pos
+from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import Flow, NodeKind, Option
 from coordinator.nodes.leaves import SetKeys
 from coordinator.refs import refs_in
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode
-from coordinator.values import read_at
+from coordinator.values import at_value_errors, read_at
 
 __all__ = ["IncludeSpec", "KINDS"]
 
@@ -70,6 +70,11 @@ class IncludeKind(NodeKind):
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec.bound())
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        where = node.spec.arg_pos
+        for k, v in node.spec.args.items():
+            at_value_errors(v, where[k] if k in where else node.pos, types, errors)
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         where = node.spec.arg_pos

@@ -9,11 +9,11 @@ from py_trees.common import Status
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError
-from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, run_param
+from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, param_type_errors, run_param
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
-from coordinator.values import read_at, ref_kind, value_type_errors
+from coordinator.values import expr_errors, read_at, value_type_errors
 
 __all__ = ["Check", "KINDS", "Recall", "SetKeys", "Wait", "WaitEvent"]
 
@@ -25,6 +25,8 @@ _WRITES_NOTHING: FrozenSet[str] = frozenset()
 class RecallSpec:
     names: Dict[str, str]             # tree key -> Blackboard name
     timeout: Optional[float] = None
+    types: Dict[str, str] = field(default_factory=dict)   # tree key -> the ROS type of its output, when known
+    timeout_pos: Optional[Pos] = None
 
 
 class Recall(Leaf):
@@ -73,13 +75,17 @@ class RecallKind(NodeKind):
         timeout = p.opt(node, raw, self.option("timeout"))
         m = p.keys(node, value, at, "tree key: blackboard name")
         names = {}
+        types = {}
         for k, v in (m or {}).items():
             parts = v.split("/") if isinstance(v, str) else []
             if len(parts) not in (1, 3) or not all(parts):
                 p.err(m.val_pos[k], "blackboard name %r must be 'name' or 'module/function/name'" % (v,))
-            else:
-                names[k] = v
-        return RecallSpec(names, timeout)
+                continue
+            names[k] = v
+            rostype = _recalled_type(p, parts, m.val_pos[k]) if p.definitions else None
+            if rostype is not None:
+                types[k] = rostype
+        return RecallSpec(names, timeout, types, raw.val_pos["timeout"] if "timeout" in raw else None)
 
     def default_name(self, node: TreeNode) -> str:
         return "recall %s" % ", ".join(node.spec.names.values())
@@ -88,9 +94,53 @@ class RecallKind(NodeKind):
         return param_keys(node.spec.timeout)
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
-        return dict.fromkeys(node.spec.names)
+        types = node.spec.types
+        return {k: types.get(k) for k in node.spec.names}
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of recall", errors)
 
     leaf = Recall
+
+
+def _recalled_type(p: Any, parts: List[str], at: Pos) -> Optional[str]:
+    """The ROS type of the output a Blackboard name stands for, when the definitions say, after reporting a
+    name that cannot be stored: ``module/function/output`` of a module whose definition is loaded must
+    name one of its functions and one of that function's outputs (an error); a module without a
+    definition here may still store values (a warning only when its name is close to a known module's:
+    likely misspelt); a plain ``output`` not among the outputs of any known function is likely misspelt,
+    or stored by a module whose definition is not given (a warning)."""
+    defs = p.definitions
+    name = "/".join(parts)
+    if len(parts) == 3:
+        mod_name, fname, out = parts
+        mod = defs.get(mod_name)
+        if mod is None:
+            close = did_you_mean(mod_name, defs)
+            if close:
+                p.warn(at, "recall of %r: no definition of module %r is loaded%s: the recall finds it only if a "
+                           "module of that name stored it" % (name, mod_name, close))
+            return None
+        fn = mod.functions.get(fname)
+        if fn is None:
+            p.err(at, "blackboard name %r: module %r has no function %r%s" % (
+                name, mod_name, fname, did_you_mean(fname, mod.functions) or " (functions: %s)"
+                % ", ".join(mod.functions)))
+            return None
+        outputs = {q.name: q for q in fn.outputs}
+        if out not in outputs:
+            p.err(at, "blackboard name %r: %s has no output %r%s" % (
+                name, fn.qualified, out, did_you_mean(out, outputs) or " (outputs: %s)"
+                % (", ".join(outputs) or "none")))
+            return None
+        return outputs[out].rostype
+    out = parts[0]
+    known = {q.name for mod in defs.values() for fn in mod.functions.values() for q in fn.outputs}
+    if out not in known:
+        p.warn(at, "recall of %r: no function of the known modules (%s) has an output %r%s" % (
+            name, ", ".join(sorted(defs)), out, did_you_mean(out, known)
+            or ": the recall finds it only if a module whose definition is not given stored it"))
+    return None   # the latest value of any module's output of that name: its type is not known
 
 
 # check ------------------------------------------------------------------------------------
@@ -141,7 +191,7 @@ class CheckKind(NodeKind):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         if node.spec is not None and not node.spec.well_typed:
-            found = node.spec.type_errors(lambda r: ref_kind(types, r))
+            found = expr_errors(node.spec, types)
             at = node.value_pos if found else None   # a Pos made only when needed
             for off, msg in found if at is not None else ():
                 errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
@@ -156,6 +206,7 @@ class WaitEventSpec:
     event: Any = None                 # EventDefinition
     outputs: Dict[str, str] = field(default_factory=dict)
     timeout: Optional[float] = None
+    timeout_pos: Optional[Pos] = None
 
 
 class WaitEvent(Leaf):
@@ -197,7 +248,8 @@ class WaitEventKind(NodeKind):
                Option("timeout", "seconds", "seconds", shown="none"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> WaitEventSpec:
-        spec = WaitEventSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")))
+        spec = WaitEventSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
+                             timeout_pos=raw.val_pos["timeout"] if "timeout" in raw else None)
         found = p.target(node, value, at, "event")
         if found is None:
             return spec
@@ -220,6 +272,9 @@ class WaitEventKind(NodeKind):
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec.timeout)
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
 
     def modules(self, node: TreeNode) -> Iterable[str]:
         t = node.spec.target
@@ -307,10 +362,15 @@ class WaitKind(NodeKind):
         return p.typed(node, self.label, value, at, self.value[0])
 
     def default_name(self, node: TreeNode) -> str:
-        return "wait %ss" % node.spec
+        seconds = node.spec   # a number: 'wait 5s'; a reference or an expression as written: 'wait $pause'
+        return "wait %ss" % seconds if isinstance(seconds, (int, float)) else "wait %s" % seconds
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec)
+
+    def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        param_type_errors(node.spec, lambda: node.value_pos or node.pos, types, "seconds0", "duration of wait",
+                          errors)
 
     leaf = Wait
 

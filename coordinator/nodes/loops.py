@@ -13,11 +13,11 @@ from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, kind_of
-from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, param_keys
+from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, param_keys, param_type_errors
 from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors, read_at, ref_kind
+from coordinator.values import expr_errors, read_at
 
 __all__ = ["DEFAULT_MAX", "ForEach", "ForEachSpec", "KINDS", "Repeat", "RepeatSpec", "expr_option"]
 
@@ -41,7 +41,7 @@ def expr_option(p: Any, raw: Any, key: str) -> Optional[Expr]:
 def expr_type_errors(expr: Optional[Expr], at: Optional[Pos], types: Dict[str, set], errors: List[TreeError]) -> None:
     if expr is None or at is None:
         return
-    for off, msg in expr.type_errors(lambda r: ref_kind(types, r)):
+    for off, msg in expr_errors(expr, types):
         errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
 
 
@@ -161,6 +161,7 @@ class ForEachSpec:
     key: str = ""
     policy: str = "all"
     max: Any = DEFAULT_MAX
+    max_pos: Optional[Pos] = None
 
 
 class ForEach(Guarded):
@@ -186,7 +187,7 @@ class ForEach(Guarded):
             self.finish_early(Status.FAILURE, "cannot read the list: %s" % (exc.args[0] if exc.args else exc))
             return
         if not isinstance(items, (list, tuple)):
-            self.finish_early(Status.FAILURE, "%r is a %s, not a list" % (spec.items, kind_of(items)))
+            self.finish_early(Status.FAILURE, "%s is a %s, not a list" % (spec.items, kind_of(items)))
             return
         if len(items) > limit:
             self.finish_early(Status.FAILURE, "the list has %d elements, more than max %d" % (len(items), limit))
@@ -245,7 +246,8 @@ class ForEachKind(NodeKind):
         if "as" in raw and (not isinstance(key, str) or not key.isidentifier()):
             p.err(raw.val_pos["as"], "'as' must be a tree key (an identifier), got %r" % (key,))
             key = None
-        spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all"), limit)
+        spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all"), limit,
+                           raw.val_pos["max"] if "max" in raw else None)
         if "child" in raw:
             p.child(node, raw["child"], raw.val_pos["child"])
         return spec
@@ -270,7 +272,10 @@ class ForEachKind(NodeKind):
         return {node.spec.key: None} if node.spec.key else {}
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        at_value_errors(node.spec.items, node.value_pos or node.pos, types, errors)
+        spec = node.spec
+        param_type_errors(spec.items, lambda: node.value_pos or node.pos, types, "list", "for_each", errors)
+        if spec.max_pos is not None:
+            param_type_errors(spec.max, spec.max_pos, types, "count", "max of for_each", errors)
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         return read_at(node.spec.items, node.value_pos, key) if node.value_pos is not None else None
