@@ -18,6 +18,7 @@ from py_trees.common import Status
 from coordinator.context import WAKE, CallRecord, RunContext
 from coordinator.reasons import FailureExplainer
 from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
+from coordinator.running import while_running
 
 __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
 
@@ -65,15 +66,6 @@ class Visited(py_trees.visitors.VisitorBase):
 
     def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
         self.visited.append((behaviour, behaviour.status))
-
-
-def while_running(root: py_trees.behaviour.Behaviour) -> str:
-    """`` while 'go to the kitchen' was running``: the leaves a stop will halt (for its reason)."""
-    names = ["'%s'" % b.name for b in root.iterate() if b.status == Status.RUNNING and not b.children]
-    if not names:
-        return ""
-    more = " and %d more" % (len(names) - 3) if len(names) > 3 else ""
-    return " while %s%s %s running" % (", ".join(names[:3]), more, "was" if len(names) == 1 else "were")
 
 
 class NoticeLines(RunObserver):

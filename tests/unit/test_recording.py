@@ -151,6 +151,18 @@ def test_max_duration_ends_in_failure_with_its_reason(sim_defs):
     assert run.calls("navigation.go_to")[0].status == "halted"
 
 
+def test_a_run_stopped_while_a_retry_waits_its_delay_says_what_it_waits_after(sim_defs, tmp_path):
+    """No leaf runs then: the retry itself is what was running, with the failure it waits after."""
+    tree = tmp_path / "delayed.yaml"
+    tree.write_text("format: 1\nroot:\n  retry: 5\n  delay: 10\n  child:\n    call: navigation.go_to\n"
+                    "    inputs: {place: kitchen}\n")
+    t = TreeTest(str(tree), definitions=sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    run = t.run(max_duration=5.0)
+    assert run.reason == "stopped after 5 s while 'retry x5' (run 1 of 5 ended in FAILURE; the next in 10s) was " \
+                         "running", run.reason
+
+
 def test_max_duration_stops_at_the_limit_not_at_the_next_period(sim_defs):
     t = TreeTest(GO, definitions=sim_defs)
     t.mocks["navigation.go_to"].hang()
