@@ -6,6 +6,7 @@ message built here goes through genpy's ``_check_types`` before anyone sees it.
 from __future__ import annotations
 
 import base64
+import contextlib
 import difflib
 import importlib
 import importlib.util
@@ -17,7 +18,7 @@ import pkgutil
 import re
 import struct
 import time
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 import genpy
 from rospy_message_converter import message_converter
@@ -27,6 +28,7 @@ from comm.limits import check_depth
 from comm.typewords import ValueMisfit, misfit_text
 
 __all__ = [
+    "now_from",
     "resolve_type",
     "suggest_type",
     "rostype_of",
@@ -191,14 +193,29 @@ def _special(cls: type, seen: Tuple[type, ...] = ()) -> bool:
     return found
 
 
+_CLOCK: List[Callable[[], float]] = []  # the clock ``now`` reads offline, innermost last (a tree test's)
+
+
+@contextlib.contextmanager
+def now_from(clock: Callable[[], float]) -> Iterator[None]:
+    """While in it, a time given as ``now`` in a process that is no ROS node is ``clock()`` seconds
+    (a tree test's simulated time: its scenarios then give the same times on every run)."""
+    _CLOCK.append(clock)
+    try:
+        yield
+    finally:
+        _CLOCK.remove(clock)
+
+
 def _now() -> Dict[str, int]:
-    """``now`` for a time field: the ROS time in a node, the wall clock offline (``bmtree check``, tests)."""
+    """``now`` for a time field: the ROS time in a node; offline (``bmtree check``, tree tests) the
+    clock of :func:`now_from`, else the wall clock."""
     import rospy
 
     try:
         stamp = rospy.get_rostime()
     except rospy.exceptions.ROSInitException:
-        stamp = rospy.Time.from_sec(time.time())
+        stamp = rospy.Time.from_sec(_CLOCK[-1]() if _CLOCK else time.time())
     return {"secs": stamp.secs, "nsecs": stamp.nsecs}
 
 

@@ -113,6 +113,17 @@ class _Unknown(Exception):
     """A reference whose type is not known statically: nothing to check."""
 
 
+def _says_now(value: Any) -> bool:
+    """Whether a literal holds the text ``now`` (a time taken when the call is made, not at load)."""
+    if isinstance(value, str):
+        return value == "now"
+    if isinstance(value, dict):
+        return any(_says_now(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_says_now(v) for v in value)
+    return False
+
+
 class CallKind(NodeKind):
     name = "call"
     family = "leaf"
@@ -155,7 +166,9 @@ class CallKind(NodeKind):
                 p.err(inputs_raw.val_pos[q.name], "input %r: null is not a %s value" % (q.name, q.rostype))
             elif spec.inputs[q.name] is not None and not refs_in(spec.inputs[q.name]):
                 try:  # converted here, once: the call leaf sends these messages as they are
-                    spec.static[q.name] = q.convert(spec.inputs[q.name])
+                    msg = q.convert(spec.inputs[q.name])
+                    if not _says_now(spec.inputs[q.name]):  # a time `now` is the time of each call
+                        spec.static[q.name] = msg
                 except ProtocolError as exc:
                     p.err(inputs_raw.val_pos[q.name], said_of("input %r" % q.name, exc))
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")

@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Set
 import py_trees
 from py_trees.common import Status
 
+from comm.rostypes import now_from
 from coordinator.builder import build_tree
 from coordinator.clock import SimClock
 from coordinator.context import CallRecord, RunContext, plain
@@ -166,8 +167,9 @@ class TreeTest:
         root = build_tree(self.tree, ctx, self.inputs)
         visitors = [self.coverage.visitor()] if self.coverage is not None else []
         del self.mocks.errors[:]
-        result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=observers,
-                            tree=self.tree).run(max_duration, stop_when)
+        with now_from(clock.now):  # a time given as `now` is the simulated time: the same on every run
+            result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=observers,
+                                tree=self.tree).run(max_duration, stop_when)
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
         return TreeRun(result, transport)

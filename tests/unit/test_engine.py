@@ -404,3 +404,28 @@ def test_control_set_takes_a_value_for_a_key_a_call_output_wrote(tmp_path):
     assert (ok, answer) == (False, "weight takes a number (std_msgs/Float64), got 'heavy'")
     assert ctx.blackboard["weight"] == Float64(2.5)
     assert control._apply({"command": "set", "key": "label", "value": "5"}) == (False, "label holds str; 5 is int")
+
+
+def test_a_time_given_as_now_is_the_time_of_each_call_on_the_run_clock(tmp_path):
+    """``now`` in a literal input was converted once, when the tree loaded: every call got that
+    time. In a tree test it is the simulated time, so the same on every run."""
+    from modules.definition import parse_definition
+
+    clock = parse_definition({"Basic Module": "stamper", "Brief Description": "", "Hardware Required": [],
+                              "Functions": [{"Name": "mark", "Exec-condition": "", "Description": "",
+                                             "Input-params": [{"Name": "at", "Data-type": "std_msgs/Time",
+                                                               "Description": ""}],
+                                             "Output-params": []}]})
+    t = TreeTest(tree(tmp_path, """
+root:
+  sequence:
+    - call: stamper.mark
+      inputs: {at: now}
+    - wait: 2.5
+    - call: stamper.mark
+      inputs: {at: now}
+"""), definitions={"stamper": clock})
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert [c.inputs["at"] for c in run.calls("stamper.mark")] == [{"secs": 0, "nsecs": 0},
+                                                                  {"secs": 2, "nsecs": 500000000}]
