@@ -77,10 +77,12 @@ class FailureExplainer(RunObserver):
                         fired.append(self._origins[-1])
                 if isinstance(b, Retry) and isinstance(getattr(b, "times", None), int):
                     self._gave_up[b] = (self._seq, b.runs, b.times)
-            elif new is Status.INVALID and old is Status.RUNNING and not b.children:
-                for o in fired:  # a timeout halted this leaf: say what it was waiting for
+            elif new is Status.INVALID and old is Status.RUNNING and (
+                    not b.children or getattr(b, "resume_at", None) is not None):
+                for o in fired:  # a timeout halted this leaf (or a retry waiting out its delay): say what ran
                     if o.behaviour in _ancestors(b):
-                        o.message += " while '%s' was running" % b.name
+                        said = " (%s)" % b.feedback_message if b.children and b.feedback_message else ""
+                        o.message += " while '%s'%s was running" % (b.name, said)
 
     def root_cause(self) -> Optional[Origin]:
         """The latest failure no ancestor recovered from."""

@@ -77,6 +77,14 @@ class Guarded(py_trees.decorators.Decorator):
         return Status.RUNNING
 
 
+def _failure_of(b: py_trees.behaviour.Behaviour) -> str:
+    """The failure text of the deepest failed node under ``b`` (what a waiting retry waits after)."""
+    for node in reversed(list(b.iterate())):
+        if node.status == Status.FAILURE and node.feedback_message:
+            return node.feedback_message
+    return ""
+
+
 class Timeout(Guarded):
     """FAILURE (and the child halted) when the child runs longer than ``duration`` on the run's clock."""
 
@@ -135,6 +143,8 @@ class Retry(Guarded):
                 said = "run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value)
                 if not self.delay:
                     return self.rerun(said)
+                why = _failure_of(self.decorated)
+                said += " (%s)" % why if why else ""
                 self.decorated.stop(Status.INVALID)
                 self.resume_at = self.ctx.clock.now() + self.delay
                 self.ctx.wake_after(self.delay)
@@ -231,7 +241,8 @@ class TimeoutKind(Counted):
         return node.spec.seconds
 
     def default_name(self, node: TreeNode) -> str:
-        return "timeout %ss" % node.spec.seconds
+        seconds = node.spec.seconds  # a number: 'timeout 5s'; a reference or an expression as written
+        return "timeout %ss" % seconds if isinstance(seconds, (int, float)) else "timeout %s" % seconds
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Timeout(node.name, child(node.children[0]), node.spec.seconds, ctx)

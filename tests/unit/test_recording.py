@@ -159,8 +159,19 @@ def test_a_run_stopped_while_a_retry_waits_its_delay_says_what_it_waits_after(si
     t = TreeTest(str(tree), definitions=sim_defs)
     t.mocks["navigation.go_to"].fail("blocked")
     run = t.run(max_duration=5.0)
-    assert run.reason == "stopped after 5 s while 'retry x5' (run 1 of 5 ended in FAILURE; the next in 10s) was " \
-                         "running", run.reason
+    assert run.reason == "stopped after 5 s while 'retry x5' (run 1 of 5 ended in FAILURE (navigation.go_to failed: " \
+                         "blocked); the next in 10s) was running", run.reason
+
+
+def test_a_timeout_that_fires_while_a_retry_waits_its_delay_says_what_it_waits_after(sim_defs, tmp_path):
+    tree = tmp_path / "bounded.yaml"
+    tree.write_text("format: 1\nroot:\n  timeout: 3\n  name: in time\n  child:\n    retry: 5\n    delay: 2\n"
+                    "    child:\n      call: navigation.go_to\n      inputs: {place: kitchen}\n")
+    t = TreeTest(str(tree), definitions=sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    run = t.run()
+    assert run.reason == "in time: timed out after 3s while 'retry x5' (run 2 of 5 ended in FAILURE (navigation.go_to " \
+                         "failed: blocked); the next in 2s) was running", run.reason
 
 
 def test_max_duration_stops_at_the_limit_not_at_the_next_period(sim_defs):
