@@ -27,6 +27,7 @@ DEFAULT_KEEP = 50
 MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
 MAX_RECORD_BYTES = 64 << 20
 _SUFFIX = ".jsonl"
+HEARTBEAT = 1.0  # seconds: a quiet run's log is touched this often, so a killed run's length is known
 _NAME = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.jsonl$")
 _SIM = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.sim$")
 
@@ -191,7 +192,14 @@ class RunLogWriter(Sink):
 
     def _write_loop(self) -> None:
         while True:
-            batch = self._queue.get()
+            try:
+                batch = self._queue.get(timeout=HEARTBEAT)
+            except queue.Empty:  # a quiet run: the file's time still says it was alive (a killed run's length)
+                try:
+                    os.utime(self.path)
+                except OSError:
+                    pass
+                continue
             if batch is None:
                 return
             lines = [batch]
@@ -327,8 +335,11 @@ def list_runs(directory: str) -> List[RunSummary]:
             end = tail if tail is not None and tail.get("type") == "end" else None
             last_t = tail.get("t") if isinstance(tail, dict) else None
             duration = end.get("t") if end else last_t
+            started = float(head.get("started") or 0.0)
+            if end is None and started:  # killed: it lived until its log was last written or touched
+                duration = max(float(duration or 0.0), os.path.getmtime(path) - started)
             out.append(RunSummary(
-                path=path, name=str(head.get("name", "?")), started=float(head.get("started") or 0.0),
+                path=path, name=str(head.get("name", "?")), started=started,
                 duration=float(duration) if duration is not None else None,
                 status=str(end.get("status")) if end else "UNFINISHED",
                 reason=str(end.get("reason") or "") if end else "the log ends without an end record (killed?)"))

@@ -675,3 +675,28 @@ def test_a_paused_run_times_its_calls_by_their_answers_and_replay_shows_the_cont
     assert "CONTROL   pause by /tester" in out   # the replayed display shows it where the live one did
     assert cmd_replay(_args(run=log, at=5.0)) == 0
     assert "paused by control (pause by /tester: paused" in capsys.readouterr().out
+
+
+def test_a_quiet_run_keeps_touching_its_log_and_a_killed_run_lists_how_long_it_lived(tmp_path, monkeypatch):
+    """Only changes are logged: a run killed after a quiet minute used to list as 0.00s."""
+    import os
+    import time as _time
+
+    from coordinator import runlog
+    from tests.conftest import until
+
+    monkeypatch.setattr(runlog, "HEARTBEAT", 0.05)
+    path = str(tmp_path / "runs" / "20261125-120000-abc123-quiet.jsonl")
+    writer = RunLogWriter(path, fsync=False)
+    started = _time.time() - 30.0
+    writer.write("tree", json.dumps({"v": 1, "type": "tree", "run": "abc123", "t": 0.0, "started": started,
+                                     "name": "quiet", "nodes": []}))
+    writer.write("status", json.dumps({"v": 1, "type": "tick", "run": "abc123", "t": 0.001, "n": 1, "changes": []}))
+    writer.flush()
+    until(lambda: os.path.exists(path) and os.path.getsize(path) > 0)
+    written = os.path.getmtime(path)
+    until(lambda: os.path.getmtime(path) > written + 0.1)  # touched while nothing is written
+    writer.close()
+    os.utime(path, (started + 12.0, started + 12.0))  # killed 12 s in
+    [run] = list_runs(str(tmp_path / "runs"))
+    assert run.status == "UNFINISHED" and abs(run.duration - 12.0) < 0.01
