@@ -66,6 +66,8 @@ class Watchdog:
         line: makes the connection that asks a node (URI, timeout, caller id) for its pid: a
             :class:`~comm.rpc.PidLine`.
         say: log each loss.
+        unregistered_lost: a node the master does not know is lost (False: only a process seen gone is;
+            a restarted master knows no node until each registers again).
 
     A module node uses one over the callers of its running calls (keys are then node names):
     a call whose caller's process is gone is cancelled.
@@ -73,9 +75,11 @@ class Watchdog:
 
     def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
-                 ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine, say: bool = True):
+                 ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine, say: bool = True,
+                 unregistered_lost: bool = True):
         self.deliver = deliver
         self.say = say  # log each loss (a module node watching its callers says it in its own words)
+        self.unregistered_lost = unregistered_lost
         self.resolve = resolve
         self.lookup = lookup
         self.period = period
@@ -222,8 +226,8 @@ class Watchdog:
                 uri = self.lookup(node)
             except OSError:
                 return None
-            if not uri:
-                return "node %s is not registered with the master" % node
+            if not uri:  # for a caller: perhaps a restarted master it has not registered with again yet
+                return "node %s is not registered with the master" % node if self.unregistered_lost else None
             try:
                 pid = self._ask(key, uri)
             except OSError:

@@ -223,7 +223,8 @@ class ModuleNode:
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard)
-        self.callers = Watchdog(self._orphaned, lambda node: node, _uri_of, period=CALLER_PERIOD, say=False)
+        self.callers = Watchdog(self._orphaned, lambda node: node, _uri_of, period=CALLER_PERIOD, say=False,
+                                unregistered_lost=False)
         self.server.callers = self.callers
         self.callers.start()
         self.inbox.subscribe()

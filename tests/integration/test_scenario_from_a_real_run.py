@@ -27,6 +27,7 @@ MODULE = '''from modules import BasicModule
 class My(BasicModule):
     def fire(self, deadline):
         self.emit("done")
+        self.context.sleep(0.2)  # ROS orders per topic only: the event surely arrives before the answer
         return {}
 
     def noop(self):
