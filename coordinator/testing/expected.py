@@ -17,8 +17,9 @@ on the keys it lists.
 """
 from __future__ import annotations
 
+import json
 import re
-from typing import Any, Dict, NamedTuple, Optional
+from typing import Any, Dict, List, NamedTuple, Optional
 
 import genpy
 
@@ -26,7 +27,8 @@ from comm.errors import ProtocolError
 from comm.rostypes import resolve_type, single_field, to_message
 from coordinator.context import plain
 
-__all__ = ["Difference", "difference", "expected_message", "legacy_times", "shown"]
+__all__ = ["Difference", "ExpectedCall", "calls_diff", "difference", "expect_calls", "expected_message", "legacy_times",
+           "shown", "want_form"]
 
 _NANOSECONDS = re.compile(r"^-?[0-9]+$")
 _TIMES = ("time", "duration")
@@ -201,3 +203,108 @@ def _as_time(want: Any, like: Any) -> Any:
     except (TypeError, ValueError, OverflowError):
         return None
     return (t.secs, t.nsecs)
+
+
+def want_form(c: Any) -> bool:
+    """An expected call: ``module.function`` or ``{module.function: {input: value}}``."""
+    return isinstance(c, str) or (isinstance(c, dict) and len(c) == 1 and isinstance(next(iter(c)), str)
+                                  and isinstance(next(iter(c.values())), (dict, type(None))))
+
+
+def _want(want: Any) -> Any:
+    return (want, {}) if isinstance(want, str) else next(iter(want.items()))
+
+
+class ExpectedCall:
+    """One call of ``expect: calls``: its ``module.function`` and the inputs it lists (as written),
+    compared normalised (:mod:`coordinator.testing.expected`): each converted once to the type of
+    the input it is compared with, and only the fields it lists."""
+
+    def __init__(self, raw: Any):
+        self.target, inputs = _want(raw)
+        self.inputs: Dict[str, Any] = dict(inputs or {})
+        self.built: Dict[str, Any] = {}  # input -> the value as a message of the input's type, or the ProtocolError
+
+    def difference(self, name: str, got: Any) -> Optional[Difference]:
+        """How the made call's input ``name`` (a message) differs from this one's, if it does."""
+        if name not in self.built and isinstance(got, genpy.Message):
+            try:
+                self.built[name] = expected_message(got._type, self.inputs[name])
+            except ProtocolError as exc:
+                self.built[name] = exc
+        return difference(self.inputs[name], got, self.built.get(name))
+
+    def matches(self, call: Any) -> bool:
+        """The made ``call`` (a CallRecord) is this one."""
+        return call.target == self.target and all(
+            k in call.messages and self.difference(k, call.messages[k]) is None for k in self.inputs)
+
+
+def _show(target: str, inputs: Any) -> str:
+    """A call on a diff line: the inputs in name order, each as written or as plain data (times
+    ``{"secs": S, "nsecs": N}``), so an expected and a made call read alike."""
+    if not inputs:
+        return target
+    return "%s %s" % (target, json.dumps({k: inputs[k] for k in sorted(inputs, key=str)}, ensure_ascii=False,
+                                         default=str))
+
+
+def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
+    """Expected vs actual calls as a diff: ``  =`` same, ``  -`` expected only, ``  +`` made only.
+    ``expected``: ExpectedCall objects or the written forms."""
+    want = [e if isinstance(e, ExpectedCall) else ExpectedCall(e) for e in expected]
+    n, m = len(want), len(actual)
+    head = 0  # the common start and end are matched in a line; the longest common subsequence in between
+    while head < min(n, m) and want[head].matches(actual[head]):
+        head += 1
+    tail = 0
+    while tail < min(n, m) - head and want[n - 1 - tail].matches(actual[m - 1 - tail]):
+        tail += 1
+    mid_w, mid_a = want[head:n - tail], actual[head:m - tail]
+    n2, m2 = len(mid_w), len(mid_a)
+    lcs = [[0] * (m2 + 1) for _ in range(n2 + 1)]
+    same = [[False] * m2 for _ in range(n2)]
+    for i in range(n2 - 1, -1, -1):
+        for j in range(m2 - 1, -1, -1):
+            if mid_w[i].matches(mid_a[j]):
+                same[i][j] = True
+                lcs[i][j] = lcs[i + 1][j + 1] + 1
+            else:
+                lcs[i][j] = max(lcs[i + 1][j], lcs[i][j + 1])
+    out = ["  = %s" % _show(w.target, w.inputs) for w in want[:head]]
+    i, j = 0, 0
+    while i < n2 or j < m2:
+        if i < n2 and j < m2 and same[i][j]:
+            out.append("  = %s" % _show(mid_w[i].target, mid_w[i].inputs))
+            i, j = i + 1, j + 1
+        elif j < m2 and (i == n2 or lcs[i][j + 1] >= lcs[i + 1][j]):
+            out.append("  + %s" % _show(mid_a[j].target, mid_a[j].inputs))
+            j += 1
+        else:
+            out.append("  - %s" % _show(mid_w[i].target, mid_w[i].inputs))
+            i += 1
+    out.extend("  = %s" % _show(w.target, w.inputs) for w in want[n - tail:])
+    return out
+
+
+def expect_calls(run: Any, expected: List[ExpectedCall]) -> List[str]:
+    """What differs between the calls a run made (a TreeRun) and ``expect: calls``."""
+    problems = []
+    actual = run.calls()
+    if len(actual) != len(expected):
+        problems.append("expected %d calls, got %d: %s" % (len(expected), len(actual), ", ".join(run.targets)))
+    for i, (want, got) in enumerate(zip(expected, actual)):
+        if got.target != want.target:
+            problems.append("call %d: expected %s, got %s" % (i + 1, want.target, got.target))
+            continue
+        for k in want.inputs:
+            if k not in got.messages:
+                problems.append("call %d (%s): it has no input %r" % (i + 1, want.target, k))
+                continue
+            d = want.difference(k, got.messages[k])
+            if d is not None:
+                problems.append("call %d (%s): %s" % (i + 1, want.target, d.said("input %s" % k)))
+    if problems:
+        problems.append("calls changed (- expected only, + made only, = both):")
+        problems.extend(calls_diff(expected, actual))
+    return problems

@@ -31,13 +31,11 @@ clock moving (a livelock); a limit reached is a FAIL naming it. The format: docs
 """
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
 from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
 
-import genpy
 from py_trees.common import Status
 
 from comm.errors import ProtocolError, did_you_mean
@@ -45,7 +43,15 @@ from comm.typewords import said_of
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
 from coordinator.runevents import RunObserver
-from coordinator.testing.expected import Difference, difference, expected_message, legacy_times
+from coordinator.testing.expected import (
+    ExpectedCall,
+    calls_diff,
+    difference,
+    expect_calls,
+    expected_message,
+    legacy_times,
+    want_form,
+)
 from coordinator.testing.kit import TreeRun, TreeTest
 from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
@@ -110,110 +116,6 @@ def _mapping(m: Any, key: str, at: Pos, what: str, out: _Problems) -> Any:
         out.add(pos_of(m, key, at), what)
         return {}
     return value
-
-
-def _call_form(c: Any) -> bool:
-    """An expected call: ``module.function`` or ``{module.function: {input: value}}``."""
-    return isinstance(c, str) or (isinstance(c, dict) and len(c) == 1 and isinstance(next(iter(c)), str)
-                                  and isinstance(next(iter(c.values())), (dict, type(None))))
-
-
-def _want(want: Any) -> Any:
-    return (want, {}) if isinstance(want, str) else next(iter(want.items()))
-
-
-class ExpectedCall:
-    """One call of ``expect: calls``: its ``module.function`` and the inputs it lists (as written),
-    compared normalised (:mod:`coordinator.testing.expected`): each converted once to the type of
-    the input it is compared with, and only the fields it lists."""
-
-    def __init__(self, raw: Any):
-        self.target, inputs = _want(raw)
-        self.inputs: Dict[str, Any] = dict(inputs or {})
-        self.built: Dict[str, Any] = {}  # input -> the value as a message of the input's type, or the ProtocolError
-
-    def difference(self, name: str, got: Any) -> Optional[Difference]:
-        """How the made call's input ``name`` (a message) differs from this one's, if it does."""
-        if name not in self.built and isinstance(got, genpy.Message):
-            try:
-                self.built[name] = expected_message(got._type, self.inputs[name])
-            except ProtocolError as exc:
-                self.built[name] = exc
-        return difference(self.inputs[name], got, self.built.get(name))
-
-    def matches(self, call: Any) -> bool:
-        """The made ``call`` (a CallRecord) is this one."""
-        return call.target == self.target and all(
-            k in call.messages and self.difference(k, call.messages[k]) is None for k in self.inputs)
-
-
-def _show(target: str, inputs: Any) -> str:
-    """A call on a diff line: the inputs in name order, each as written or as plain data (times
-    ``{"secs": S, "nsecs": N}``), so an expected and a made call read alike."""
-    if not inputs:
-        return target
-    return "%s %s" % (target, json.dumps({k: inputs[k] for k in sorted(inputs, key=str)}, ensure_ascii=False,
-                                         default=str))
-
-
-def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
-    """Expected vs actual calls as a diff: ``  =`` same, ``  -`` expected only, ``  +`` made only.
-    ``expected``: ExpectedCall objects or the written forms."""
-    want = [e if isinstance(e, ExpectedCall) else ExpectedCall(e) for e in expected]
-    n, m = len(want), len(actual)
-    head = 0  # the common start and end are matched in a line; the longest common subsequence in between
-    while head < min(n, m) and want[head].matches(actual[head]):
-        head += 1
-    tail = 0
-    while tail < min(n, m) - head and want[n - 1 - tail].matches(actual[m - 1 - tail]):
-        tail += 1
-    mid_w, mid_a = want[head:n - tail], actual[head:m - tail]
-    n2, m2 = len(mid_w), len(mid_a)
-    lcs = [[0] * (m2 + 1) for _ in range(n2 + 1)]
-    same = [[False] * m2 for _ in range(n2)]
-    for i in range(n2 - 1, -1, -1):
-        for j in range(m2 - 1, -1, -1):
-            if mid_w[i].matches(mid_a[j]):
-                same[i][j] = True
-                lcs[i][j] = lcs[i + 1][j + 1] + 1
-            else:
-                lcs[i][j] = max(lcs[i + 1][j], lcs[i][j + 1])
-    out = ["  = %s" % _show(w.target, w.inputs) for w in want[:head]]
-    i, j = 0, 0
-    while i < n2 or j < m2:
-        if i < n2 and j < m2 and same[i][j]:
-            out.append("  = %s" % _show(mid_w[i].target, mid_w[i].inputs))
-            i, j = i + 1, j + 1
-        elif j < m2 and (i == n2 or lcs[i][j + 1] >= lcs[i + 1][j]):
-            out.append("  + %s" % _show(mid_a[j].target, mid_a[j].inputs))
-            j += 1
-        else:
-            out.append("  - %s" % _show(mid_w[i].target, mid_w[i].inputs))
-            i += 1
-    out.extend("  = %s" % _show(w.target, w.inputs) for w in want[n - tail:])
-    return out
-
-
-def _expect_calls(run: TreeRun, expected: List[ExpectedCall]) -> List[str]:
-    problems = []
-    actual = run.calls()
-    if len(actual) != len(expected):
-        problems.append("expected %d calls, got %d: %s" % (len(expected), len(actual), ", ".join(run.targets)))
-    for i, (want, got) in enumerate(zip(expected, actual)):
-        if got.target != want.target:
-            problems.append("call %d: expected %s, got %s" % (i + 1, want.target, got.target))
-            continue
-        for k in want.inputs:
-            if k not in got.messages:
-                problems.append("call %d (%s): it has no input %r" % (i + 1, want.target, k))
-                continue
-            d = want.difference(k, got.messages[k])
-            if d is not None:
-                problems.append("call %d (%s): %s" % (i + 1, want.target, d.said("input %s" % k)))
-    if problems:
-        problems.append("calls changed (- expected only, + made only, = both):")
-        problems.extend(calls_diff(expected, actual))
-    return problems
 
 
 class _Scenario:
@@ -348,7 +250,7 @@ def _expected_calls(expect: Any, at: Pos, defs: Dict[str, ModuleDefinition], out
     """``expect: calls`` checked against the definitions (problems to ``out``, each where it is
     written): each a function of a module, each input one it has, of a value that fits its type."""
     calls = expect.get("calls") or []
-    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
+    if not isinstance(calls, list) or not all(want_form(c) for c in calls):
         return []  # said by _expectations
     found = []
     for j, c in enumerate(calls):
@@ -399,7 +301,7 @@ def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
         out.add(pos_of(expect, "status", at), "status is success or failure, got %r%s" % (
             status, did_you_mean(status.lower(), ("success", "failure"))))
     calls = expect.get("calls") or []
-    if not isinstance(calls, list) or not all(_call_form(c) for c in calls):
+    if not isinstance(calls, list) or not all(want_form(c) for c in calls):
         out.add(pos_of(expect, "calls", at), "calls is a list of module.function or {module.function: {input: value}}")
     _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
     if "reason" in expect and not isinstance(expect["reason"], str):
@@ -547,7 +449,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
             problems.append("the run reached the scenario's max_duration (%g s of simulated time); raise it if "
                             "the tree needs longer" % limits["max_duration"])
     if "calls" in expect:
-        problems.extend(_expect_calls(run, s.calls))
+        problems.extend(expect_calls(run, s.calls))
     if "reason" in expect and str(expect["reason"]) not in run.reason:
         problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
                         else "no reason (the run %s), expected one containing %r" % (
