@@ -167,6 +167,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             _announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
             return
         if notify is not None and start + NOTIFY_AFTER <= time.monotonic() <= end - NOTIFY_AFTER / 2:
+            problems.update(_dead([announced[n] for n in problems if n in announced]))  # killed, not slow
             notify("waiting up to %.3g s more (--wait): %s ..." % (
                 max(0.0, end - time.monotonic()), "; ".join(p for name in sorted(problems) for p in problems[name])))
             notify = None

@@ -194,3 +194,15 @@ def test_a_call_whose_caller_was_killed_is_cancelled_by_the_module(ros_graph, tm
     out = subprocess.run(bmtree_cmd("run", str(quick), "--modules", PROBE_JSON, "-q"), capture_output=True,
                          text=True, timeout=120, env=dict(os.environ))
     assert out.returncode == 0, out.stdout + out.stderr  # the module is free again, long before 100 s
+
+
+def test_the_wait_for_a_killed_module_says_it_is_not_running(ros_graph, tmp_path):
+    """Its announcement stays behind: the wait said 'not connected … yet', as for a slow start."""
+    ros_graph.kill_node(start_probe(ros_graph))
+    quick = tmp_path / "quick.yaml"
+    quick.write_text("format: 1\nroot:\n  call: probe.echo\n  inputs: {tag: y}\n")
+    out = subprocess.run(bmtree_cmd("run", str(quick), "--modules", PROBE_JSON, "-q", "--wait", "4"),
+                         capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    assert out.returncode == 3, out.stdout + out.stderr
+    waiting = next(line for line in out.stderr.splitlines() if "waiting up to" in line)
+    assert "module 'probe' is not running (node /bm_probe announced it but does not answer)" in waiting, out.stderr
