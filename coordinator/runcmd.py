@@ -61,6 +61,25 @@ def _warn_without_blackboard() -> None:
         "(start one: bmtree-blackboard, or roslaunch bmtree blackboard.launch)")
 
 
+def call_limit_warnings(tree: Any, limits: Dict[str, float], default_timeout: float) -> List[str]:
+    """Call leaves that would wait longer than their module itself does (a bridge's --call-timeout):
+    the call would fail then, blaming the module, before the tree's timeout."""
+    from coordinator.treeast import walk
+
+    out = []
+    for n in walk(tree.root):
+        fn = getattr(n.spec, "function", None) if n.nodekind.name == "call" else None
+        limit = limits.get(fn.module) if fn is not None else None
+        if fn is None or not limit:
+            continue
+        timeout = n.spec.timeout if n.spec.timeout is not None else default_timeout
+        if isinstance(timeout, (int, float)) and timeout > limit:
+            out.append("warning: %s: call %s waits up to %g s, but module %r gives up a call after %g s (a "
+                       "bridge's --call-timeout): the call would fail then; give the module a longer limit"
+                       % (n.value_pos or n.pos, fn.qualified, timeout, fn.module, limit))
+    return out
+
+
 def first_uses(tree: Any) -> Dict[str, str]:
     """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
     from coordinator.treeast import walk
@@ -278,6 +297,16 @@ def cmd_run(args: argparse.Namespace) -> int:
             err("error: %s" % exc)
             return EXIT_ENV
         stream_sink.settle()
+        import rosgraph
+
+        from modules.discovery import announced_modules
+
+        try:
+            limits = {n: m.call_limit for n, m in announced_modules().items() if n in mods and m.call_limit}
+        except (OSError, rosgraph.masterapi.Error):  # the master went away meanwhile: the run will say so
+            limits = {}
+        for line in call_limit_warnings(tree, limits, args.call_timeout):
+            err(line)
         if not recall and not args.sim:
             _warn_without_blackboard()
         ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)

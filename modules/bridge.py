@@ -155,6 +155,11 @@ class CppBridge(BasicModule):
             if s is not None:
                 s.unregister()
 
+    @property
+    def call_limit(self) -> Optional[float]:
+        """Announced: a coordinator warns of a call that would wait longer than the bridge does."""
+        return self.call_timeout or None
+
     def _gap(self) -> float:
         if self.input_gap is not None:
             return self.input_gap

@@ -10,6 +10,7 @@ whose node does not answer is not listed.
 from __future__ import annotations
 
 import json
+import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Dict, Mapping, Optional
@@ -37,18 +38,24 @@ class LiveModule:
     call_topic: Optional[str] = None  # None: the module takes calls only on /master/output
     cancel_topic: Optional[str] = None
     legacy: bool = False  # an original module, announced on its behalf by ``bmtree run``
+    call_limit: Optional[float] = None  # seconds after which the module itself fails a call (a bridge's --call-timeout)
 
 
 def announcement(node: str, definition: ModuleDefinition, instance: str = "",
-                 topics: Optional[Mapping[str, str]] = None, uri: Optional[str] = None) -> Dict[str, str]:
+                 topics: Optional[Mapping[str, str]] = None, uri: Optional[str] = None,
+                 call_limit: Optional[float] = None) -> Dict[str, Any]:
     """The parameter a module node sets; ``instance`` tells two processes of one node name apart;
-    ``topics``: its ``call_topic`` and ``cancel_topic``; ``uri``: its node's XML-RPC URI."""
-    out = {"node": node, "definition": json.dumps(definition.to_dict())}
+    ``topics``: its ``call_topic`` and ``cancel_topic``; ``uri``: its node's XML-RPC URI;
+    ``call_limit``: seconds after which the node itself fails a call (a coordinator warns of a
+    call that would wait longer)."""
+    out: Dict[str, Any] = {"node": node, "definition": json.dumps(definition.to_dict())}
     if instance:
         out["instance"] = instance
     out.update(topics or {})
     if uri:
         out["uri"] = uri
+    if call_limit:
+        out["call_limit"] = float(call_limit)
     return out
 
 
@@ -78,6 +85,11 @@ def _topic(entry: Dict[str, Any], key: str) -> Optional[str]:
     return value if valid_topic(value) else None
 
 
+def _limit(value: Any) -> Optional[float]:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+    return float(value) if ok else None
+
+
 def announced_modules(master_uri: Optional[str] = None) -> Dict[str, LiveModule]:
     """Every module announced on the master, alive or not: one master query (plus one per
     announcement of an older bmtree, which lacks ``uri``). Raises OSError-like errors if
@@ -105,7 +117,7 @@ def announced_modules(master_uri: Optional[str] = None) -> Dict[str, LiveModule]
                 continue
         found[name] = LiveModule(name=name, node=entry["node"], uri=uri, definition=definition,
                                  call_topic=_topic(entry, "call_topic"), cancel_topic=_topic(entry, "cancel_topic"),
-                                 legacy=entry.get("legacy") is True)
+                                 legacy=entry.get("legacy") is True, call_limit=_limit(entry.get("call_limit")))
     return found
 
 

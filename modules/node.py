@@ -230,7 +230,7 @@ class ModuleNode:
         self.inbox.subscribe()
         self.impl.setup(self)
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
-                           rospy.get_node_uri())
+                           rospy.get_node_uri(), getattr(self.impl, "call_limit", None))
         rospy.set_param(self._param, ann)
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
         rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))

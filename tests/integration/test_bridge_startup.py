@@ -51,3 +51,24 @@ def test_a_node_connected_to_nothing_is_said_in_one_clause_per_direction(ros_gra
     said = out.stderr.split("is not ready after 0.5s: ", 1)[1]
     assert said.startswith("/deaf_tool does not receive /DEMO_BM/bool, /DEMO_BM/string; /deaf_tool does not publish "
                            "/DEMO_BM/BM_output, /DEMO_BM/string, /DEMO_BM/bool to the bridge"), out.stderr
+
+
+def test_a_call_that_would_wait_longer_than_the_bridge_is_warned_of(ros_graph, tmp_path):
+    """The bridge announces its --call-timeout: a tree timeout beyond it would end in the bridge's
+    'no BM_output … it hangs or crashed', blaming a node that was only slow."""
+    from tests.integration.conftest import bmtree_cmd, wait_announced
+
+    ros_graph.start_node([sys.executable, os.path.join(NODES, "original_cpp_demo_bm.py")], "/DEMO_BM")
+    ros_graph.start_node(["-m", "modules.bridge", "--definition", DEMO_JSON, "--call-timeout", "2"], "/DEMO_BM_bridge")
+    wait_announced("DEMO_BM")
+    tree = tmp_path / "patient.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - call: DEMO_BM.functionA\n      inputs: {Aviso: hola, "
+                    "Bandera: true}\n      timeout: 10\n    - call: DEMO_BM.functionA\n      inputs: {Aviso: b, "
+                    "Bandera: false}\n      timeout: 1.5\n")
+    out = subprocess.run(bmtree_cmd("run", str(tree), "-q"), capture_output=True, text=True, timeout=120,
+                         env=ros_graph.env)
+    assert out.returncode == 0, out.stdout + out.stderr
+    warned = [line for line in out.stderr.splitlines() if "gives up a call after" in line]
+    assert warned == ["warning: %s:4:13: call DEMO_BM.functionA waits up to 10 s, but module 'DEMO_BM' gives up a "
+                      "call after 2 s (a bridge's --call-timeout): the call would fail then; give the module a "
+                      "longer limit" % tree], out.stderr
