@@ -107,7 +107,8 @@ class Watchdog:
     def call_sent(self, call_id: str, module: str) -> None:
         with self._lock:
             self._calls[call_id] = (module, time.monotonic())
-        self._owing.set()
+        if not self._owing.is_set():  # the watching thread sleeps: wake it (once, not per call)
+            self._owing.set()
 
     def owes(self, call_id: str) -> bool:
         """True while the call is in flight (sent, neither answered nor given up as lost)."""
