@@ -78,7 +78,9 @@ def _tokens(text: str) -> List[Tuple[str, Any, int]]:
         value = m.group(kind)
         start = m.start(kind)
         if kind == "bad":
-            raise ExprError("unexpected character %r" % value, start)
+            hint = {"=": " (compare with '==')", "&": " (use 'and')", "|": " (use 'or')",
+                    "!": " (use 'not', or '!=')"}.get(value, "")
+            raise ExprError("unexpected character %r%s" % (value, hint), start)
         if kind == "name" and value in _KEYWORDS:
             kind = "kw"
         elif kind == "name" and not value.startswith("$") and _OPEN_PAREN.match(text, m.end()):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import glob
 import json
 import os
+import re
 
 import jsonschema
 import pytest
@@ -189,3 +190,12 @@ def test_errors_have_two_shapes(tmp_path, capsys):
     bad_def.write_text("{}")
     assert bmtree(["check", "--modules", str(bad_def), os.path.join(TREES, "find_apple.yaml")]) == 2
     assert "Basic Module" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text,said", [("answer = 'yes'", "unexpected character '=' (compare with '==')"),
+                                       ("a && b", "unexpected character '&' (use 'and')"),
+                                       ("a || b", "unexpected character '|' (use 'or')"),
+                                       ("!a", "unexpected character '!' (use 'not', or '!=')")])
+def test_an_operator_from_another_language_says_what_to_write(text, said):
+    with pytest.raises(ExprError, match=re.escape(said)):
+        Expr(text)
