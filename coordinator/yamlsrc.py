@@ -367,9 +367,11 @@ def _syntax_hint(exc: Any, text: str, line: int, column: int) -> str:
     if "mapping values are not allowed" in problem:
         return (": a ': ' inside a value that is not quoted, or a key indented deeper than the keys above it: "
                 "quote the value (name: \"note: hi\") or line the key up with the others")
+    lines = text.splitlines()
+    row = lines[line - 1] if 0 < line <= len(lines) else ""
+    if "expected ',' or" in problem and row[column - 1:column] in ("[", "{"):  # $people[0] in {text: …}
+        return ": inside { } or [ ], a value holding [ ] or { } must be quoted ({text: \"$people[0]\"})"
     if "cannot start any token" in problem:
-        lines = text.splitlines()
-        row = lines[line - 1] if 0 < line <= len(lines) else ""
         if row[column - 1:column] == "\t":
             return ": a tab: YAML indents with spaces only"
     return ""

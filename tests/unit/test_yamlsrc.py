@@ -139,6 +139,8 @@ def test_load_value_gives_plain_containers_with_the_same_limits():
                     "or a key indented deeper than the keys above it"),
     ("root:\n  name: note: hi\n", "t.yaml:2:13", "quote the value"),
     ("root:\n\tsequence: []\n", "t.yaml:2:1", "a tab: YAML indents with spaces only"),
+    ("root:\n  call: speech.say\n  inputs: {text: $people[0]}\n", "t.yaml:3:25",
+     "did not find expected ',' or '}': inside { } or [ ], a value holding [ ] or { } must be quoted"),
 ])
 def test_common_yaml_syntax_errors_say_what_to_fix(text, where, says):
     with pytest.raises(TreeErrors) as info:
