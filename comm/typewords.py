@@ -12,6 +12,8 @@ The walk that finds the reason runs only after a conversion failed: it never slo
 """
 from __future__ import annotations
 
+import base64
+import binascii
 import math
 from typing import Any, Optional, Tuple
 
@@ -100,8 +102,14 @@ def _misfit(t: str, value: Any, field: str, named: str, scalar: bool, got: str =
 
     if t.endswith("]"):
         inner, size = t[:t.rindex("[")], t[t.rindex("[") + 1:-1]
-        if inner in ("uint8", "char") and isinstance(value, (bytes, str)):
-            return None   # bytes, or their base64 text in JSON
+        if inner in ("uint8", "char") and isinstance(value, (bytes, bytearray)):
+            return None
+        if inner in ("uint8", "char") and isinstance(value, str):  # bytes as base64 text (JSON's form)
+            try:
+                base64.b64decode(value, validate=True)
+                return None
+            except (ValueError, binascii.Error):
+                return wrong_kind("a list of numbers 0-255, or base64 text")
         if not isinstance(value, (list, tuple)):
             return wrong_kind()
         if size and len(value) != int(size):

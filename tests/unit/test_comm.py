@@ -281,3 +281,11 @@ def test_a_time_given_as_other_text_is_refused_not_made_zero(rostype, value):
 
     with pytest.raises(ProtocolError, match="takes"):
         to_message(rostype, value, allow_scalar=True)
+
+
+def test_bytes_given_as_text_that_is_not_base64_say_what_a_byte_field_takes():
+    from comm.rostypes import to_message
+
+    with pytest.raises(ProtocolError, match=r"field data takes a list of numbers 0-255, or base64 text \(uint8\[\]\), "
+                                            r"got 'abc'"):
+        to_message("std_msgs/UInt8MultiArray", {"data": "abc"})
