@@ -293,7 +293,11 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
         module = importlib.import_module(where)
     cls = getattr(module, cls_name, None)
     if cls is None:
-        raise ValueError("%s has no class %r" % (where, cls_name))
+        from comm.errors import did_you_mean
+
+        classes = sorted(n for n, v in vars(module).items() if isinstance(v, type) and not n.startswith("_"))
+        raise ValueError("%s has no class %r%s" % (where, cls_name, did_you_mean(cls_name, classes)
+                                                   or " (its classes: %s)" % (", ".join(classes) or "none")))
     if not isinstance(cls, type) or not issubclass(cls, BasicModule):
         raise ValueError("%s: %s is not a subclass of BasicModule (from modules.runtime import BasicModule; "
                          "class %s(BasicModule): ...)" % (where, cls_name, cls_name))
@@ -384,7 +388,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     except SyntaxError as exc:  # one line, where the author looks: file:line
         sys.stderr.write("%s:%s:%s: syntax error: %s\n" % (exc.filename, exc.lineno, exc.offset or 0, exc.msg))
         return 2
-    except (ValueError, ImportError, OSError) as exc:
+    except ImportError as exc:  # in the class file (file:line where it imports), or its module is not found
+        sys.stderr.write("error: %s: %s\n" % (_where(exc, args.cls), exc))
+        return 2
+    except (ValueError, OSError) as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
     except Exception as exc:  # the class file raised while loading or in __init__

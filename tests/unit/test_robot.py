@@ -282,6 +282,16 @@ def test_an_exception_while_loading_the_class_file_names_file_and_line(tmp_path)
     assert out.stderr.strip() == "error: %s:2: ZeroDivisionError: division by zero" % bad
 
 
+def test_an_import_that_fails_in_the_class_file_names_file_and_line_and_a_misspelt_class_a_near_one(tmp_path):
+    bad = tmp_path / "arm.py"
+    bad.write_text("from modules import BasicModule\nimport rospyy\n")
+    out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"), "--class", "%s:Gripper" % bad)
+    assert out.returncode == 2 and out.stderr.strip() == "error: %s:2: No module named 'rospyy'" % bad, out.stderr
+    out = _module_main("--definition", os.path.join(GRIPPER, "gripper.json"),
+                       "--class", "%s:Griper" % os.path.join(GRIPPER, "gripper.py"))
+    assert out.returncode == 2 and "has no class 'Griper' (did you mean 'Gripper'?)" in out.stderr, out.stderr
+
+
 def test_a_class_file_that_is_not_python_or_a_class_not_of_basic_module_is_one_line(no_master, tmp_path, capsys):
     binary = tmp_path / "binary.py"
     binary.write_bytes(b"class Gripper:\n    pass\0\n")
