@@ -145,6 +145,16 @@ class Replay:
             raise RunLogError("%s: record %d (%s) is malformed: %s" % (self.log.path, self.index, rec.get("type"), exc))
         return rec
 
+    def to_failure(self, f: Failure) -> None:
+        """Apply the records up to failure ``f``'s own change: its tick only as far as that change
+        (not a retry restarting the failed leaf later in the same tick)."""
+        while self.index < f.index and self.next() is not None:
+            pass
+        before = sum(len(r.get("changes") or []) for r in self.log.records[:f.index] if r.get("type") == "tick")
+        rec = self.log.records[f.index]
+        self.apply(dict(rec, changes=(rec.get("changes") or [])[:max(0, f.seq - before)]))
+        self.index = f.index + 1
+
     def until(self, stop: Callable[[Dict[str, Any]], bool]) -> bool:
         """Apply records up to and including the first for which ``stop`` is true; False if none is."""
         while True:
@@ -294,7 +304,7 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
         return "'%s' (%s:%s): %s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"), f.message)
 
     if ended is not None:
-        replay.until(lambda rec: replay.index > ended.index)
+        replay.to_failure(ended)
         out.write("the failure that ended the run, at %.3fs: %s\n" % (ended.t, where(ended)))
     elif end.get("status") == "FAILURE" or end.get("status") == "INVALID" or not end:
         ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick"]
@@ -303,7 +313,7 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
         out.write("no leaf's failure ended this run: %s\nthe state at %.3fs, its last tick before that:\n" % (
             end.get("reason") or "its log ends without the run's end (the process was killed?)", replay.t))
     elif recovered:
-        replay.until(lambda rec: replay.index > recovered[0].index)
+        replay.to_failure(recovered[0])
         out.write("the run succeeded; the tree recovered from %d failure%s, the first at %.3fs: %s\n" % (
             len(recovered), "" if len(recovered) == 1 else "s", recovered[0].t, where(recovered[0])))
     else:

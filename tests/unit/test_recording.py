@@ -437,8 +437,10 @@ def test_replay_failure_goes_to_the_failure_that_ended_the_run_not_one_the_tree_
     log_path, run = recorded(GO_RETRY, sim_defs, tmp_path / "ok", blocked_once)
     assert run.status == Status.SUCCESS
     assert cmd_replay(_args(run=log_path, failure=True)) == 0
-    assert "the run succeeded; the tree recovered from 1 failure, the first at 0.000s: 'navigation.go_to'" in \
-        capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "the run succeeded; the tree recovered from 1 failure, the first at 0.000s: 'navigation.go_to'" in out
+    # drawn as it was at that failure, not after the retry restarted it in the same tick
+    assert "navigation.go_to [✕]" in out, out
 
 
 def test_replay_failure_of_an_interrupted_run_shows_what_ran_when_it_was_stopped(sim_defs, tmp_path, capsys):
