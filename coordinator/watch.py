@@ -30,6 +30,8 @@ WATCH_CHANNELS = ("tree", "snapshot", "status", "calls", "events", "blackboard",
 #: after the run's end, ``watch --web`` serves until a page got the end (and one second more, for
 #: the other pages polling), and at most this long (s); the page keeps showing the last state
 END_GRACE = 5.0
+#: seconds ``watch --plain`` waits after the end for the run's last ticks (queued on another topic)
+END_TICKS_GRACE = 1.0
 
 
 class RosWatcher:
@@ -280,6 +282,10 @@ def cmd_watch(args: argparse.Namespace) -> int:
                 args.namespace, args.wait))
             return EXIT_ENV
         wait(lambda s: s.end is not None and not args.follow, 1e9)  # or a stop
+        if printer is not None and state.end is not None:  # the latched end can overtake the last ticks
+            wait(lambda s: s.tick >= int(s.end.get("ticks") or 0), END_TICKS_GRACE)
+            with state.lock:
+                printer.finish()
         if server is not None and state.end is not None and not (signals.requested or stop.is_set()):
             print("the run ended: %s; the page keeps showing it (--follow serves it for the next run too)"
                   % state.end.get("status"))

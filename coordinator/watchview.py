@@ -195,6 +195,18 @@ class LinePrinter:
     def __init__(self, out: TextIO):
         self.out = out
         self._caught: Any = None
+        self._end: Optional[Tuple[int, str]] = None  # the end's line, held until its last tick is printed
+
+    def finish(self) -> None:
+        """Print the end's line if it is still held (its last tick never came)."""
+        if self._end is not None:
+            self._write([self._end[1]])
+            self._end = None
+
+    def _write(self, lines: List[str]) -> None:
+        for line in lines:
+            self.out.write(line + "\n")
+        self.out.flush()
 
     def record(self, rec: Dict[str, Any], state: WatchState) -> None:
         kind = rec.get("type")
@@ -233,7 +245,15 @@ class LinePrinter:
         elif kind == "control":
             lines.append("[%7.3fs] control   %s" % (t, control_line(rec)))
         elif kind == "end":
-            lines.append("[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else ""))
+            line = "[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else "")
+            ticks = rec.get("ticks")
+            if isinstance(ticks, int) and state.tick < ticks:  # latched, it can overtake the queued last ticks
+                self._end = (ticks, line)
+            else:
+                lines.append(line)
+        if kind == "tick" and self._end is not None and state.tick >= self._end[0]:
+            lines.append(self._end[1])
+            self._end = None
         for line in lines:
             self.out.write(line.rstrip() + "\n")
         if lines:

@@ -286,3 +286,29 @@ def test_a_cut_blackboard_shows_the_most_recently_written_keys():
     # the same run's tree again (latched, re-sent) does not undo a write
     late.apply(dict(tree_record(leaves=8, groups=2), blackboard={"key%d" % k: k for k in range(30)}))
     assert late.blackboard["key3"] == "new 0" and late.written[-1] == "alpha"
+
+
+def test_the_latched_end_that_overtakes_the_last_ticks_is_printed_after_them():
+    """The end is latched and written at once, the ticks are queued on another topic: the end could
+    arrive first, and `watch --plain` printed it before the tree's last changes."""
+    s = WatchState()
+    out = io.StringIO()
+    p = LinePrinter(out)
+
+    def take(rec):
+        s.apply(rec)
+        p.record(rec, s)
+
+    take(tree_record())
+    take({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[0, "RUNNING"], [2, "RUNNING"]]})
+    take({"type": "end", "run": "r1", "t": 0.2, "status": "FAILURE", "reason": "leaf 0.0 failed", "ticks": 2})
+    take({"type": "tick", "run": "r1", "n": 2, "t": 0.2, "changes": [[2, "FAILURE"], [0, "FAILURE"]]})
+    lines = out.getvalue().splitlines()
+    assert [line[11:] for line in lines[-3:]] == ["FAILURE   leaf 0.0", "FAILURE   root",
+                                                  "end       FAILURE: leaf 0.0 failed"], lines
+    # an end whose last tick never comes is printed when the watch finishes
+    p2 = LinePrinter(out)
+    p2.record({"type": "end", "run": "r1", "t": 0.3, "status": "SUCCESS", "ticks": 9}, s)
+    before = out.getvalue()
+    p2.finish()
+    assert "end       SUCCESS" not in before.splitlines()[-1] and out.getvalue().endswith("end       SUCCESS\n")
