@@ -35,6 +35,16 @@ class _Decorator(py_trees.decorators.Decorator):
         return self.status
 
 
+class _Composite(py_trees.composites.Composite):
+    """A recorded composite that is none of py_trees' own: it holds its children, never ticks."""
+
+    def tick(self) -> Any:
+        yield self
+
+    def stop(self, new_status: Status = Status.INVALID) -> None:
+        self.status = new_status
+
+
 def _skeleton(nodes: List[Dict[str, Any]]) -> Tuple[Any, Dict[int, Any]]:
     """Behaviours shaped like the recorded tree (for the display), by recorded id."""
     kids: Dict[Any, List[Dict[str, Any]]] = {}
@@ -56,6 +66,8 @@ def _skeleton(nodes: List[Dict[str, Any]]) -> Tuple[Any, Dict[int, Any]]:
                                              children=children)
         elif shape == "decorator" and len(children) == 1:
             b = _Decorator(name=name, child=children[0])
+        elif children:  # a composite of another shape (switch), or one a newer bmtree wrote
+            b = _Composite(name=name, children=children)
         else:
             b = _Leaf(name)
         by_id[n["id"]] = b

@@ -66,6 +66,8 @@ def _shape(b: Any) -> str:
         return "parallel"
     if isinstance(b, py_trees.decorators.Decorator):
         return "decorator"
+    if isinstance(b, py_trees.composites.Composite):
+        return "composite"  # another composite (switch): its children are drawn under it all the same
     return "leaf"
 
 

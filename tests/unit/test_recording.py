@@ -702,3 +702,19 @@ def test_a_quiet_run_keeps_touching_its_log_and_a_killed_run_lists_how_long_it_l
     os.utime(path, (started + 12.0, started + 12.0))  # killed 12 s in
     [run] = list_runs(str(tmp_path / "runs"))
     assert run.status == "UNFINISHED" and abs(run.duration - 12.0) < 0.01
+
+
+def test_replay_draws_a_switch_with_its_cases(sim_defs, tmp_path, capsys):
+    """A composite of none of py_trees' shapes was recorded as a leaf: replay and watch drew the
+    switch without the case that ran under it."""
+    tree = tmp_path / "choose.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - set: {answer: 'yes'}\n    - switch: $answer\n"
+                    "      name: act on the answer\n      cases:\n        'yes': {call: speech.say, inputs: {text: great},"
+                    " name: say great}\n      default: {call: speech.say, inputs: {text: sorry}, name: say sorry}\n")
+    log_path, run = recorded(str(tree), sim_defs, tmp_path, lambda m: None)
+    assert run.succeeded, run.reason
+    assert [n["shape"] for n in read_log(log_path).tree["nodes"] if n["name"] == "act on the answer"] == ["composite"]
+    assert cmd_replay(_args(run=log_path, at=99.0)) == 0
+    out = capsys.readouterr().out
+    drawn = out[out.index("act on the answer"):]
+    assert "say great [✓]" in drawn and "say sorry [-]" in drawn, out
