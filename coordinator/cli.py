@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
 from comm.messages import MIN_MAX_BYTES
@@ -90,6 +90,21 @@ def offline_tree(path: str, defs: Dict[str, ModuleDefinition]) -> Any:
     return tree, build(tree.root, RunContext(NullTransport(), RealClock(), defs))
 
 
+def _label_cases(root: Any) -> Set[str]:
+    """Name each case of a switch after its value (``'yes' → answered yes``, ``default → …``): the
+    rendering shows which child runs when; the names of the switches."""
+    from coordinator.nodes.switch import Switch
+
+    names = set()
+    for b in root.iterate():
+        if isinstance(b, Switch):
+            names.add(b.name)
+            labels = ["%r" % (lab,) for lab in b.spec.labels] + (["default"] if b.spec.has_default else [])
+            for label, child in zip(labels, b.children):
+                child.name = "%s → %s" % (label, child.name)  # not ':', graphviz's port separator
+    return names
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     import py_trees
 
@@ -101,8 +116,16 @@ def cmd_render(args: argparse.Namespace) -> int:
     folder = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(folder):
         raise UsageError("-o %s: folder %s does not exist" % (out, folder))
+    switches = _label_cases(root)
     graph = py_trees.display.dot_tree(root, collapse_decorators=False)
     graph.set_name(tree.name)
+    for node in graph.get_nodes():
+        label = node.get_label()
+        if isinstance(label, str) and "Ⓜ " in label:  # py_trees' memory mark: no font here has it (an empty box)
+            node.set_label(label.replace("Ⓜ ", ""))
+        if node.get_name().strip('"') in switches:  # py_trees draws a composite it does not know as a grey leaf
+            node.set_shape("diamond")
+            node.set_fillcolor("plum")
     if fmt == "dot":
         graph.write(out, format="raw")
     else:

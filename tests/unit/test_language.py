@@ -143,6 +143,15 @@ def test_render_dot_and_svg(tmp_path, capsys):
     assert bmtree(["render", os.path.join(TREES, "find_apple.yaml"), "-o", str(tmp_path / "t.gif")]) == 2
 
 
+def test_render_draws_a_switch_with_its_case_values_and_no_glyph_the_fonts_lack(tmp_path):
+    dot = tmp_path / "invite.dot"
+    assert bmtree(["render", os.path.join(TREES, "invite_to_dining_room.yaml"), "-o", str(dot)]) == 0
+    text = dot.read_text()
+    assert '"act on the answer" [label="act on the answer", shape=diamond' in text, text
+    assert '"act on the answer" -> "\'yes\' → answered yes";' in text and "default → force_failure" in text, text
+    assert "Ⓜ" not in text
+
+
 @pytest.mark.parametrize("text,values,expected", [
     ("a == 1", {"a": 1}, True),
     ("a != 1 or b", {"a": 1, "b": False}, False),
