@@ -354,15 +354,18 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _leave_graph(transport: Any) -> None:
     """Unregister everything this process registered with the master (also when a stop signal
     came before the transport was made: ``init_node`` may have registered already)."""
-    if transport is not None:
-        transport.close()
-    try:
-        import rospy
+    from coordinator.watch import quiet_unregistering
 
-        if rospy.core.is_initialized():
-            rospy.signal_shutdown("bmtree run finished")
-    except Exception as exc:  # the master is gone: nothing is left to unregister
-        log.debug("leaving the ROS graph: %s", exc)
+    with quiet_unregistering():  # a master that is gone: one warning per topic, for nothing left to undo
+        if transport is not None:
+            transport.close()
+        try:
+            import rospy
+
+            if rospy.core.is_initialized():
+                rospy.signal_shutdown("bmtree run finished")
+        except Exception as exc:  # the master is gone: nothing is left to unregister
+            log.debug("leaving the ROS graph: %s", exc)
 
 
 def _user_module(spec: str) -> Any:

@@ -117,3 +117,35 @@ def _the_run_recorded_the_restart(out, log):
                             timeout=60)
     assert replay.returncode == 0, replay.stderr
     assert "the ROS graph:\n" in replay.stdout and "does not answer" in replay.stdout, replay.stdout
+
+
+def test_a_run_whose_master_died_for_good_ends_on_its_open_connections_without_a_warning_per_topic(own_graph,
+                                                                                                 tmp_path):
+    """Nothing is left to unregister from a master that is gone: rospy's 'registrations are now
+    out of sync', once per topic, used to end the run's output."""
+    graph = own_graph
+    graph.start_node(["-m", "modules.node", "--definition", PROBE_JSON, "--class", PROBE_CLASS], "/bm_probe")
+    _wait_registered_probe(graph)
+    slow = tmp_path / "slow.yaml"
+    slow.write_text("format: 1\nroot:\n  sequence:\n    - call: probe.work\n      inputs: {seconds: 2.0, tag: a}\n"
+                    "    - call: probe.echo\n      inputs: {tag: b}\n")
+    run = _run(graph, slow, quiet=False)
+    seen = []
+    for line in run.stdout:
+        seen.append(line)
+        if "RUNNING" in line and "probe.work" in line:
+            break
+    graph.master.send_signal(signal.SIGKILL)
+    graph.master.wait(5)
+    out, _ = run.communicate(timeout=60)
+    text = "".join(seen) + out
+    assert run.returncode == 0, text
+    assert "does not answer" in text and "out of sync" not in text, text
+
+
+def _wait_registered_probe(graph, timeout=30.0):
+    master = xmlrpc.client.ServerProxy(graph.uri)
+    end = time.monotonic() + timeout
+    while master.getParam("/t", "/bmtree/modules/probe")[0] != 1:
+        assert time.monotonic() < end, "the probe did not announce itself"
+        time.sleep(0.02)
