@@ -17,7 +17,7 @@ import re
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
-from coordinator.refs import Ref, RefError, scan_ref, unwrap
+from coordinator.refs import Ref, RefError, kind_of, scan_ref, unwrap
 
 __all__ = ["Expr", "ExprError", "FUNCTIONS", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
 
@@ -49,22 +49,6 @@ FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
     "min": ((1, 8), "number", "number"),
     "max": ((1, 8), "number", "number"),
 }
-
-
-def kind_of(value: Any) -> str:
-    """The expression-level type of a run-time value: number, string, bool, list, message, null."""
-    value = unwrap(value)
-    if isinstance(value, bool):
-        return "bool"
-    if isinstance(value, (int, float)):
-        return "number"
-    if isinstance(value, str):
-        return "string"
-    if isinstance(value, (list, tuple, bytes)):
-        return "list"
-    if value is None:
-        return "null"
-    return "message"
 
 
 def _tokens(text: str) -> List[Tuple[str, Any, int]]:

@@ -18,7 +18,7 @@ import genpy
 
 from comm.errors import InvalidInput, did_you_mean
 
-__all__ = ["Computed", "Ref", "RefError", "field_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap"]
+__all__ = ["Computed", "Ref", "RefError", "field_of", "kind_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap"]
 
 _NAME = re.compile(r"[^\W\d]\w*")
 _INDEX = re.compile(r"-?\d+")
@@ -72,19 +72,31 @@ def field_of(value: Any, step: Any, root: str) -> Any:
     raise RefError("%s has no field %r%s" % (root, step, hint))
 
 
+def kind_of(value: Any) -> str:
+    """The expression-level type of a run-time value: number, string, bool, list, message, null."""
+    value = unwrap(value)
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, (int, float)):
+        return "number"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, (list, tuple, bytes)):
+        return "list"
+    if value is None:
+        return "null"
+    return "message"
+
+
+_WORDS = {"bool": "true or false", "number": "a number", "string": "text", "list": "a list", "null": "null"}
+
+
 def _held(value: Any) -> str:
     """What a run-time value is, in an error: ``a geometry_msgs/Pose``, ``a number``, ``text``."""
-    if isinstance(value, genpy.Message):
-        return "a %s" % getattr(value, "_type", type(value).__name__)
-    if isinstance(value, bool):
-        return "true or false"
-    if isinstance(value, (int, float)):
-        return "a number"
-    if isinstance(value, str):
-        return "text"
-    if isinstance(value, (list, tuple, bytes)):
-        return "a list"
-    return "null" if value is None else "a %s" % type(value).__name__
+    kind = kind_of(value)
+    if kind == "message":
+        return "a %s" % getattr(unwrap(value), "_type", type(value).__name__)
+    return _WORDS.get(kind, "a %s" % type(value).__name__)
 
 
 @dataclass(frozen=True)
