@@ -86,7 +86,7 @@ def test_a_run_without_control_refuses_every_command(tmp_path):
     """... and the viewers do not offer commands it would refuse: the terminal's footer says why,
     the page has no control buttons."""
     from tests.integration.test_watch_terminal import Tmux, _cmd
-    from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
+    from tests.integration.test_watch_web import browser, start_web, text, wait_until
 
     driver = browser(tmp_path)
     run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=2.0))
@@ -109,12 +109,19 @@ def test_a_run_without_control_refuses_every_command(tmp_path):
         controls = [r for r in read_log(log_path).records if r.get("type") == "control"]
         assert [(r["command"], r["ok"]) for r in controls] == [("pause", False)]
     finally:
-        driver.quit()
-        if web is not None:
-            stop(web)
-        if term is not None:
-            term.close()
-        run.close()
+        _close(driver, web, term, run)
+
+
+def _close(driver, web, term, run):
+    """End what a viewer test started: the browser, the web watch, the terminal, the run."""
+    from tests.integration.test_watch_web import stop
+
+    driver.quit()
+    if web is not None:
+        stop(web)
+    if term is not None:
+        term.close()
+    run.close()
 
 
 def _clock(text: str) -> float:
@@ -124,7 +131,7 @@ def _clock(text: str) -> float:
 
 def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
     from tests.integration.test_watch_terminal import Tmux, _cmd
-    from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
+    from tests.integration.test_watch_web import browser, start_web, text, wait_until
 
     driver = browser(tmp_path)
     run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=0.4), extra=("--control",))
@@ -151,12 +158,7 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
             "return [...document.querySelectorAll('#tree g.node title')].map(t=>t.textContent).join('|')"))
         assert run.finish() == 1, run.out.text()
     finally:
-        driver.quit()
-        if web is not None:
-            stop(web)
-        if term is not None:
-            term.close()
-        run.close()
+        _close(driver, web, term, run)
 
 
 QUIET = "format: 1\nname: quiet\nroot:\n  wait: 120\n"
@@ -166,7 +168,7 @@ def test_the_page_clock_counts_on_while_the_run_is_paused(tmp_path):
     """A paused run makes no records while it waits; its time goes on (calls would run on), and
     the page's clock counts it as the terminal's does (it used to stop at the last record)."""
     from tests.integration.test_watch_terminal import Tmux, _cmd
-    from tests.integration.test_watch_web import browser, start_web, stop, text, wait_until
+    from tests.integration.test_watch_web import browser, start_web, text, wait_until
 
     tree = tmp_path / "quiet.yaml"
     tree.write_text(QUIET)
@@ -186,9 +188,4 @@ def test_the_page_clock_counts_on_while_the_run_is_paused(tmp_path):
         shown = _clock(term.wait_screen("PAUSED").split("t=", 1)[1])
         until(lambda: _clock(term.screen().split("t=", 1)[1]) >= shown + 1.5, 30)
     finally:
-        driver.quit()
-        if web is not None:
-            stop(web)
-        if term is not None:
-            term.close()
-        run.close()
+        _close(driver, web, term, run)
