@@ -232,7 +232,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             _check_local_address(args.ros_ip)
 
         try:
-            World.load(args.world or DEFAULT_WORLD)
+            World.load(args.world or DEFAULT_WORLD, others=[fn.qualified for um in user_modules
+                                                           for fn in um.definition.functions.values()])
         except WorldError as exc:
             raise PlainError("error: --world %s" % exc)
     files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)

@@ -1,6 +1,7 @@
 """The simulated robot as a private ROS graph: master, Blackboard node, sim modules."""
 from __future__ import annotations
 
+import json
 import os
 import time
 from typing import Dict, NamedTuple, Optional, Sequence
@@ -9,6 +10,7 @@ from coordinator.graph import GraphError, RosGraph
 from modules.definition import ModuleDefinition
 from modules.discovery import live_modules
 from modules.sim import DEFAULT_WORLD
+from modules.sim.world import World
 
 __all__ = ["SIM_MODULES", "start_sim", "UserModule", "ModuleStartError"]
 
@@ -66,10 +68,15 @@ def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, black
                              wait=False)
             names.append("/bm_" + m)
         mine = {}
+        the_world = World.load(world or DEFAULT_WORLD, others=[fn.qualified for um in user_modules
+                                                               for fn in um.definition.functions.values()])
         for um in user_modules:
             node = "/bm_" + um.definition.name
+            faults = the_world.faults_of(um.definition.name)  # the world's faults of the user's own module
+            extra = ["_faults:=%s" % json.dumps(faults)] if faults else []
             mine[node] = graph.start_node(["-m", "modules.node", "--definition", um.definition_path,
-                                           "--class", um.class_spec, "--node-name", node[1:]], node, wait=False)
+                                           "--class", um.class_spec, "--node-name", node[1:], *extra], node,
+                                          wait=False)
             names.append(node)
         for name, proc in zip(names, graph.nodes):
             try:

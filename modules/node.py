@@ -216,10 +216,12 @@ class ModuleNode:
         res_pub = ReplyPublisher(sync_publisher(TOPIC_RESULT, String))
         ev_pub = rospy.Publisher(TOPIC_EVENT, String, queue_size=1000)
         self.event_publisher = ev_pub  # for setup(): who listens to this module's events
+        faults = _faults(self.definition, rospy.get_param("~faults", None))
         self.server = ModuleServer(self.definition, self.impl,
                                    publish_result=lambda text: res_pub.publish(String(text)),
                                    publish_event=lambda text: ev_pub.publish(String(text)),
                                    max_bytes=self.max_bytes)
+        self.server.faults = faults
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard)
@@ -257,6 +259,33 @@ class ModuleNode:
         except Exception:  # the master may be gone already
             pass
         self.impl.shutdown()
+
+
+def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:
+    """Injected faults by function (``~faults``: ``{function: {fail: reason, times: n}, …}``, as a
+    world writes them), checked like a world's."""
+    if raw is None or raw == "":
+        return {}
+    import yaml
+
+    from modules.sim.world import Fault, WorldError
+
+    if isinstance(raw, str):
+        try:
+            raw = yaml.safe_load(raw)
+        except yaml.YAMLError as exc:
+            raise BindingError("parameter ~faults is not valid YAML: %s" % exc)
+    if not isinstance(raw, dict):
+        raise BindingError("parameter ~faults must be a mapping of function -> fault, got %r" % (raw,))
+    out = {}
+    for fn, spec in raw.items():
+        if fn not in definition.functions:
+            raise BindingError("parameter ~faults: module %r has no function %r" % (definition.name, fn))
+        try:
+            out[fn] = Fault.parse("%s.%s" % (definition.name, fn), spec)
+        except WorldError as exc:
+            raise BindingError("parameter ~faults: %s" % exc)
+    return out
 
 
 def _uri_of(node: str) -> Optional[str]:

@@ -220,6 +220,9 @@ class ModuleServer:
         #: a :class:`comm.liveness.Watchdog` over the callers (a node sets it): a call whose caller's
         #: process is gone is cancelled, not left running the hardware and holding the module
         self.callers: Optional[Any] = None
+        #: function -> an injected fault (``take()``, ``outcome``): it answers instead of the function
+        #: (the world's faults of a user's own module under ``bmtree run --sim``)
+        self.faults: Dict[str, Any] = {}
         self._bind()
         impl._server = self
 
@@ -379,7 +382,10 @@ class ModuleServer:
             self.impl._local.ctx = ctx
             try:
                 if work is None:
-                    out = self.impl.before_call(call.fn.name, call.inputs)
+                    fault = self.faults.get(call.fn.name)
+                    out = fault.outcome if fault is not None and fault.take() else None
+                    if out is None:
+                        out = self.impl.before_call(call.fn.name, call.inputs)
                     if out is None:
                         out = getattr(self.impl, call.fn.name)(**call.inputs)
                 else:

@@ -108,10 +108,19 @@ class World:
     start: str
     speed: float = 1.0
     faults: Dict[str, Fault] = field(default_factory=dict)
+    written_faults: Dict[str, Any] = field(default_factory=dict)  # as the file writes them (for other nodes)
+
+    def faults_of(self, module: str) -> Dict[str, Any]:
+        """The faults of ``module``'s functions, as written, by function name (for its node's ``~faults``)."""
+        prefix = module + "."
+        return {k[len(prefix):]: v for k, v in self.written_faults.items() if k.startswith(prefix)}
 
     @classmethod
-    def load(cls, path: str = DEFAULT_WORLD) -> World:
-        """The world in ``path``; WorldError says where when it cannot be read or is not valid."""
+    def load(cls, path: str = DEFAULT_WORLD, others: Any = ()) -> World:
+        """The world in ``path``; WorldError says where when it cannot be read or is not valid.
+        ``others``: the ``module.function`` of the user's own modules its faults may name too (the
+        ``--module`` of ``bmtree run --sim``), or True for any function of a module that is not
+        simulated (a simulated module's node, which knows only its own)."""
         try:
             with open(path, encoding="utf-8") as fh:
                 data = yaml.safe_load(fh)
@@ -123,20 +132,26 @@ class World:
             mark = getattr(exc, "problem_mark", None)
             where = "%s:%d:%d" % (path, mark.line + 1, mark.column + 1) if mark is not None else path
             raise WorldError("%s: not valid YAML: %s" % (where, getattr(exc, "problem", None) or exc))
-        return cls.from_dict(data, path)
+        return cls.from_dict(data, path, others)
 
     @classmethod
-    def from_dict(cls, data: Any, source: str = "<world>") -> World:
+    def from_dict(cls, data: Any, source: str = "<world>", others: Any = ()) -> World:
         if not isinstance(data, dict):
             raise WorldError("%s: the world must be a mapping" % source)
         for key in data:  # a misspelt key would silently leave its part of the world out
             if key not in _WORLD_KEYS:
                 raise WorldError("%s: unknown key %r%s (a world has %s)" % (
                     source, key, did_you_mean(str(key), _WORLD_KEYS), ", ".join(_WORLD_KEYS)))
+        known = _sim_functions()
+        simulated = {f.split(".")[0] for f in known}
         for key in data.get("faults") or {}:
-            if str(key) not in _sim_functions():
-                raise WorldError("%s: faults.%s: not a function of the simulated robot%s" % (
-                    source, key, did_you_mean(str(key), _sim_functions())))
+            if str(key) in known or (others is True and str(key).split(".")[0] not in simulated):
+                continue
+            if others is not True and str(key) in set(others):
+                continue
+            mine = [] if others is True else sorted(others)
+            raise WorldError("%s: faults.%s: not a function of the simulated robot%s%s" % (
+                source, key, " or of your --module" if mine else "", did_you_mean(str(key), known + mine)))
         try:
             rooms = {n: (float(r["x"]), float(r["y"])) for n, r in (data.get("rooms") or {}).items()}
 
@@ -151,7 +166,8 @@ class World:
 
             world = cls(rooms=rooms, places=things("places"), objects=things("objects"), people=things("people"),
                         start=str(data.get("start", next(iter(rooms), ""))), speed=float(data.get("speed", 1.0)),
-                        faults={k: Fault.parse(k, v) for k, v in (data.get("faults") or {}).items()})
+                        faults={k: Fault.parse(k, v) for k, v in (data.get("faults") or {}).items()},
+                        written_faults={str(k): v for k, v in (data.get("faults") or {}).items()})
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, WorldError):
                 raise
