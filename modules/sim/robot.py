@@ -10,8 +10,6 @@ from __future__ import annotations
 import threading
 from typing import Any, Dict, List, Optional
 
-import yaml
-
 from modules.outcome import Outcome
 from modules.runtime import BasicModule, Failure
 from modules.sim.world import Fault, World
@@ -47,10 +45,6 @@ class SimModule(BasicModule):
             if key.startswith(prefix):
                 self.faults[key[len(prefix):]] = fault
 
-    def _add_faults(self, raw: Dict[str, Any]) -> None:
-        for fn, spec in raw.items():
-            self.faults[fn] = Fault.parse("%s.%s" % (self.module_name, fn), spec)
-
     def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
         """An injected fault's outcome replaces the function's answer (the runtime carries it out)."""
         fault = self.faults.get(function)
@@ -61,10 +55,7 @@ class SimModule(BasicModule):
     def setup(self, node: Any) -> None:
         import rospy
 
-        raw = rospy.get_param("~faults", "")
-        if raw:
-            self._add_faults(yaml.safe_load(raw) if isinstance(raw, str) else raw)
-        self._rospy = rospy
+        self._rospy = rospy  # the node's own ~faults are applied by the module node, as for any module
 
     def _here(self) -> str:
         if self._rospy is not None and not isinstance(self, Navigation):
