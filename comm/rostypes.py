@@ -31,6 +31,7 @@ __all__ = [
     "now_from",
     "resolve_type",
     "suggest_type",
+    "type_hint",
     "rostype_of",
     "to_message",
     "from_message",
@@ -52,6 +53,24 @@ _ALIASES = {
     "string": "std_msgs/String", "bool": "std_msgs/Bool", "boolean": "std_msgs/Bool",
     "point": "geometry_msgs/Point", "pose": "geometry_msgs/Pose",
 }
+# ROS field types, written where a whole message is meant: `uint8` → std_msgs/UInt8.
+_PRIMITIVES = {name: "std_msgs/" + cap for name, cap in (
+    ("bool", "Bool"), ("byte", "Byte"), ("char", "Char"), ("int8", "Int8"), ("uint8", "UInt8"),
+    ("int16", "Int16"), ("uint16", "UInt16"), ("int32", "Int32"), ("uint32", "UInt32"),
+    ("int64", "Int64"), ("uint64", "UInt64"), ("float32", "Float32"), ("float64", "Float64"),
+    ("string", "String"), ("time", "Time"), ("duration", "Duration"))}
+_ARRAY = re.compile(r"^\s*([A-Za-z0-9_]+)\s*\[\s*\d*\s*\]\s*$")  # uint8[], float64[3]
+
+
+def _array_hint(name: str) -> Optional[str]:
+    """`float64[]` → std_msgs/Float64MultiArray: the wrapper of a list of numbers, if there is one."""
+    m = _ARRAY.match(name)
+    if not m:
+        return None
+    single = _ALIASES.get(m.group(1).lower()) or _PRIMITIVES.get(m.group(1).lower())
+    if single is None or single.endswith(("/Bool", "/String", "/Char", "/Time", "/Duration")):
+        return None  # std_msgs wraps no list of these: a message of the team's own is needed
+    return single + "MultiArray"
 
 
 def _is_message_module(pkg: str, typ: str) -> bool:
@@ -126,9 +145,12 @@ def suggest_type(name: str) -> Optional[str]:
     """The closest real message type to a wrong name, for 'did you mean' hints."""
     if not isinstance(name, str):
         return None
-    alias = _ALIASES.get(name.strip().lower())
+    key = name.strip().lower()
+    alias = _ALIASES.get(key) or _PRIMITIVES.get(key) or _array_hint(name)
     if alias:
         return alias
+    if _ARRAY.match(name):
+        return None  # a close name would be the single value's type, not a list's
     candidates = known_types()
     match = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
     if match:
@@ -139,12 +161,20 @@ def suggest_type(name: str) -> Optional[str]:
     return by_short[match[0]] if match else None
 
 
-def unknown_type_error(name: Any) -> ProtocolError:
+def type_hint(name: Any) -> str:
+    """What to write instead of a wrong type name, as a parenthesis to append ("" if nothing)."""
     hint = suggest_type(name) if isinstance(name, str) else None
-    text = "unknown ROS type %.200r" % (name,)
     if hint:
-        text += " (did you mean %r?)" % hint
-    return ProtocolError(text)
+        return " (did you mean %r?)" % hint
+    m = _ARRAY.match(name) if isinstance(name, str) else None
+    if m:
+        return (" (a parameter is one message, and std_msgs has no list of %s: use a message type with a"
+                " %s[] field)" % (m.group(1), m.group(1)))
+    return ""
+
+
+def unknown_type_error(name: Any) -> ProtocolError:
+    return ProtocolError("unknown ROS type %.200r%s" % (name, type_hint(name)))
 
 
 def rostype_of(msg: Any) -> str:

@@ -16,7 +16,7 @@ import jsonschema
 from comm.errors import InvalidInput, ProtocolError, did_you_mean
 from comm.limits import check_depth
 from comm.messages import FunctionCall, FunctionResult, new_id
-from comm.rostypes import resolve_type, rostype_of, suggest_type, to_message
+from comm.rostypes import resolve_type, rostype_of, to_message, type_hint
 from comm.typewords import said_of
 
 __all__ = [
@@ -280,9 +280,8 @@ def parse_definition(data: Any, source: str = "<definition>") -> ModuleDefinitio
                 problems.append("%s: %s.Name: duplicate parameter name %r" % (source, where, p["Name"]))
             seen.add(p["Name"])
             if resolve_type(p["Data-type"]) is None:
-                hint = suggest_type(p["Data-type"])
                 problems.append("%s: %s.Data-type: %r is not a ROS message type%s" % (
-                    source, where, p["Data-type"], " (did you mean %r?)" % hint if hint else ""))
+                    source, where, p["Data-type"], type_hint(p["Data-type"])))
 
     functions: Dict[str, FunctionDefinition] = {}
     for i, f in enumerate(data["Functions"]):

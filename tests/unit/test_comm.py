@@ -18,7 +18,7 @@ from comm import (
     ProtocolError,
     commBM,
 )
-from comm.rostypes import resolve_type, suggest_type, to_message
+from comm.rostypes import resolve_type, suggest_type, to_message, type_hint
 from modules.definition import load_definitions
 from modules.sim import SIM_DIR
 from tests.conftest import REFERENCE
@@ -209,6 +209,14 @@ def test_type_resolution_and_suggestions():
     assert resolve_type("a/b/c") is None and resolve_type("os.path/x") is None
     assert suggest_type("float") == "std_msgs/Float64"
     assert suggest_type("std_msgs/string") == "std_msgs/String"
+    # ROS field types where a whole message is meant: the std_msgs wrapper, of a list too
+    assert suggest_type("uint8") == "std_msgs/UInt8" and suggest_type("time") == "std_msgs/Time"
+    assert suggest_type("uint8[]") == "std_msgs/UInt8MultiArray"
+    assert suggest_type("float64[3]") == "std_msgs/Float64MultiArray"
+    assert suggest_type("double[]") == "std_msgs/Float64MultiArray"
+    assert suggest_type("string[]") is None  # not std_msgs/String: that is one text
+    assert "no list of string: use a message type with a string[] field" in type_hint("string[]")
+    assert type_hint("float") == " (did you mean 'std_msgs/Float64'?)" and type_hint("zzzzzz") == ""
     assert to_message("std_msgs/String", "hi", allow_scalar=True) == String("hi")
     with pytest.raises(ProtocolError, match=re.escape("takes a mapping of fields x, y, z (geometry_msgs/Point), got 1.0")):
         to_message("geometry_msgs/Point", 1.0, allow_scalar=True)
