@@ -106,8 +106,6 @@ def _label_cases(root: Any) -> Set[str]:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    import py_trees
-
     out = args.output
     fmt = os.path.splitext(out)[1].lstrip(".").lower()
     if fmt not in ("dot", "svg", "png"):
@@ -116,16 +114,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     folder = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(folder):
         raise UsageError("-o %s: folder %s does not exist" % (out, folder))
-    switches = _label_cases(root)
-    graph = py_trees.display.dot_tree(root, collapse_decorators=False)
-    graph.set_name(tree.name)
-    for node in graph.get_nodes():
-        label = node.get_label()
-        if isinstance(label, str) and "Ⓜ " in label:  # py_trees' memory mark: no font here has it (an empty box)
-            node.set_label(label.replace("Ⓜ ", ""))
-        if node.get_name().strip('"') in switches:  # py_trees draws a composite it does not know as a grey leaf
-            node.set_shape("diamond")
-            node.set_fillcolor("plum")
+    from coordinator.render import tree_graph
+
+    graph = tree_graph(tree.name, root, _label_cases(root))
     if fmt == "dot":
         graph.write(out, format="raw")
     else:

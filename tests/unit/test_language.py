@@ -147,9 +147,28 @@ def test_render_draws_a_switch_with_its_case_values_and_no_glyph_the_fonts_lack(
     dot = tmp_path / "invite.dot"
     assert bmtree(["render", os.path.join(TREES, "invite_to_dining_room.yaml"), "-o", str(dot)]) == 0
     text = dot.read_text()
-    assert '"act on the answer" [label="act on the answer", shape=diamond' in text, text
+    assert '"act on the answer" [label="act on the answer\\nswitch $(lower(answer))", shape=diamond' in text, text
     assert '"act on the answer" -> "\'yes\' → answered yes";' in text and "default → force_failure" in text, text
     assert "Ⓜ" not in text
+
+
+def test_render_labels_say_what_names_hide_and_no_uniqueness_stars(tmp_path):
+    """py_trees makes repeated names unique with '*' and shows names only: a label is the node's
+    own name, then what a name hides (a named node's kind and parameters, a call's inputs)."""
+    tree = tmp_path / "t.yaml"
+    tree.write_text("format: 1\nname: t\nroot:\n  sequence:\n"
+                    "    - call: speech.say\n      inputs: {text: hi}\n"
+                    "    - call: speech.say\n      inputs: {text: $who}\n"
+                    "    - timeout: 300\n      name: follow until stop\n"
+                    "      child: {call: speech.say, inputs: {text: x}}\n"
+                    "inputs:\n  who: {default: Ana}\n")
+    dot = tmp_path / "t.dot"
+    assert bmtree(["render", str(tree), "-o", str(dot)]) == 0
+    text = dot.read_text()
+    assert '"speech.say" [label="speech.say\\ntext: \'hi\'"' in text, text
+    assert '"speech.say*" [label="speech.say\\ntext: $who"' in text, text
+    assert '[label="follow until stop\\ntimeout 300s"' in text, text
+    assert 'label="speech.say*' not in text
 
 
 @pytest.mark.parametrize("text,values,expected", [
