@@ -19,7 +19,7 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 from comm.errors import did_you_mean
 from coordinator.refs import Ref, RefError, kind_of, scan_ref, unwrap
 
-__all__ = ["Expr", "ExprError", "FUNCTIONS", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
+__all__ = ["BRIEF", "Expr", "ExprError", "FUNCTIONS", "brief", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
 
 
 class ExprError(RefError):
@@ -248,6 +248,18 @@ class Expr:
         """The expression's value (a one-field message stands for its value)."""
         return unwrap(self._eval(self.tree, lookup))
 
+    def values_read(self, lookup: Callable[[str], Any]) -> str:
+        """`` (a = 'kitchen', b = 'hall')``: what each reference holds now, for a reason that says why an
+        expression was false without the reader having to guess the values ('' without references; a
+        reference that cannot be read now is left out)."""
+        said: List[str] = []
+        for ref in dict.fromkeys(self.refs):   # each once, in the order written
+            try:
+                said.append("%s = %s" % (str(ref)[1:], brief(ref.resolve(lookup))))
+            except (KeyError, RefError):
+                continue
+        return " (%s)" % ", ".join(said) if said else ""
+
     def _eval(self, node: Any, lookup: Callable[[str], Any]) -> Any:
         op = node[0]
         if op == "lit":
@@ -300,6 +312,48 @@ class Expr:
         """The kind of the expression's value (see :func:`kind_of`) when known before running, else None
         (also when an operand is of the wrong kind: :meth:`type_errors` says that)."""
         return _static(self.tree, key_kind, [])
+
+
+BRIEF = 40   # characters of a value said in a reason
+
+
+def brief(v: Any, limit: int = BRIEF) -> str:
+    """A value in a reason, short: ``'kitchen'``, ``3``, ``true``, ``{x: 1.0, y: 2.0, z: 0.0}``; longer than
+    ``limit`` characters, cut with ``…`` (a camera image must not fill the log)."""
+    text = _brief(unwrap(v), limit + 1)
+    return text if len(text) <= limit else text[:limit - 1] + "\u2026"
+
+
+def _brief(v: Any, limit: int) -> str:
+    """``v`` as :func:`brief` writes it, built no longer than about ``limit`` characters."""
+    if isinstance(v, bool) or v is None:
+        return text_of(v)
+    if isinstance(v, str):
+        return repr(v[:limit])
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, (bytes, bytearray)):
+        return "%d bytes" % len(v)
+    if isinstance(v, (list, tuple)):
+        parts: List[str] = []
+        for item in v:
+            if sum(len(p) + 2 for p in parts) > limit:
+                break
+            parts.append(_brief(unwrap(item), limit))
+        return "[%s]" % ", ".join(parts)
+    slots = getattr(v, "__slots__", None)
+    if slots is not None and not isinstance(v, dict):
+        items = [(name, getattr(v, name, None)) for name in slots]
+    elif isinstance(v, dict):
+        items = list(v.items())
+    else:
+        return repr(v)[:limit]
+    parts = []
+    for name, item in items:
+        if sum(len(p) + 2 for p in parts) > limit:
+            break
+        parts.append("%s: %s" % (name, _brief(unwrap(item), limit)))
+    return "{%s}" % ", ".join(parts)
 
 
 def _described(v: Any) -> str:
@@ -436,4 +490,31 @@ def _static(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tu
     a, b = _static(node[2], key_kind, errors), _static(node[3], key_kind, errors)
     if node[1] in _ORDER and a is not None and b is not None and a != b:
         errors.append((node[4], "cannot compare a %s %s a %s" % (a, node[1], b)))
+    elif node[1] in ("==", "!=") and {a, b} == {"number", "string"}:
+        errors.append((node[4], "a %s %s a %s is always %s%s" % (
+            a, node[1], b, "false" if node[1] == "==" else "true", _as_other(node[2]) or _as_other(node[3]))))
     return "bool"
+
+
+_NUMBER_TEXT = re.compile(r"-?(?:\d+\.\d*|\d*\.\d+|\d+)(?:[eE][-+]?\d+)?$")
+
+
+def _as_other(node: Any) -> str:
+    """`` (write 0, not "0")``: the fix when one side of a number-text comparison is a literal that
+    the other kind can write; '' otherwise."""
+    if node[0] != "lit":
+        return ""
+    v = node[1]
+    if isinstance(v, str):
+        if not _NUMBER_TEXT.match(v):
+            return ""
+        num = float(v)
+        if num in (float("inf"), float("-inf")):
+            return ""
+        return " (write %s, not %s)" % (text_of(num), _quoted(v))
+    return " (write %s, not %s)" % (_quoted(text_of(v)), text_of(v))
+
+
+def _quoted(text: str) -> str:
+    """Text as an expression writes it, in double quotes."""
+    return '"%s"' % text.replace("\\", "\\\\").replace('"', '\\"')

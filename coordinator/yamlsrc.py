@@ -371,10 +371,24 @@ def _syntax_hint(exc: Any, text: str, line: int, column: int) -> str:
     row = lines[line - 1] if 0 < line <= len(lines) else ""
     if "expected ',' or" in problem and row[column - 1:column] in ("[", "{"):  # $people[0] in {text: …}
         return ": inside { } or [ ], a value holding [ ] or { } must be quoted ({text: \"$people[0]\"})"
-    if "cannot start any token" in problem:
-        if row[column - 1:column] == "\t":
-            return ": a tab: YAML indents with spaces only"
+    if "expected ',' or" in problem and row[column - 1:column] == ":":   # {text: Hello: welcome}
+        return ": quote a value containing ': ' (%s)" % _quoted_entry(row, column - 1)
+    if "cannot start any token" in problem and row[column - 1:column] == "\t" or "tab character" in problem:
+        return ": a tab: YAML indents with spaces only"
     return ""
+
+
+def _quoted_entry(row: str, colon: int) -> str:
+    """The entry of a flow mapping that holds ``row[colon]``, a second ': ' in its value, written as it
+    must be: ``text: "Hello: welcome"`` (an example when the line is not that simple)."""
+    left = row[:colon]
+    start = max(left.rfind("{"), left.rfind(",")) + 1
+    end = min([i for i in (row.find(",", colon), row.find("}", colon)) if i >= 0] or [len(row)])
+    key, sep, head = left[start:].strip().partition(": ")
+    value = (head + row[colon:end]).strip()
+    if not sep or not key or '"' in value or "\\" in value:
+        return '{text: "Hello: welcome"}'
+    return '%s: "%s"' % (key, value)
 
 
 def _first_line(exc: Exception) -> str:

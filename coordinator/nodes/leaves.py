@@ -155,7 +155,7 @@ class Check(Leaf):
             return self._fail(str(exc.args[0] if exc.args else exc))
         if ok:
             return Status.SUCCESS
-        return self._fail("%s is false" % expr.text)
+        return self._fail("%s is false%s" % (expr.text, expr.values_read(self.ctx.lookup)))
 
 
 class CheckKind(NodeKind):
