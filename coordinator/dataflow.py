@@ -1,7 +1,9 @@
 """Checks over a whole tree, asked of each node's kind (``coordinator.nodes``).
 
-Data flow: every key a node reads is written earlier on every path, or is a declared input; a read
-is reported at its reference, and a key that no node writes is told apart (likely misspelt).
+Data flow: every key a node reads is written earlier on every path by which the nodes before it
+succeed, or is a declared input (a branch that never succeeds is no such path); a read is reported
+at its reference, with where the key is written, and a key that no node writes is told apart (likely
+misspelt: a close name is suggested).
 Types: a ``$reference`` whose value's ROS type (known from the definitions of the nodes that
 write the key) cannot be converted to the input it is passed to, or whose path names a field that
 type does not have (``coordinator.values.follow``); a count, duration or ``for_each`` list of a type
@@ -23,7 +25,7 @@ def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[Tree
     """Every read of a key not surely written before it, for a whole tree."""
     errors: List[TreeError] = []
     avail = frozenset(k for k, v in tree.inputs.items() if v is not REQUIRED) | given | tree.required_inputs
-    flow = Flow(errors)
+    flow = Flow(errors, tree)
     flow.of(tree.root, avail)
     if flow.missed:   # the keys written anywhere tell a misspelt key from one written too late
         flow.report(set(key_types(tree)) | avail)

@@ -17,7 +17,7 @@ import py_trees
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
-from coordinator.treeast import TreeNode
+from coordinator.treeast import TreeFile, TreeNode, nodes_of
 
 if TYPE_CHECKING:  # pragma: no cover
     from coordinator.context import RunContext
@@ -25,10 +25,47 @@ if TYPE_CHECKING:  # pragma: no cover
     from coordinator.yamlsrc import LMap
     from modules.definition import FunctionDefinition
 
-__all__ = ["Flow", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "param_keys", "run_param"]
+__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "fixed", "join",
+           "meet", "param_keys", "repeated_outputs", "run_param", "where"]
 
 NO_DEFAULT = object()
 _NOTHING: FrozenSet[str] = frozenset()
+
+
+class _Never(frozenset):  # type: ignore[type-arg]
+    """The keys written when a node ends in a way it never can: all of them, vacuously (see ``NEVER``)."""
+
+    __slots__ = ()
+
+
+NEVER: FrozenSet[str] = _Never()
+"""What the data-flow hooks say a node writes on an ending it cannot have (a ``force_failure`` never
+succeeds): told apart by identity, it takes no part in a ``meet``. Code that does not know it reads it
+as an empty set, nothing written, which is the cautious reading."""
+
+
+def meet(sets: Iterable[FrozenSet[str]]) -> FrozenSet[str]:
+    """The keys written whichever of these alternative paths was taken: what every possible one writes
+    (``NEVER`` when none is possible). A path that cannot happen must not shrink what the others give."""
+    out = NEVER
+    for s in sets:
+        if s is not NEVER:
+            out = s if out is NEVER else out & s
+    return out
+
+
+def join(a: FrozenSet[str], b: FrozenSet[str]) -> FrozenSet[str]:
+    """The keys written when both happened, one after the other (``NEVER`` when either cannot)."""
+    if a is NEVER or b is NEVER:
+        return NEVER
+    return a | b if b else a
+
+
+def fixed(*values: Any) -> bool:
+    """Whether these values are known when the tree loads (no reference, no expression): a node reading
+    them cannot fail because of them (a bad literal is an error of the check)."""
+    return not any(refs_in(v) for v in values)
+
 
 BuildChild = Callable[[TreeNode], py_trees.behaviour.Behaviour]
 
@@ -170,15 +207,27 @@ class Option:
         return "`%s`" % self.default
 
 
+def where(pos: Pos, seen_from: Pos) -> str:
+    """A place as a message at ``seen_from`` names it: ``line 7`` in the same file, else ``file:7``."""
+    return "line %d" % pos.line if pos.file == seen_from.file else "%s:%d" % (pos.file, pos.line)
+
+
 class Flow:
     """The data-flow walk (``coordinator.dataflow``): kinds call back into it for their children.
 
+    A kind says what its node surely writes when it succeeds (``flow``, and ``of`` here) and, when it
+    knows, when it fails too (``outcome``): a selector's later children and an inverter need the latter.
     Each read of a key not surely written is noted (``missed``); :meth:`report` makes the errors once
     the walk is over and the keys written anywhere in the tree are known."""
 
-    def __init__(self, errors: List[TreeError]):
+    def __init__(self, errors: List[TreeError], tree: Optional[TreeFile] = None):
         self.errors = errors
         self.missed: List[Tuple[TreeNode, str, FrozenSet[str]]] = []
+        self.tree = tree
+        # the files being walked, innermost last (an include pushes its subtree's): whose keys a subtree meets
+        self.files: List[TreeFile] = [tree] if tree is not None else []
+        self._writers: Optional[Dict[str, Dict[TreeNode, None]]] = None
+        self._file_writes: Dict[int, Dict[str, TreeNode]] = {}
 
     def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
         missing = [k for k in keys if k not in avail]
@@ -187,13 +236,14 @@ class Flow:
 
     def report(self, written: Iterable[str]) -> None:
         """The errors of the reads noted, at each reference; ``written``: every key a node of the tree
-        writes or an input gives (a key outside it is likely misspelt)."""
+        writes or an input gives (a key outside it is likely misspelt; one inside it is not, so a close
+        name would mislead: the error says where it is written instead)."""
         anywhere = frozenset(written)
         for node, k, avail in self.missed:
             at = node.nodekind.read_pos(node, k) or node.pos
             if k in anywhere:
                 message = "reads %r, which is not written on every path before this node (%s)" % (
-                    k, did_you_mean(k, avail)[2:-1] or "write it earlier or declare it under 'inputs:'")
+                    k, self._written_at(node, k, at))
             else:
                 message = "reads %r, which no node writes and no input declares (%s)" % (
                     k, did_you_mean(k, anywhere | avail)[2:-1]
@@ -201,9 +251,55 @@ class Flow:
             self.errors.append(TreeError(at, message))
         self.missed = []
 
+    def _written_at(self, node: TreeNode, key: str, at: Pos) -> str:
+        hint = "write it earlier on every path or declare it under 'inputs:'"
+        writers = self.writers(key)
+        if not writers:
+            return hint
+        if writers == [node]:
+            return "only this node writes it: %s" % hint
+        places = [where(w.pos, at) for w in writers if w is not node]
+        shown = ", ".join(places[:3]) + (", …" if len(places) > 3 else "")
+        return "written at %s, but not before it on every path: %s" % (shown, hint)
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Keys surely written when ``node`` succeeds, and when it fails (``NEVER``: it cannot end so)."""
+        nk = node.nodekind
+        if nk.own_outcome:
+            return nk.outcome(node, avail, self)
+        return nk.flow(node, avail, self), _NOTHING
+
     def of(self, node: TreeNode, avail: FrozenSet[str]) -> FrozenSet[str]:
         """Keys surely written when ``node`` succeeds."""
         return node.nodekind.flow(node, avail, self)
+
+    def writers(self, key: str) -> List[TreeNode]:
+        """The nodes of the whole tree (includes expanded) that write ``key``, in walk order. Made on
+        first use: only a problem needs them."""
+        if self._writers is None:
+            self._writers = {}
+            for n in nodes_of(self.tree.root) if self.tree is not None else ():
+                nk = n.nodekind
+                written = nk.writes(n) if nk.own_writes else None
+                for k in written if written else ():
+                    self._writers.setdefault(k, {})[n] = None
+        return list(self._writers.get(key, ()))
+
+    def file_writes(self, tree: TreeFile) -> Dict[str, TreeNode]:
+        """The keys the nodes of ``tree``'s own file write, each with its first writer; not those of the
+        files it includes, nor the arguments of its includes (each include is looked at by itself)."""
+        found = self._file_writes.get(id(tree))
+        if found is None:
+            found = self._file_writes[id(tree)] = {}
+            stack = [tree.root]
+            while stack:
+                n = stack.pop()
+                nk = n.nodekind
+                if nk.own_writes and not nk.own_expand:
+                    for k in nk.writes(n) or ():
+                        found.setdefault(k, n)
+                stack.extend(reversed(n.children))
+        return found
 
 
 class NodeKind(abc.ABC):
@@ -222,14 +318,14 @@ class NodeKind(abc.ABC):
     parse_without_pos = False
     # whether the kind overrides these hooks (set for each subclass): the whole-tree walks skip the base's,
     # which find nothing
-    own_expand = own_writes = own_check_types = own_warnings = False
+    own_expand = own_writes = own_check_types = own_warnings = own_outcome = False
     # a leaf kind's behaviour class, made as ``leaf(node, ctx)``: the builder makes it without calling
     # ``build`` (None: ``build`` makes the behaviour)
     leaf: Optional[Callable[[TreeNode, Any], py_trees.behaviour.Behaviour]] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        for hook in ("expand", "writes", "check_types", "warnings"):
+        for hook in ("expand", "writes", "check_types", "warnings", "outcome"):
             setattr(cls, "own_" + hook, getattr(cls, hook) is not getattr(NodeKind, hook))
         if cls.build is not NodeKind.build:
             cls.leaf = None   # its own build decides
@@ -254,6 +350,10 @@ class NodeKind(abc.ABC):
         return {}
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+        """Keys surely written when ``node`` succeeds (``NEVER``: it never does); its reads are checked
+        against ``avail``, the keys surely written before it."""
+        if self.own_outcome:
+            return self.outcome(node, avail, f)[0]
         read = self.reads(node)
         if read:
             f.need(node, read, avail)
@@ -261,6 +361,13 @@ class NodeKind(abc.ABC):
             return _NOTHING
         written = self.writes(node)
         return frozenset(written) if written else _NOTHING
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Keys surely written when ``node`` succeeds and when it fails (``NEVER``: it cannot end so). A
+        composite or decorator overrides it: what its parent may count on depends on both (a selector's
+        child that never succeeds is no way for it to succeed). By default: ``flow``; on failure nothing
+        (a leaf writes its keys only when it succeeds)."""
+        return self.flow(node, avail, f), _NOTHING
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:  # noqa: B027
         """Report references whose known type cannot fit where they are used (most kinds pass none)."""
@@ -322,6 +429,19 @@ class NodeKind(abc.ABC):
             head = "`%s`%s" % (o.name, " (%s)" % ", ".join(bits) if bits else "")
             parts.append("%s: %s" % (head, o.doc) if o.doc else head)
         return "; ".join(parts)
+
+
+def repeated_outputs(p: Parser, raw: LMap, outputs: Dict[str, str], key: str = "outputs") -> None:
+    """An error at each output written to a tree key an earlier output of the node writes: both are
+    written when it succeeds, so one value is lost (``outputs: {success: result, text: result}``)."""
+    first: Dict[str, str] = {}
+    for name, tree_key in outputs.items():
+        if tree_key not in first:
+            first[tree_key] = name
+            continue
+        at = raw[key].val_pos[name]
+        p.err(at, "%s %r and %r both write tree key %r: one value would replace the other; give %r its own "
+                  "key" % (key, first[tree_key], name, tree_key, name))
 
 
 def check_choice(p: Parser, raw: LMap, key: str, choices: Tuple[str, ...], default: str) -> str:

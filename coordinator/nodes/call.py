@@ -13,7 +13,14 @@ from comm.rostypes import resolve_type
 from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import NodeKind, Option, param_keys, param_type_errors, run_param
+from coordinator.nodes.base import (
+    NodeKind,
+    Option,
+    param_keys,
+    param_type_errors,
+    repeated_outputs,
+    run_param,
+)
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
@@ -153,6 +160,7 @@ class CallKind(NodeKind):
                                                                or " (functions: %s)" % ", ".join(mod.functions)))
         if fn is None:  # its outputs still write their keys: no knock-on errors where they are read
             spec.outputs = p.key_map(node, raw, "outputs", None, "output")
+            repeated_outputs(p, raw, spec.outputs)
             return spec
         spec.function = fn
         params = {q.name: q for q in fn.inputs}
@@ -172,6 +180,7 @@ class CallKind(NodeKind):
                 except ProtocolError as exc:
                     p.err(inputs_raw.val_pos[q.name], said_of("input %r" % q.name, exc))
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
+        repeated_outputs(p, raw, spec.outputs)
         return spec
 
     def default_name(self, node: TreeNode) -> str:

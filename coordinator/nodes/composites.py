@@ -7,7 +7,7 @@ from typing import Any, Dict, FrozenSet, List, Tuple
 import py_trees
 
 from coordinator.errors import TreeError
-from coordinator.nodes.base import TYPES, Flow, NodeKind, Option, check_choice
+from coordinator.nodes.base import NEVER, TYPES, Flow, NodeKind, Option, check_choice, join, meet, where
 from coordinator.treeast import TreeNode, walk
 
 __all__ = ["KINDS", "MemorySpec", "ParallelSpec"]
@@ -51,13 +51,21 @@ class Sequence(_Composite):
     summary = "children in order until one fails"
     options = (Option("memory", "bool", "a child that succeeded is not ticked again", default=True),)
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Succeeds when every child does, each reading what the earlier ones wrote; fails at a child that
+        fails, after the earlier ones succeeded. Children after one that never succeeds never run: they
+        are still checked, with what the others before them write."""
         cur = avail
+        ok: FrozenSet[str] = frozenset()
+        failed = NEVER
         for c in node.children:
-            written = c.nodekind.flow(c, cur, f)   # f.of(c, cur), without a call per child
-            if written:
-                cur = cur | written
-        return cur - avail
+            cs, cf = f.outcome(c, cur)
+            if cf is not NEVER and ok is not NEVER:
+                failed = meet((failed, ok | cf))
+            ok = join(ok, cs)
+            if cs:   # (NEVER is empty)
+                cur = cur | cs
+        return ok, failed
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return py_trees.composites.Sequence(node.name, memory=node.spec.memory,
@@ -70,9 +78,20 @@ class Selector(_Composite):
     options = (Option("memory", "bool", "`false` re-checks earlier children on every tick (reactive priorities)",
                       default=True),)
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        ws = [f.of(c, avail) for c in node.children]
-        return frozenset.intersection(*ws) if ws else frozenset()
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Succeeds at the first child that does, the earlier ones having failed: a child that never
+        succeeds (a ``force_failure`` fallback) is no way to succeed, so its writes are not required of
+        the others. Fails when every child failed."""
+        cur = avail
+        ok = NEVER
+        failed: FrozenSet[str] = frozenset()   # what the children so far surely wrote, all having failed
+        for c in node.children:
+            cs, cf = f.outcome(c, cur)
+            ok = meet((ok, join(failed, cs)))
+            failed = join(failed, cf)
+            if cf:   # (NEVER is empty: the later children never run, and are checked as they are)
+                cur = cur | cf
+        return ok, failed
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return py_trees.composites.Selector(node.name, memory=node.spec.memory,
@@ -91,11 +110,20 @@ class Parallel(_Composite):
         return ParallelSpec(policy=check_choice(p, raw, "policy", ("all", "one"), "all"),
                             synchronise=p.opt(node, raw, self.option("synchronise")))
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        ws = [f.of(c, avail) for c in node.children]
-        if not ws:
-            return frozenset()
-        return frozenset().union(*ws) if node.spec.policy == "all" else frozenset.intersection(*ws)
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """py_trees' parallel fails as soon as any child fails (the others halted: only the failed one's
+        writes are sure), under either policy. ``all`` succeeds when every child has; ``one`` when a child
+        has and none failed (the others halted): what any child that can succeed writes."""
+        outs = [f.outcome(c, avail) for c in node.children]   # together: none reads what another writes
+        if not outs:
+            return frozenset(), NEVER
+        failed = meet(cf for _, cf in outs)
+        if node.spec.policy == "all":
+            ok: FrozenSet[str] = frozenset()
+            for cs, _ in outs:
+                ok = join(ok, cs)
+            return ok, failed
+        return meet(cs for cs, _ in outs), failed
 
     def warnings(self, node: TreeNode) -> List[TreeError]:
         """Two children that can call non-concurrent functions of one module at the same time: the
@@ -112,8 +140,8 @@ class Parallel(_Composite):
                             out.append(TreeError(nb.pos, "warning: %s can run while %s (%s) runs, under parallel %r "
                                                          "(%s): module %r runs one non-concurrent function at a "
                                                          "time and would reject it as busy" % (
-                                                             fb.qualified, fa.qualified, _where(na.pos, nb.pos),
-                                                             node.name, _where(node.pos, nb.pos), fa.module)))
+                                                             fb.qualified, fa.qualified, where(na.pos, nb.pos),
+                                                             node.name, where(node.pos, nb.pos), fa.module)))
         return out
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
@@ -125,7 +153,3 @@ class Parallel(_Composite):
 
 
 KINDS = (Sequence(), Selector(), Parallel())
-
-
-def _where(pos: Any, seen_from: Any) -> str:
-    return "line %d" % pos.line if pos.file == seen_from.file else "%s:%d" % (pos.file, pos.line)

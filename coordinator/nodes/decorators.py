@@ -2,13 +2,23 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional, Tuple
 
 import py_trees
 from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, param_type_errors, run_param
+from coordinator.nodes.base import (
+    NEVER,
+    Flow,
+    NodeKind,
+    Option,
+    fixed,
+    meet,
+    param_keys,
+    param_type_errors,
+    run_param,
+)
 from coordinator.treeast import TreeNode
 from coordinator.values import read_at
 
@@ -189,9 +199,13 @@ class Counted(NodeKind):
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         return read_at(self.param(node), node.value_pos, key) if node.value_pos is not None else None
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Succeeds when its child does (``timeout``: in time); fails on its own too (timed out, the child
+        halted; a count or duration that cannot be used), having written nothing sure."""
         f.need(node, self.reads(node), avail)
-        return f.of(node.children[0], avail) if node.children else frozenset()
+        if not node.children:
+            return frozenset(), frozenset()
+        return f.outcome(node.children[0], avail)[0], frozenset()
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return self.behaviour(node.name, child(node.children[0]), node.spec.times, ctx)
@@ -212,6 +226,15 @@ class RetryKind(Counted):
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec.times, node.spec.delay)
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Succeeds when an attempt does; fails when the last attempt failed, or at once when its count
+        or delay (a reference) cannot be used."""
+        f.need(node, self.reads(node), avail)
+        if not node.children:
+            return frozenset(), frozenset()
+        cs, cf = f.outcome(node.children[0], avail)
+        return cs, cf if fixed(node.spec.times, node.spec.delay) else meet((cf, frozenset()))
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         super().check_types(node, types, errors)
@@ -249,7 +272,7 @@ class TimeoutKind(Counted):
 
 
 class _Wrap(NodeKind):
-    """A decorator whose main value is its child; what the child writes is not guaranteed."""
+    """A decorator whose main value is its child, and which maps its child's ending (``ends``)."""
 
     family = "decorator"
     value = ("node", "the child node")
@@ -259,10 +282,14 @@ class _Wrap(NodeKind):
         p.child(node, value, at)
         return None
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        for c in node.children:
-            f.of(c, avail)
-        return frozenset()
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        if not node.children:
+            return frozenset(), frozenset()
+        return self.ends(*f.outcome(node.children[0], avail))
+
+    def ends(self, ok: FrozenSet[str], failed: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """What is surely written when this node succeeds and fails, from the same of its child."""
+        raise NotImplementedError
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return self.behaviour(node.name, child(node.children[0]))
@@ -273,17 +300,26 @@ class Inverter(_Wrap):
     summary = "SUCCESS ↔ FAILURE"
     behaviour = py_trees.decorators.Inverter
 
+    def ends(self, ok: FrozenSet[str], failed: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        return failed, ok
+
 
 class ForceSuccess(_Wrap):
     name = "force_success"
     summary = "FAILURE → SUCCESS"
     behaviour = py_trees.decorators.FailureIsSuccess
 
+    def ends(self, ok: FrozenSet[str], failed: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        return meet((ok, failed)), NEVER
+
 
 class ForceFailure(_Wrap):
     name = "force_failure"
     summary = "SUCCESS → FAILURE"
     behaviour = py_trees.decorators.SuccessIsFailure
+
+    def ends(self, ok: FrozenSet[str], failed: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        return NEVER, meet((ok, failed))
 
 
 KINDS = (RetryKind(), TimeoutKind(), Inverter(), ForceSuccess(), ForceFailure())

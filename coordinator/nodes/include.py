@@ -1,16 +1,17 @@
 """``include``: a subtree from another file, its ``inputs`` bound by ``args``."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, FrozenSet, Iterable, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, List, Optional, Set, Tuple
 
 import py_trees
 
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import Flow, NodeKind, Option
+from coordinator.nodes.base import Flow, NodeKind, Option, fixed, join, meet, where
 from coordinator.nodes.leaves import SetKeys
-from coordinator.refs import refs_in
+from coordinator.refs import Ref, refs_in
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode
 from coordinator.values import at_value_errors, read_at
 
@@ -23,6 +24,9 @@ class IncludeSpec:
     args: Dict[str, Any] = field(default_factory=dict)
     tree: Optional[TreeFile] = None
     arg_pos: Dict[str, Pos] = field(default_factory=dict)   # where each argument's value is written
+    # the keys of the caller it replaces, found by the data-flow walk (which runs before the warnings)
+    clashes: Set[TreeError] = field(default_factory=set, compare=False, repr=False)
+    clashes_of: Any = field(default=None, compare=False, repr=False)   # the walk that found them: a new one starts afresh
 
     def bound(self) -> Dict[str, Any]:
         """What the include sets when it starts: the subtree's defaults, then the arguments."""
@@ -81,13 +85,28 @@ class IncludeKind(NodeKind):
         return next((p for p in (read_at(v, where[k], key) for k, v in node.spec.args.items() if k in where)
                      if p is not None), None)
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """A sequence: its inputs set (failing when an argument's reference cannot be read), then the
+        subtree. Inside, an input without its argument counts as given: that is reported by itself."""
         f.need(node, self.reads(node), avail)
-        sub = node.spec.tree
+        spec = node.spec
+        sub = spec.tree
         if sub is None:
-            return frozenset()
-        bound = frozenset(node.spec.bound())
-        return bound | f.of(sub.root, bound | avail)
+            return frozenset(), frozenset()
+        bound = frozenset(spec.bound())
+        if spec.clashes_of is not f:
+            spec.clashes_of, spec.clashes = f, set()
+        spec.clashes.update(_clashes(node, sub, avail, f))
+        f.files.append(sub)
+        try:
+            ok, failed = f.outcome(sub.root, avail | bound | sub.required_inputs)
+        finally:
+            f.files.pop()
+        failed = join(bound, failed)
+        return join(bound, ok), failed if fixed(spec.bound()) else meet((failed, frozenset()))
+
+    def warnings(self, node: TreeNode) -> List[TreeError]:
+        return sorted(node.spec.clashes, key=lambda e: (e.pos.line, e.pos.column, e.message))
 
     def expand(self, node: TreeNode) -> List[TreeNode]:
         return [node.spec.tree.root] if node.spec.tree is not None else []
@@ -101,6 +120,59 @@ class IncludeKind(NodeKind):
             kids.append(SetKeys(setter, ctx))
         kids.append(child(sub.root))
         return py_trees.composites.Sequence(name=node.name, memory=True, children=kids)
+
+
+def _clashes(node: TreeNode, sub: TreeFile, held: FrozenSet[str], f: Flow) -> List[TreeError]:
+    """The caller's keys (``held``: surely written or declared before the include) that the include
+    replaces on the one tree blackboard: an input the arguments leave to its default, an argument that
+    is not the caller's own key passed on, a key a node of the subtree's file writes. A key that only an
+    earlier run of this same subtree holds is not the caller's."""
+    spec = node.spec
+    name = os.path.basename(sub.path)
+    found: Dict[str, Tuple[Pos, str]] = {}
+    for k, default in sub.inputs.items():
+        if k in held and k not in spec.args and default is not REQUIRED:
+            found[k] = (node.pos, "include of %s sets its input %r to its default %s, replacing the caller's %r "
+                                  "(%%s): pass it on with args: {%s: $%s}, or rename one of them"
+                        % (name, k, _shown(default), k, k, k))
+    for k, v in spec.args.items():
+        if k in held and not (isinstance(v, Ref) and v.key == k and not v.path):
+            found[k] = (spec.arg_pos.get(k, node.pos), "argument %r of %s is set on the tree blackboard, replacing "
+                                                       "the caller's %r (%%s): rename the caller's key or the "
+                                                       "subtree's input" % (k, name, k))
+    for k, writer in f.file_writes(sub).items():
+        if k in held and k not in found:
+            found[k] = (node.pos, "%s writes %r (%s), replacing the caller's %r (%%s): rename one of them"
+                        % (name, k, where(writer.pos, node.pos), k))
+    out = []
+    for k, (at, message) in sorted(found.items()):
+        place = _caller_place(node, sub, k, f)
+        if place:
+            out.append(TreeError(at, "warning: " + message % place))
+    return out
+
+
+def _caller_place(node: TreeNode, sub: TreeFile, key: str, f: Flow) -> str:
+    """Where the caller's ``key`` comes from, as the warning at ``node`` names it ('' when only runs of
+    ``sub`` itself write it): an input of the including file, else a writer outside ``sub``'s file (one
+    in the including file first), else an input of a file further up."""
+    caller = f.files[-1] if f.files else None
+    here = node.pos.file
+    if caller is not None and key in caller.inputs:
+        return "an input of %s" % os.path.basename(caller.path)
+    mine = sub.root.pos.file
+    writers = [w for w in f.writers(key)   # not this include, nor another of the same file
+               if w.pos.file != mine and not (w.kind == "include" and w.spec.tree is sub)]
+    if writers:
+        w = next((w for w in writers if w.pos.file == here), writers[0])
+        return "written at %s" % where(w.pos, node.pos)
+    up = next((t for t in reversed(f.files) if key in t.inputs), None)
+    return "an input of %s" % os.path.basename(up.path) if up is not None else ""
+
+
+def _shown(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 KINDS = (IncludeKind(),)

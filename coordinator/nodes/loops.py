@@ -6,14 +6,25 @@ than its ``max``; reaching the bound is FAILURE with the reason, so a tree canno
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, FrozenSet, Iterable, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
 import py_trees
 from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, kind_of
-from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, param_keys, param_type_errors
+from coordinator.nodes.base import (
+    NEVER,
+    Flow,
+    NodeKind,
+    Option,
+    check_choice,
+    fixed,
+    join,
+    meet,
+    param_keys,
+    param_type_errors,
+)
 from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
@@ -131,15 +142,22 @@ class RepeatKind(Counted):
             return "repeat %s %s (at most %s)" % (s.mode, s.cond.text, s.times)
         return "repeat x%s" % s.times
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Succeeds after a successful run of its child (``while``: maybe with no run, writing nothing);
+        fails when a run fails, when ``until`` reaches the maximum or cannot be worked out (after a
+        successful run), or at once when its count (a reference) cannot be used."""
         s = node.spec
         f.need(node, param_keys(s.times), avail)
         if s.mode == "while" and s.cond is not None:
             f.need(node, s.cond.keys, avail)
-        written = f.of(node.children[0], avail) if node.children else frozenset()
+        nothing: FrozenSet[str] = frozenset()
+        ok, failed = f.outcome(node.children[0], avail) if node.children else (nothing, nothing)
         if s.mode == "until" and s.cond is not None:
-            f.need(node, s.cond.keys, avail | written)
-        return frozenset() if s.mode == "while" else written
+            f.need(node, s.cond.keys, avail | ok)   # (NEVER is empty: never evaluated, still checked)
+            failed = meet((failed, ok))
+        if s.mode == "while":
+            return nothing, nothing
+        return ok, failed if fixed(s.times) else meet((failed, nothing))
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         super().check_types(node, types, errors)
@@ -260,13 +278,29 @@ class ForEachKind(NodeKind):
     def reads(self, node: TreeNode) -> Iterable[str]:
         return [r.key for r in refs_in(node.spec.items)] + param_keys(node.spec.max)
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """A run writes the ``as`` key, then what the child writes. ``all`` succeeds when every run did
+        (or with an empty list: nothing written), fails at the first run that fails; ``one`` succeeds at
+        the first run that succeeds, fails when all failed (or with an empty list). Either fails at once
+        on a list or ``max`` that cannot be used (a reference)."""
+        spec = node.spec
         f.need(node, self.reads(node), avail)
-        key = frozenset([node.spec.key]) if node.spec.key else frozenset()
-        written = f.of(node.children[0], avail | key) if node.children else frozenset()
-        items = node.spec.items
-        runs_once = node.spec.policy == "one" or (isinstance(items, list) and len(items) > 0)
-        return (written | key) if runs_once else frozenset()
+        nothing: FrozenSet[str] = frozenset()
+        key = frozenset([spec.key]) if spec.key else nothing
+        ok, failed = f.outcome(node.children[0], avail | key) if node.children else (nothing, nothing)
+        run_ok, run_failed = join(key, ok), join(key, failed)
+        items = spec.items
+        nonempty = isinstance(items, list) and bool(items)   # surely one run at least
+        empty = isinstance(items, list) and not items
+        if spec.policy == "all":
+            ok = run_ok if nonempty else meet((run_ok, nothing))
+            failed = NEVER if empty else run_failed
+        else:
+            ok = NEVER if empty else run_ok
+            failed = run_failed if nonempty else nothing
+        if not fixed(items, spec.max):
+            failed = meet((failed, nothing))
+        return ok, failed
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return {node.spec.key: None} if node.spec.key else {}

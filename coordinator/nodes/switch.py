@@ -9,7 +9,7 @@ from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import text_of
-from coordinator.nodes.base import Flow, NodeKind, Option, check_choice
+from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, fixed, meet
 from coordinator.refs import RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
 from coordinator.values import at_value_errors, read_at
@@ -119,10 +119,17 @@ class SwitchKind(NodeKind):
     def reads(self, node: TreeNode) -> Iterable[str]:
         return [r.key for r in refs_in(node.spec.value)]
 
-    def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Ends as the chosen child does: a case that never succeeds (a ``force_failure`` default) is no
+        way for the switch to succeed. It also fails with no child run, when nothing matches and there
+        is no default, or when its value cannot be worked out."""
         f.need(node, self.reads(node), avail)
-        ws = [f.of(c, avail) for c in node.children]
-        return frozenset.intersection(*ws) if ws else frozenset()
+        outs = [f.outcome(c, avail) for c in node.children]
+        ok = meet(cs for cs, _ in outs)
+        failed = meet(cf for _, cf in outs)
+        if not node.spec.has_default or not fixed(node.spec.value):
+            failed = meet((failed, frozenset()))
+        return ok, failed
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         at_value_errors(node.spec.value, node.value_pos or node.pos, types, errors)

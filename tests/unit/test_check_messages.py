@@ -48,7 +48,8 @@ root:
 """)
     assert status == 2
     assert lines == ["t.yaml:5:34: reads 'thing', which is not written on every path before this node "
-                     "(write it earlier or declare it under 'inputs:')"]
+                     "(written at line 6, but not before it on every path: write it earlier on every path or "
+                     "declare it under 'inputs:')"]
 
 
 @pytest.mark.parametrize("node,where", [
