@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Optional
 
+from comm.errors import did_you_mean
 from comm.textenum import TextEnum
 
 __all__ = ["Outcome", "OutcomeKind", "OutcomeError", "succeed", "fail", "reject", "hang", "respond",
@@ -85,8 +86,9 @@ def outcome_from_dict(raw: Any) -> Outcome:
     kinds = [k for k in raw if k in _WRITTEN]
     extra = [k for k in raw if k not in _WRITTEN and k != "delay"]
     if len(kinds) != 1 or extra:
-        raise OutcomeError("an outcome has one of %s (and optionally delay), got %s" % (
-            ", ".join(_WRITTEN), ", ".join(map(str, raw))))
+        hints = ["%r is no key of an outcome%s" % (k, did_you_mean(k, _WRITTEN + ("delay",))) for k in extra]
+        raise OutcomeError("an outcome has one of %s (and optionally delay), got %s%s" % (
+            ", ".join(_WRITTEN), ", ".join(map(str, raw)), ": " + "; ".join(hints) if hints else ""))
     kind = kinds[0]
     try:
         delay = float(raw.get("delay", 0.0))

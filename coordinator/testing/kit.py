@@ -5,6 +5,9 @@
     run = t.run()
     assert run.succeeded
     assert run.calls("navigation.go_to")[0].inputs["place"] == "living_room"
+
+A tree error, a missing input or a bad script fails the test at the user's line: the kit's own
+frames are hidden from pytest (``__tracebackhide__``).
 """
 from __future__ import annotations
 
@@ -14,15 +17,17 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Set
 import py_trees
 from py_trees.common import Status
 
+from comm.errors import did_you_mean
 from comm.rostypes import now_from
 from coordinator.builder import build_tree
 from coordinator.clock import SimClock
 from coordinator.context import CallRecord, RunContext, plain
+from coordinator.errors import TreeErrors, UsageError
 from coordinator.language import load_tree
 from coordinator.runner import RunResult, TreeRunner
 from coordinator.testing.mocks import InProcessTransport, Mocks
 from coordinator.treeast import TreeFile, TreeNode, walk
-from modules.definition import ModuleDefinition
+from modules.definition import DefinitionError, ModuleDefinition
 from modules.search import default_definitions
 
 __all__ = ["TreeTest", "TreeRun", "Coverage"]
@@ -37,6 +42,8 @@ class TreeRun:
         self.reason = result.reason
         self.duration = result.duration
         self.transport = transport
+        defs = transport.mocks.definitions
+        self._functions = {"%s.%s" % (m, f) for m, d in defs.items() for f in d.functions}
         self._by_name: Dict[str, List[str]] = {}
         for b, statuses in result.history.items():
             self._by_name.setdefault(b.name, [s.value for s in statuses])
@@ -50,7 +57,17 @@ class TreeRun:
         return self.status == Status.FAILURE
 
     def calls(self, target: Optional[str] = None) -> List[CallRecord]:
-        """Calls in order, all or those of ``module.function``."""
+        """Calls in order, all or those of ``module.function``: ``[]`` for a function never called,
+        KeyError for one the definitions do not have (a misspelt target must not pass
+        ``assert not run.calls(...)``)."""
+        __tracebackhide__ = True
+        if target is not None and target not in self._functions and all(c.target != target for c in self.result.calls):
+            mod = str(target).partition(".")[0]
+            same = sorted(f for f in self._functions if f.partition(".")[0] == mod)
+            raise KeyError("run.calls(%r): no function %r in the module definitions%s" % (
+                target, target, did_you_mean(target, self._functions) or (
+                    " (module %s has %s)" % (mod, ", ".join(same)) if same
+                    else " (modules: %s)" % ", ".join(sorted({f.partition(".")[0] for f in self._functions})))))
         return [c for c in self.result.calls if target is None or c.target == target]
 
     @property
@@ -64,13 +81,15 @@ class TreeRun:
 
     def statuses(self, name: str) -> List[str]:
         """Statuses the first node called ``name`` went through (``["RUNNING", "SUCCESS"]``)."""
+        __tracebackhide__ = True
         if name not in self._by_name:
-            raise KeyError("no node named %r ran (nodes: %s)" % (name, ", ".join(sorted(self._by_name))))
+            raise KeyError("no node named %r ran%s (nodes: %s)" % (
+                name, did_you_mean(name, self._by_name), ", ".join(sorted(self._by_name))))
         return self._by_name[name]
 
     def said(self) -> List[str]:
         """Convenience for the speech module: every ``text`` passed to ``speech.say``."""
-        return [c.inputs.get("text") for c in self.calls("speech.say")]
+        return [c.inputs.get("text") for c in self.result.calls if c.target == "speech.say"]
 
 
 class Coverage:
@@ -132,7 +151,8 @@ class TreeTest:
     Args:
         path: the tree file.
         definitions: module definitions (default: :func:`modules.search.default_definitions`).
-        inputs: values for the tree's declared inputs.
+        inputs: values for the tree's declared inputs; every input without a default must be
+            given (else UsageError here, saying how).
         coverage: a :class:`Coverage` to record into (the pytest plugin passes one).
         modules: more definition files or folders (your own modules), as ``--modules`` of the CLI;
             added to ``definitions`` (or to the default ones).
@@ -141,16 +161,23 @@ class TreeTest:
     def __init__(self, path: str, definitions: Optional[Mapping[str, ModuleDefinition]] = None,
                  inputs: Optional[Dict[str, Any]] = None, coverage: Optional[Coverage] = None,
                  modules: Sequence[str] = ()):
-        if definitions is None:
-            self.definitions = default_definitions(modules)
-        else:
-            self.definitions = dict(definitions)
-            if modules:
-                from modules.definition import load_definitions
-
-                self.definitions.update(load_definitions(list(modules)))
+        __tracebackhide__ = True
+        self.path = path
         self.inputs = dict(inputs or {})
-        self.tree = load_tree(path, self.definitions, given=set(self.inputs))
+        try:
+            if definitions is None:
+                self.definitions = default_definitions(modules)
+            else:
+                self.definitions = dict(definitions)
+                if modules:
+                    from modules.definition import load_definitions
+
+                    self.definitions.update(load_definitions(list(modules)))
+            self.tree = load_tree(path, self.definitions, given=set(self.inputs))
+            self._check_inputs()
+        except (TreeErrors, DefinitionError, UsageError) as exc:
+            # the message says where (file:line:column); the loader's frames would only bury it
+            raise exc.with_traceback(None)
         self.mocks = Mocks(self.definitions)
         self.coverage = coverage
         if coverage is not None:
@@ -161,6 +188,8 @@ class TreeTest:
         """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds, or until ``stop_when()``
         gives a reason); ``observers`` are :class:`~coordinator.runevents.RunObserver` (e.g. a
         RunStream writing a run log)."""
+        __tracebackhide__ = True
+        self._check_inputs()
         clock = SimClock()
         transport = InProcessTransport(self.mocks, clock)
         ctx = RunContext(transport, clock, self.definitions, default_timeout=default_timeout)
@@ -173,3 +202,14 @@ class TreeTest:
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
         return TreeRun(result, transport)
+
+    def _check_inputs(self) -> None:
+        """UsageError naming the tree's inputs without a default that ``inputs`` lacks, and how to give them."""
+        __tracebackhide__ = True
+        missing = sorted(self.tree.required_inputs - set(self.inputs))
+        if missing:
+            example = ", ".join("%r: ..." % m for m in missing)
+            raise UsageError("%s: tree input%s %s must be given: bmtree_tree(path, inputs={%s}) or TreeTest(path, "
+                             "inputs={%s}); in a scenario file, the scenario's inputs: {%s}" % (
+                                 self.path, "s" if len(missing) > 1 else "", ", ".join(repr(m) for m in missing),
+                                 example, example, ", ".join("%s: ..." % m for m in missing)))

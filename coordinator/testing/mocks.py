@@ -6,7 +6,9 @@ outcomes (:mod:`modules.outcome`). The in-process transport serves it with the s
 clock, so it refuses what the real module refuses with the same texts: an unknown function,
 missing or ill-typed inputs, a second non-concurrent call while one runs (``busy with call
 …``); it answers cancels the same way. A scripted output that breaks the definition is refused
-when scripted. Delays, hangs and events cost no time under a :class:`SimClock`.
+when scripted. Delays, hangs and events cost no time under a :class:`SimClock`. Values the
+Blackboard node held before the run (:meth:`Mocks.stored`) go into the in-process Blackboard
+through the real service, as results of earlier runs would.
 """
 from __future__ import annotations
 
@@ -25,8 +27,10 @@ from comm.messages import (
     FunctionCall,
     FunctionResult,
 )
+from comm.typewords import said_of
 from coordinator.clock import Clock
 from coordinator.context import plain
+from coordinator.testing.expected import legacy_times
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 from modules.execution import ClockExecutor
@@ -44,7 +48,8 @@ from modules.outcome import outcome_from_dict as _outcome_from_dict
 from modules.outcome import outcome_to_dict as _outcome_to_dict
 from modules.runtime import BasicModule, ModuleServer
 
-__all__ = ["MockError", "FunctionMock", "Mocks", "MockModule", "mock_module", "InProcessTransport",
+__all__ = ["MockError", "StoredNameError", "FunctionMock", "Mocks", "MockModule", "mock_module", "InProcessTransport",
+           "StoredEntry", "stored_value",
            # the outcome type (modules.outcome), re-exported for test authors
            "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "reject", "respond",
            "outcome_from_dict", "outcome_to_dict"]
@@ -54,6 +59,85 @@ OUTCOME_KINDS = tuple(k.value for k in OutcomeKind if k != OutcomeKind.RESPOND) 
 
 class MockError(AssertionError):
     """A script that the real module could never follow (fails the test)."""
+
+
+class StoredNameError(MockError):
+    """A name given to :meth:`Mocks.stored` that no output of the definitions answers to, or that
+    several do with types the value fits (a scenario file reports it at the name, not the value)."""
+
+
+StoredEntry = Tuple[Optional[str], Optional[str], str, Any]
+"""(module, function, output, message) of a value stored before the run; no module and
+function for a plain name that several functions' outputs have."""
+
+
+def _known(names: Any) -> str:
+    return ", ".join(sorted(names)) or "none"
+
+
+def stored_value(definitions: Mapping[str, ModuleDefinition], name: Any, value: Any,
+                 legacy: bool = False) -> StoredEntry:
+    """What the Blackboard would hold under ``name`` (as a ``recall`` takes it) after a result
+    with ``value``: the output's type comes from the definitions, the value is converted as a
+    scripted output is. ``legacy``: times as older run logs wrote them are accepted (scenario
+    files). StoredNameError for a name no output answers to (with a did-you-mean), or a plain
+    name whose outputs have several types the value fits; MockError for a value that fits none."""
+    prefix = "stored %r: " % (name,)
+    parts = name.split("/") if isinstance(name, str) else []
+    if len(parts) == 3 and all(parts):
+        mod_name, fname, out = parts
+        mod = definitions.get(mod_name)
+        if mod is None:
+            raise StoredNameError(prefix + "no module %r in the definitions%s" % (
+                mod_name, did_you_mean(mod_name, definitions) or " (known: %s)" % _known(definitions)))
+        fn = mod.functions.get(fname)
+        if fn is None:
+            raise StoredNameError(prefix + "module %r has no function %r%s" % (
+                mod_name, fname, did_you_mean(fname, mod.functions) or " (functions: %s)" % _known(mod.functions)))
+        outputs = {q.name: q for q in fn.outputs}
+        if out not in outputs:
+            raise StoredNameError(prefix + "%s has no output %r%s" % (
+                fn.qualified, out, did_you_mean(out, outputs) or " (its outputs: %s)" % _known(outputs)))
+        return mod_name, fname, out, _stored_message(prefix, fn, outputs[out], value, legacy)
+    if len(parts) != 1 or not parts[0]:
+        raise StoredNameError(prefix + "a Blackboard name is 'output' or 'module/function/output', as a recall "
+                                       "takes it")
+    candidates = [(fn, q) for mod in definitions.values() for fn in mod.functions.values() for q in fn.outputs
+                  if q.name == name]
+    if not candidates:
+        known = {q.name for mod in definitions.values() for fn in mod.functions.values() for q in fn.outputs}
+        raise StoredNameError(prefix + "no function of the definitions has an output %r%s" % (
+            name, did_you_mean(name, known) or " (outputs: %s)" % _known(known)))
+    fits: Dict[str, Any] = {}       # ROS type -> the value as that type
+    misfits: Dict[str, str] = {}    # ROS type -> why the value does not fit it
+    for fn, q in candidates:
+        if q.rostype not in fits and q.rostype not in misfits:
+            try:
+                fits[q.rostype] = _stored_message("", fn, q, value, legacy)
+            except MockError as exc:
+                misfits[q.rostype] = str(exc)
+    every = ", ".join("%s/%s/%s (%s)" % (fn.module, fn.name, q.name, q.rostype) for fn, q in candidates)
+    if not fits:
+        if len(misfits) == 1:
+            raise MockError(prefix + next(iter(misfits.values())))
+        raise MockError(prefix + "the value fits none of the types of the outputs named %r: %s; give "
+                                 "'module/function/output' (candidates: %s)" % (name, "; ".join(misfits.values()), every))
+    if len(fits) > 1:
+        raise StoredNameError(prefix + "the value fits outputs named %r of %d types (%s): give 'module/function/output' "
+                                       "(candidates: %s)" % (name, len(fits), ", ".join(sorted(fits)), every))
+    rostype, msg = next(iter(fits.items()))
+    owners = [fn for fn, q in candidates if q.rostype == rostype]
+    if len(owners) == 1:  # only that function stores it: a qualified recall of it finds the value too
+        return owners[0].module, owners[0].name, name, msg
+    return None, None, name, msg
+
+
+def _stored_message(prefix: str, fn: FunctionDefinition, q: Any, value: Any, legacy: bool) -> Any:
+    """``value`` as output ``q`` of ``fn``: the scripted outputs' converter, and their words for a misfit."""
+    try:
+        return q.convert(legacy_times(q.rostype, value) if legacy else value)
+    except ProtocolError as exc:
+        raise MockError(prefix + said_of("%s output %r" % (fn.qualified, q.name), exc))
 
 
 def outcome_from_dict(raw: Any) -> Outcome:
@@ -89,26 +173,34 @@ class FunctionMock:
         self._default: Optional[Outcome] = None
 
     def _check(self, outcome: Outcome) -> Outcome:
-        """Complete a succeed's outputs with zero values and check them against the definition."""
+        """Complete a succeed's outputs with the defaults of :func:`_zero` and check them against the definition."""
+        __tracebackhide__ = True
         if outcome.kind == OutcomeKind.SUCCEED:
             outputs = dict(_zero(self.fn), **outcome.outputs)
             try:
                 self.fn.build_result(outputs)
             except ProtocolError as exc:
-                raise MockError("scripted outputs of %s break its definition: %s" % (self.fn.qualified, exc))
+                raise MockError("scripted outputs of %s break its definition: %s" % (self.fn.qualified, exc)) from None
             outcome.outputs = outputs
         return outcome
 
     def script(self, *outcomes: Outcome) -> FunctionMock:
         """Replace the script; the last outcome repeats for further calls."""
-        self.outcomes = [self._check(o) for o in outcomes]
+        __tracebackhide__ = True
+        checked = []
+        for o in outcomes:  # a loop, not a comprehension: no frame of its own for pytest to show
+            checked.append(self._check(o))
+        self.outcomes = checked
         return self
 
     def then(self, *outcomes: Outcome) -> FunctionMock:
-        self.outcomes.extend(self._check(o) for o in outcomes)
+        __tracebackhide__ = True
+        for o in outcomes:
+            self.outcomes.append(self._check(o))
         return self
 
     def succeed(self, delay: float = 0.0, **outputs: Any) -> FunctionMock:
+        __tracebackhide__ = True
         return self.script(succeed(delay, **outputs))
 
     def fail(self, reason: str = "failed (mock)", delay: float = 0.0) -> FunctionMock:
@@ -122,6 +214,7 @@ class FunctionMock:
 
     def fail_first(self, n: int, reason: str = "failed (mock)", **outputs: Any) -> FunctionMock:
         """Fail the first ``n`` calls, then succeed with ``outputs``."""
+        __tracebackhide__ = True
         return self.script(*([fail(reason)] * n + [succeed(**outputs)]))
 
     def next_outcome(self) -> Outcome:
@@ -164,8 +257,11 @@ class Mocks:
         # events tied to a call: (module.function, which of its calls from 1, seconds after it started, module, event, params)
         self.call_events: List[Tuple[str, int, float, str, str, Dict[str, Any]]] = []
         self.errors: List[MockError] = []
+        # values the Blackboard node held before the run: one list per stored() call, oldest first
+        self.stored_values: List[List[StoredEntry]] = []
 
     def __getitem__(self, target: str) -> FunctionMock:
+        __tracebackhide__ = True
         if target not in self._fns:
             mod, _, fname = target.partition(".")
             if mod not in self.definitions:
@@ -173,12 +269,37 @@ class Mocks:
             try:
                 fn = self.definitions[mod].function(fname)
             except ProtocolError as exc:
-                raise MockError(str(exc))
+                raise MockError(str(exc)) from None
             self._fns[target] = FunctionMock(fn)
         return self._fns[target]
 
+    def stored(self, values: Mapping[str, Any]) -> Mocks:
+        """Values the Blackboard node held before the run (stored by earlier runs), so that a
+        ``recall`` of them can succeed: ``{"vision/find_object/room": "kitchen", "text": "yes"}``.
+        Names as a ``recall`` takes them: ``module/function/output``, or a plain ``output`` when
+        exactly one type among the definitions' outputs of that name fits the value (stored as that
+        function's output if only one function has it, else as no particular function's: then only
+        a plain recall finds it). Each call stores values newer than the previous call's, all older
+        than the run's own results (a ``history`` request lists them after those, newest first).
+        MockError (StoredNameError for a name) naming every problem; nothing is stored then."""
+        __tracebackhide__ = True
+        entries: List[StoredEntry] = []
+        problems: List[MockError] = []
+        for name, value in values.items():
+            try:
+                entries.append(stored_value(self.definitions, name, value))
+            except MockError as exc:
+                problems.append(exc)
+        if len(problems) == 1:
+            raise problems[0].with_traceback(None)
+        if problems:
+            raise MockError("; ".join(map(str, problems)))
+        self.stored_values.append(entries)
+        return self
+
     def event(self, at: float, target: str, **params: Any) -> None:
         """Emit ``module.event`` with ``params`` at ``at`` seconds after the start (of the run, or of a mock node)."""
+        __tracebackhide__ = True
         mod, name = self._checked_event(target, params)
         self.scheduled_events.append((float(at), mod, name, dict(params)))
 
@@ -188,6 +309,7 @@ class Mocks:
         ``call`` (``module.function``) started, in process (never if the run makes no such call).
         Against that call's ``delay``: an ``at`` below it comes before its answer, equal to it with
         the answer (the tree takes both at its next tick), above it after the tree took the answer."""
+        __tracebackhide__ = True
         self[call]  # a function there is
         if isinstance(nth, bool) or not isinstance(nth, int) or nth < 1:
             raise MockError("nth is a whole number >= 1, got %r" % (nth,))
@@ -195,6 +317,7 @@ class Mocks:
         self.call_events.append((call, nth, float(at), mod, name, dict(params or {})))
 
     def _checked_event(self, target: str, params: Dict[str, Any]) -> Tuple[str, str]:
+        __tracebackhide__ = True
         mod, _, name = target.partition(".")
         ev = self.definitions.get(mod) and self.definitions[mod].events.get(name)
         if not ev:
@@ -205,7 +328,7 @@ class Mocks:
         try:
             ev.build_values(params)
         except ProtocolError as exc:
-            raise MockError(str(exc))
+            raise MockError(str(exc)) from None
         return mod, name
 
 
@@ -275,6 +398,22 @@ class InProcessTransport(Transport):
             name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
                                executor=executor, scheduler=clock)
             for name, definition in mocks.definitions.items()}
+        if mocks.stored_values:
+            self._seed(clock.now())
+
+    def _seed(self, start: float) -> None:
+        """Store the values of :meth:`Mocks.stored` as the results of earlier calls would be, through
+        the real service: a second apart, the newest a second before ``start`` (the run's own
+        results are newer, by order and by stamp)."""
+        batches = self.mocks.stored_values
+        for i, entries in enumerate(batches):
+            by_function: Dict[Tuple[Optional[str], Optional[str]], List[Tuple[str, Any]]] = {}
+            for mod, fn, name, msg in entries:
+                by_function.setdefault((mod, fn), []).append((name, msg))
+            for (mod, fn), values in by_function.items():
+                result = FunctionResult(names=[n for n, _ in values], msgs=[m for _, m in values],
+                                        basic_mod=mod, function=fn)
+                self.blackboard.on_result(result.encode(), stamp=start - (len(batches) - i))
 
     @property
     def blackboard(self) -> BlackboardService:

@@ -2,7 +2,9 @@
 
 Fixtures:
     bmtree_tree: ``bmtree_tree("trees/x.yaml", inputs={...}, modules=["modules/gripper.json"])`` -> a TreeTest
-        (mocked modules, simulated clock); ``modules`` adds your definitions, as does the ini key ``bmtree_modules``.
+        (mocked modules, simulated clock); ``inputs`` must give every tree input without a default (else a
+        UsageError there); ``modules`` adds your definitions, as does the ini key ``bmtree_modules``. An
+        invalid tree fails the test at that line with its ``file:line:column`` errors, without the kit's frames.
     ros_master: a real ``rosmaster --core`` on a free port for the session (its own ROS_HOME); yields the URI.
     ros_graph: start nodes as processes against that master; they are stopped (by pid) after the test.
     ros_probe: publish/collect topics from the test process (one rospy node per session).
@@ -56,12 +58,13 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
 
 @pytest.fixture
 def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
-    """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=())`` -> TreeTest; ``modules``
-    come after the ini key ``bmtree_modules``'s."""
+    """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=())`` -> TreeTest; ``inputs``
+    gives the tree's inputs (every one without a default); ``modules`` come after the ini key ``bmtree_modules``'s."""
     cov = _coverage(request.config)
     configured = [os.path.abspath(str(p)) for p in request.config.getini("bmtree_modules")]
 
     def make(path: str, **kwargs: Any) -> TreeTest:
+        __tracebackhide__ = True
         given = configured + [os.path.abspath(m) for m in kwargs.get("modules") or ()]
         kwargs["modules"] = list(dict.fromkeys(given))  # a file given both ways is loaded once
         return TreeTest(path, coverage=cov, **kwargs)

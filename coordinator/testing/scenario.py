@@ -4,6 +4,7 @@
     scenarios:
       - name: apple in the kitchen
         inputs: {object: apple}
+        stored: {vision/find_object/room: kitchen}   # what the Blackboard node held before the run
         mocks:
           vision.find_object:
             - succeed: {success: false}
@@ -53,7 +54,15 @@ from coordinator.testing.expected import (
     want_form,
 )
 from coordinator.testing.kit import TreeRun, TreeTest
-from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
+from coordinator.testing.mocks import (
+    MockError,
+    Mocks,
+    StoredEntry,
+    StoredNameError,
+    outcome_from_dict,
+    stored_value,
+)
+from coordinator.treeast import TreeFile
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
@@ -68,9 +77,10 @@ DEFAULT_MAX_TICKS = 100000
 DEFAULT_MAX_TICKS_PER_INSTANT = 10000
 """Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
-_SCENARIO_KEYS = ("name", "inputs", "mocks", "events", "expect") + _LIMITS
+_SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS
 _EXPECT_KEYS = ("status", "calls", "blackboard", "reason")
 _EVENT_KEYS = ("at", "event", "params", "after", "nth")
+_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
 
 
 class _Problems:
@@ -160,9 +170,11 @@ class TickGuard(RunObserver):
         return self.hit
 
 
-def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str, ModuleDefinition]) -> _Scenario:
+def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition],
+              tree: Optional[TreeFile] = None) -> _Scenario:
     """Check one scenario (TreeErrors listing every problem, with positions) and script its mocks and events;
-    ``tree_path`` None: the tree is missing or invalid (already reported), the rest is checked all the same."""
+    ``tree`` (loaded from ``tree_path``) None: the tree is missing or invalid (already reported), the rest is
+    checked all the same."""
     if not isinstance(sc, LMap):
         raise TreeErrors([TreeError(at, "a scenario is a mapping")])
     out = _Problems()
@@ -176,11 +188,16 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str
               "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
     if not isinstance(sc.get("name", ""), str):
         out.add(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))
-    test = TreeTest(tree_path, definitions=defs) if tree_path is not None else None   # valid: checked before
-    if test is not None:
-        _check_inputs(test.tree, inputs, sc, at, out)
-        test.inputs = dict(inputs)
+    test = None
+    if tree is not None:
+        before = len(out.errors)
+        _check_inputs(tree, inputs, sc, at, out)
+        if len(out.errors) == before:   # the tree is valid (checked before), its inputs given
+            test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs))
     mocked = test.mocks if test is not None else Mocks(defs)
+    stored = _stored(sc, at, defs, out)
+    if stored:
+        mocked.stored_values.extend(stored)
     for target, outcomes in mocks.items():
         _script(mocked, mocks, target, outcomes, at, out)
     events = sc.get("events") or []
@@ -194,6 +211,34 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: Optional[str], defs: Dict[str
         raise TreeErrors(out.errors)
     return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
                      {k for k in _LIMITS if k in sc}, calls)
+
+
+def _stored(sc: LMap, at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> List[List[StoredEntry]]:
+    """``stored``: the values the Blackboard node held before the run, a mapping of Blackboard name:
+    value or a list of them (oldest first, for a history), each checked where it is written."""
+    raw = sc.get("stored")
+    if raw is None:
+        return []
+    what = "stored is a mapping of Blackboard name (output or module/function/output): value, or a list of them"
+    if isinstance(raw, LMap):
+        batches, positions = [raw], [pos_of(sc, "stored", at)]
+    elif isinstance(raw, LList) and raw and all(isinstance(b, LMap) for b in raw):
+        batches, positions = list(raw), raw.item_pos
+    else:
+        out.add(pos_of(sc, "stored", at), what)
+        return []
+    found = []
+    for batch, b_at in zip(batches, positions):
+        entries = []
+        for name, value in batch.items():
+            try:
+                entries.append(stored_value(defs, name, value, legacy=True))
+            except StoredNameError as exc:
+                out.add(batch.key_pos.get(name, b_at), str(exc))
+            except MockError as exc:
+                out.add(batch.val_pos.get(name, b_at), str(exc))
+        found.append(entries)
+    return found
 
 
 def _function(defs: Dict[str, ModuleDefinition], target: Any) -> Tuple[Any, str]:
@@ -333,8 +378,9 @@ def _script(mocked: Mocks, mocks: Any, target: Any, outcomes: Any, at: Pos, out:
     for raw, where in zip(outcomes_list, positions):
         try:
             written.append(outcome_from_dict(_legacy_outputs(mock.fn, raw)))
-        except MockError as exc:
-            out.add(where, str(exc))
+        except MockError as exc:  # at a misspelt key (fial:) when there is one
+            out.add(next((raw.key_pos[k] for k in raw if k not in _OUTCOME_KEYS), where)
+                    if isinstance(raw, LMap) else where, str(exc))
             continue
         _check_reason(raw, where, out)
         _check_outputs(mock.fn, raw, out)
@@ -401,6 +447,7 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
     _check_keys(data, ("tree", "scenarios"), "top-level", found)
     errors = found.errors
     defs = definitions if definitions is not None else default_definitions()
+    loaded: Optional[TreeFile] = None
     tree = data["tree"]
     tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(tree))
     if not isinstance(tree, str) or not tree.strip():
@@ -410,17 +457,17 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
                                                            "scenario file's folder)" % tree_path))
     else:
         try:
-            load_tree(tree_path, defs)   # the tree itself, before the scenarios give it inputs
+            loaded = load_tree(tree_path, defs)   # the tree itself, before the scenarios give it inputs
         except TreeErrors as exc:
             errors.extend(exc.errors)
             errors.extend(getattr(exc, "warnings", ()))
     if not data["scenarios"]:
         errors.append(TreeError(pos_of(data, "scenarios", top), "scenarios is empty: write at least one scenario"))
-    usable = tree_path if not errors else None   # else the scenarios are checked without their tree
+    usable = loaded if not errors else None   # else the scenarios are checked without their tree
     scenarios = []
     for i, sc in enumerate(data["scenarios"]):
         try:
-            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], usable, defs))
+            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs, usable))
         except TreeErrors as exc:
             errors.extend(exc.errors)
     if errors:

@@ -95,3 +95,36 @@ def test_your_own_modules_by_keyword_or_by_the_ini_key(pytester):
     pytester.makeini("[pytest]\nbmtree_modules = %s\n" % os.path.relpath(gripper, str(pytester.path)))
     result = pytester.runpytest("-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
+
+
+BAD_TREE_TEST = '''
+def test_bad_tree(bmtree_tree):
+    t = bmtree_tree(%r)
+
+def test_bad_script(bmtree_tree):
+    t = bmtree_tree(%r)
+    t.mocks["navigation.go_to"].fail_first(1, room=3)
+'''
+
+
+def test_a_tree_error_shows_at_the_users_line_without_the_kits_frames(pytester, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: 1\nroot:\n  call: navigation.goto\n")
+    pytester.makepyfile(test_user=BAD_TREE_TEST % (str(bad), os.path.join(TREES, "find_apple.yaml")))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(failed=2)
+    out = result.stdout.str()
+    assert "%s:3:9: " % bad in out and "did you mean 'go_to'" in out
+    assert "MockError: scripted outputs of navigation.go_to break its definition" in out
+    for internal in ("language.py", "kit.py", "plugin.py", "mocks.py", "definition.py", "raise exc.with_traceback"):
+        assert internal not in out, internal
+
+
+def test_a_missing_tree_input_fails_where_the_test_is_made_saying_how(pytester):
+    pytester.makepyfile(test_user="def test_inputs_missing(bmtree_tree):\n    t = bmtree_tree(%r)\n"
+                                  % os.path.join(TREES, "search_room.yaml"))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*UsageError: *search_room.yaml: tree input 'room' must be given: "
+                                 "bmtree_tree(path, inputs={'room': ...})*"])
+    assert "kit.py" not in result.stdout.str()

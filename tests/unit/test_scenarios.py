@@ -319,3 +319,76 @@ def test_expect_reason_is_a_substring_of_the_runs_reason(tmp_path, capsys):
     f.write_text("tree: %s\nscenarios:\n  - expect: {reason: 5}\n" % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 2
     assert "s.yaml:3:22: reason is text that the run's reason must contain, got 5" in capsys.readouterr().err
+
+
+# values stored before the run ---------------------------------------------------------------------
+RECALLING = """format: 1
+name: recalling
+root:
+  sequence:
+    - recall: {room: vision/find_object/room, heard: text}
+    - call: speech.say
+      inputs: {text: "{heard}: the {room}"}
+"""
+
+
+def test_a_scenario_gives_what_the_blackboard_held_before_the_run(tmp_path, capsys):
+    (tmp_path / "t.yaml").write_text(RECALLING)
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: t.yaml\nscenarios:\n"
+                 "  - name: nothing stored\n    expect: {status: failure, reason: the Blackboard has no}\n"
+                 "  - name: stored\n    stored: {vision/find_object/room: kitchen, text: 'yes'}\n"
+                 "    expect: {calls: [speech.say: {text: 'yes: the kitchen'}], blackboard: {room: kitchen}}\n"
+                 "  - name: stored twice, the newer wins\n"
+                 "    stored:\n      - {vision/find_object/room: kitchen, text: 'no'}\n"
+                 "      - {vision/find_object/room: hall, text: 'yes'}\n"
+                 "    expect: {calls: [speech.say: {text: 'yes: the hall'}]}\n")
+    assert bmtree(["test", str(f)]) == 0, capsys.readouterr()
+    assert capsys.readouterr().out.rstrip().endswith("3 passed, 0 failed")
+
+
+def test_stored_names_and_values_are_checked_where_they_are_written(tmp_path, capsys):
+    (tmp_path / "t.yaml").write_text(RECALLING)
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: t.yaml\nscenarios:\n  - stored:\n"
+                 "      vision/find_objet/room: kitchen\n"      # 4
+                 "      vision/find_object/room: [1, 2]\n"      # 5
+                 "      rooom: kitchen\n"                       # 6
+                 "      room: kitchen\n"                        # 7: three functions, one type: fine
+                 "  - stored: [kitchen]\n")                     # 8
+    assert bmtree(["test", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "%s:4:7: stored 'vision/find_objet/room': module 'vision' has no function 'find_objet' (did you mean " \
+           "'find_object'?)" % f in err
+    assert "%s:5:32: stored 'vision/find_object/room': vision.find_object output 'room' takes text" % f in err
+    assert "%s:6:7: stored 'rooom': no function of the definitions has an output 'rooom' (did you mean " \
+           "'room'?)" % f in err
+    assert "%s:8:13: stored is a mapping of Blackboard name" % f in err
+    assert "s.yaml:7:" not in err and err.count("\n") == 4
+
+
+def test_misspelt_outcome_keys_get_a_suggestion_at_the_key(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text("tree: %s\nscenarios:\n  - mocks:\n      navigation.go_to: {fial: blocked}\n"
+                 "      vision.find_object: {succeed: {success: true}, dealy: 2}\n" % os.path.join(TREES, "find_apple.yaml"))
+    assert bmtree(["test", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "%s:4:26: an outcome has one of succeed, fail, reject, hang (and optionally delay), got fial: 'fial' is " \
+           "no key of an outcome (did you mean 'fail'?)" % f in err
+    assert "%s:5:54: an outcome has one of succeed, fail, reject, hang (and optionally delay), got succeed, dealy: " \
+           "'dealy' is no key of an outcome (did you mean 'delay'?)" % f in err
+
+
+def test_the_format_page_says_exactly_what_a_missing_succeed_output_gets(tmp_path):
+    from coordinator.testing import TreeTest
+
+    with open(os.path.join(ROOT, "docs", "scenarios.md"), encoding="utf-8") as fh:
+        doc = fh.read()
+    assert "missing outputs get zero values" not in doc
+    assert "a missing output gets its default, as with no script (`true` for a `std_msgs/Bool` output named " \
+           "`success`, else the empty value of its type)" in doc
+    t = TreeTest(os.path.join(TREES, "find_apple.yaml"))
+    t.mocks["navigation.go_to"].succeed(room="kitchen")
+    t.mocks["vision.find_object"].succeed(room="kitchen")   # no success given: true, and the apple is seen
+    outputs = t.run().calls("navigation.go_to")[0].outputs
+    assert outputs["success"].data is True and outputs["position"].x == 0.0
