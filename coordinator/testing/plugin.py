@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, List
 
 import pytest
 
@@ -31,9 +31,23 @@ def pytest_addoption(parser: Any) -> None:
     group = parser.getgroup("bmtree")
     group.addoption("--bmtree-coverage", action="store_true", default=False,
                     help="report which nodes of the tested trees ran and which outcomes they reached")
-    parser.addini("bmtree_modules", type="pathlist", default=[],
+    parser.addini("bmtree_modules", type="linelist", default=[],
                   help="module definition files or folders every bmtree_tree gets (your own modules), "
-                       "relative to the ini file")
+                       "relative to the ini file; '#' starts a comment")
+
+
+def configured_modules(config: Any) -> List[str]:
+    """The ini key ``bmtree_modules``: paths separated by spaces or lines, relative to the ini file.
+    A ``#`` comment ends a line (pytest's own ``pathlist`` would take each word of an end-of-line
+    comment for a file, and every test would fail)."""
+    base = os.path.dirname(str(config.inipath)) if getattr(config, "inipath", None) else str(config.rootpath)
+    paths = []
+    for line in config.getini("bmtree_modules"):
+        for word in line.split():
+            if word.startswith("#"):
+                break
+            paths.append(os.path.normpath(os.path.join(base, os.path.expanduser(word))))
+    return paths
 
 
 def pytest_configure(config: Any) -> None:
@@ -61,7 +75,7 @@ def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
     """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=())`` -> TreeTest; ``inputs``
     gives the tree's inputs (every one without a default); ``modules`` come after the ini key ``bmtree_modules``'s."""
     cov = _coverage(request.config)
-    configured = [os.path.abspath(str(p)) for p in request.config.getini("bmtree_modules")]
+    configured = configured_modules(request.config)
 
     def make(path: str, **kwargs: Any) -> TreeTest:
         __tracebackhide__ = True

@@ -95,6 +95,11 @@ def test_your_own_modules_by_keyword_or_by_the_ini_key(pytester):
     pytester.makeini("[pytest]\nbmtree_modules = %s\n" % os.path.relpath(gripper, str(pytester.path)))
     result = pytester.runpytest("-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
+    # as the README writes it: an end-of-line comment is no list of files
+    pytester.makeini("[pytest]\nbmtree_modules = %s   # files or folders, relative to this file\n"
+                     "    # one per line\n" % os.path.relpath(gripper, str(pytester.path)))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=2)
 
 
 BAD_TREE_TEST = '''
