@@ -9,7 +9,15 @@ from py_trees.common import Status
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError
-from coordinator.nodes.base import Flow, NodeKind, Option, param_keys, param_type_errors, run_param
+from coordinator.nodes.base import (
+    Flow,
+    NodeKind,
+    Option,
+    param_keys,
+    param_type_errors,
+    repeated_outputs,
+    run_param,
+)
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
@@ -261,6 +269,7 @@ class WaitEventKind(NodeKind):
             return spec
         spec.event = ev
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in ev.params}, "event param")
+        repeated_outputs(p, raw, spec.outputs)
         return spec
 
     def default_name(self, node: TreeNode) -> str:

@@ -109,8 +109,9 @@ class Repeat(Guarded):
                                                               "s" if self.runs > 1 else "")
             return Status.SUCCESS
         if self.runs >= self.times:
-            self.feedback_message = "reached its maximum of %d runs while %s %s" % (
-                self.times, self.spec.cond.text, "was still false" if mode == "until" else "still held")
+            self.feedback_message = "reached its maximum of %d runs while %s %s%s" % (
+                self.times, self.spec.cond.text, "was still false" if mode == "until" else "still held",
+                self.spec.cond.values_read(self.ctx.lookup))
             return Status.FAILURE
         return self.rerun("run %d of at most %d: %s %s not yet" % (self.runs, self.times, mode, self.spec.cond.text))
 

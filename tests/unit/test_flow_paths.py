@@ -176,6 +176,17 @@ def test_two_outputs_to_one_key_are_an_error_at_the_second(tmp_path):
                     "replace the other; give 'text' its own key"]
 
 
+def test_two_params_of_an_event_to_one_key_are_an_error_too(tmp_path):
+    errs = problems(tmp_path, """\
+        format: 1
+        root:
+          wait_event: vision.personSeen
+          outputs: {person: seen, position: seen}
+        """)
+    assert errs == ["t.yaml:4:37: outputs 'person' and 'position' both write tree key 'seen': one value would "
+                    "replace the other; give 'position' its own key"]
+
+
 # 4. keys a subtree replaces on the shared tree blackboard -----------------------------------------
 SUB_LOOK = """\
     format: 1
