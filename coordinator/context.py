@@ -138,6 +138,11 @@ class RunContext:
         if self.observers:
             notify(self.observers, "on_blackboard_write", key, value, self.clock.now())
 
+    def recalled(self, values: List[Dict[str, Any]]) -> None:
+        """Tell the observers what a ``recall`` read and where it came from (see ``RunObserver.on_recall``)."""
+        if self.observers:
+            notify(self.observers, "on_recall", values, self.clock.now())
+
     def wake_after(self, delay: float) -> None:
         """Make the runner tick again after ``delay`` (timeouts, waits, retries)."""
         self.clock.call_later(delay, lambda: self.inbox.put(WAKE))

@@ -53,6 +53,11 @@ class RunObserver:
     def on_blackboard_write(self, key: str, value: Any, now: float) -> None:
         """A tree-blackboard key was written."""
 
+    def on_recall(self, values: List[Dict[str, Any]], now: float) -> None:
+        """A ``recall`` read values from the Blackboard node (before writing them to its keys): per
+        value ``key``, ``name`` asked, ``rostype``, ``value`` (the message) and where it came from,
+        ``basic_mod``, ``function``, ``call_id``, ``stamp`` (an earlier run's result, or this one's)."""
+
     def on_end(self, result: Any) -> None:
         """The run ended (a RunResult, with its reason)."""
 

@@ -195,6 +195,11 @@ class RunStream(RunObserver):
             self._emit("blackboard", {"v": VERSION, "type": "write", "run": self.run_id, "t": self._t(now),
                                       "key": key, "value": plain(value)})
 
+    def on_recall(self, values: List[Dict[str, Any]], now: float) -> None:
+        if self._open:
+            self._emit("blackboard", {"v": VERSION, "type": "recall", "run": self.run_id, "t": self._t(now),
+                                      "values": [dict(v, value=plain(v["value"])) for v in values]})
+
     def on_notice(self, notice: Any, now: float) -> None:
         if self._open:
             self._emit("events", {"v": VERSION, "type": "notice", "run": self.run_id, "t": self._t(now),

@@ -137,6 +137,29 @@ def _events(seen: RunLog, answered: Dict[Any, float], defs: Dict[str, Any]) -> L
     return out
 
 
+def _stored(seen: RunLog, defs: Dict[str, Any]) -> Dict[str, Any]:
+    """What the Blackboard node held before the run, as far as the run's ``recall``s read it: each
+    value recalled that no call of this run produced (an earlier run's result), under the name of
+    the output that stored it (``module/function/output`` when the definitions have it, else the
+    plain name). The run's own results need nothing: the scenario's mocks produce them again."""
+    made = {r.get("call_id") for r in seen.of_type("call_start")}
+    out: Dict[str, Any] = {}
+    for rec in seen.of_type("recall"):
+        for v in rec.get("values") or []:
+            if not isinstance(v, dict) or not isinstance(v.get("name"), str) or (
+                    v.get("call_id") is not None and v.get("call_id") in made):
+                continue
+            output = v["name"].split("/")[-1]
+            mod, fn = v.get("basic_mod"), v.get("function")
+            qualified = "%s/%s/%s" % (mod, fn, output)
+            known = mod in defs and fn in defs[mod].functions and any(
+                q.name == output for q in defs[mod].functions[fn].outputs)
+            name = qualified if known else v["name"]
+            if name not in out:
+                out[name] = v.get("value")
+    return out
+
+
 def seen_until(log: RunLog) -> Tuple[RunLog, float]:
     """A killed run's log cut after its last tick, and that tick's time (seconds, rounded up
     to the microsecond): what the tree had acted on when the log stopped."""
@@ -181,10 +204,13 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
             answered[start.get("call_id")] = float(outcome.get("delay", 0.0))
         calls.append({target: _times(defs, target, "inputs", start.get("inputs"))})
     events = _events(seen, answered, defs)
+    stored = _stored(seen, defs)
     scenario: Dict[str, Any] = {}
     scenario["name"] = "as recorded in run %s" % tree.get("run")
     if tree.get("inputs"):
         scenario["inputs"] = dict(tree["inputs"])
+    if stored:
+        scenario["stored"] = stored
     scenario["mocks"] = mocks
     if events:
         scenario["events"] = events

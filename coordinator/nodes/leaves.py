@@ -66,6 +66,11 @@ class Recall(Leaf):
         if ans.missing or ans.error:
             return self._fail("the Blackboard has no %s%s" % (", ".join(ans.missing), "; " + ans.error if ans.error else ""))
         values = ans.values
+        if self.ctx.observers:  # a run log keeps where each value came from (an earlier run, or this one)
+            at = {n: i for i, n in reversed(list(enumerate(ans.names)))}
+            self.ctx.recalled([dict(
+                ans.sources[at[name]] if at[name] < len(ans.sources) else {}, key=key, name=name,
+                rostype=ans.rostypes[at[name]], value=values[name]) for key, name in self.node.spec.names.items()])
         for key, name in self.node.spec.names.items():
             self.ctx.write(key, values[name])
         return Status.SUCCESS

@@ -517,6 +517,44 @@ def test_scenario_from_a_run_passes_and_a_changed_tree_shows_the_changed_calls(s
                     '+ navigation.go_to {"place": "kitchen"}', '+ navigation.go_to {"place": "kitchen"}']
 
 
+RECALLS = """format: 1
+name: where was it
+root:
+  sequence:
+    - recall: {last_room: vision/find_object/room}
+    - call: navigation.go_to
+      inputs: {place: $last_room}
+    - recall: {arrived: navigation/go_to/room}
+    - call: speech.say
+      inputs: {text: "I am in the {arrived}"}
+"""
+
+
+def test_a_scenario_from_a_run_gives_the_values_recalled_from_earlier_runs_and_only_those(sim_defs, tmp_path):
+    """A recall of a value an earlier run stored could not succeed in the run's scenario: the log
+    keeps where each recalled value came from, and the scenario stores those no call of the run made."""
+    tree = tmp_path / "recalls.yaml"
+    tree.write_text(RECALLS)
+
+    def script(m):
+        m.stored({"vision/find_object/room": "kitchen"})
+        m["navigation.go_to"].succeed(room="kitchen")
+
+    log_path, run = recorded(str(tree), sim_defs, tmp_path, script)
+    assert run.succeeded, run.reason
+    recalls = read_log(log_path).of_type("recall")
+    assert [v["name"] for r in recalls for v in r["values"]] == ["vision/find_object/room", "navigation/go_to/room"]
+    first, second = recalls[0]["values"][0], recalls[1]["values"][0]
+    assert first["value"] == "kitchen" and first["call_id"] not in {c.call_id for c in run.calls()}
+    assert second["call_id"] == run.calls("navigation.go_to")[0].call_id
+    out_path = str(tmp_path / "replayed.yaml")
+    write_scenario(read_log(log_path), out_path)
+    scenario = yaml.safe_load(open(out_path))["scenarios"][0]
+    assert scenario["stored"] == {"vision/find_object/room": "kitchen"}  # not the run's own result
+    out = io.StringIO()
+    assert run_scenario_file(out_path, sim_defs, out) == [True], out.getvalue()
+
+
 def test_a_killed_run_becomes_a_scenario_of_what_the_tree_saw_until_its_last_tick(sim_defs, tmp_path):
     def slow_navigation(m):
         m["navigation.go_to"].script(succeed(room="kitchen", delay=4.0))
