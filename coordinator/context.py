@@ -110,6 +110,10 @@ class RunContext:
         self.calls: List[CallRecord] = []
         self.pending: typing.OrderedDict[str, CallRecord] = OrderedDict()
         self.events: List[Event] = []
+        # per event, the ticks done before it arrived: events with one number came together, between two
+        # ticks, and a wait_event restarted by a loop takes the ones that came with the one it took
+        self.event_ticks: List[int] = []
+        self.ticks_done = 0
         self.notices: List[Notice] = []
         self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
@@ -244,6 +248,7 @@ class RunContext:
                     self.unstored.popitem(last=False)
         elif isinstance(item, Event):
             self.events.append(item)
+            self.event_ticks.append(self.ticks_done)
             if self.observers:
                 notify(self.observers, "on_event", item, self.clock.now())
         elif isinstance(item, BlackboardAnswer):

@@ -193,6 +193,7 @@ class TreeRunner:
     def tick(self) -> None:
         """One tick, its status changes told to the observers (a step of :meth:`run`; benchmarks)."""
         with self.ctx.transport.hold():
+            self.ctx.ticks_done += 1
             self.tree.tick()
         if self._visited is not None:
             self._tell(self._visited.visited)

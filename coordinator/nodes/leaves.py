@@ -223,10 +223,19 @@ class WaitEventSpec:
 
 
 class WaitEvent(Leaf):
-    """SUCCESS at the first ``module.event`` that arrives after the leaf starts."""
+    """SUCCESS at the first ``module.event`` that arrives after the leaf starts.
+
+    Events that arrive together (between two ticks) are one moment for the tree: started again
+    (by a loop) after taking one of them, the leaf first takes the others of that moment, in their
+    order, so that ``repeat … until`` over it sees each one (two people seen at once)."""
+
+    took: Optional[int] = None   # the index of the event the last run took
 
     def initialise(self) -> None:
-        self.seen = len(self.ctx.events)
+        events, ticks = self.ctx.events, self.ctx.event_ticks
+        self.seen = len(events)
+        took, self.took = self.took, None
+        self.together = [] if took is None else [j for j in range(took + 1, self.seen) if ticks[j] == ticks[took]]
         self.timeout, self.reason = run_param(self.node.spec.timeout, self.ctx.lookup, "seconds",
                                               "timeout of wait_event")
         self.deadline = None if self.timeout is None else self.ctx.clock.now() + self.timeout
@@ -238,14 +247,19 @@ class WaitEvent(Leaf):
             return self._fail(self.reason)
         ev_def = self.node.spec.event
         events = self.ctx.events
-        while self.seen < len(events):
-            ev = events[self.seen]
-            self.seen += 1
+        while self.together or self.seen < len(events):
+            if self.together:
+                index = self.together.pop(0)
+            else:
+                index = self.seen
+                self.seen += 1
+            ev = events[index]
             if ev.basic_mod == ev_def.module and ev.event == ev_def.name:
                 values = ev.values
                 for param, key in self.node.spec.outputs.items():
                     if param in values:
                         self.ctx.write(key, values[param])
+                self.took = index
                 return Status.SUCCESS
         if self.deadline is not None and self.ctx.clock.now() >= self.deadline:
             return self._fail("no %s.%s within %gs" % (ev_def.module, ev_def.name, self.timeout))

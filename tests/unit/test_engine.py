@@ -186,6 +186,41 @@ root:
     assert run.succeeded and run.blackboard == {"gave_up": True} and run.duration == pytest.approx(2.0)
 
 
+def test_a_wait_event_in_a_loop_takes_each_of_the_events_that_came_together(tmp_path):
+    """Two people seen at once: a loop over wait_event took Bob, and its next run started after Ana
+    had come (with Bob), so it skipped her and waited out its timeout. Events that come together
+    are one moment: the restarted leaf takes the others of that moment first, then new ones."""
+    t = TreeTest(tree(tmp_path, """
+root:
+  repeat: 10
+  until: 'who == "Ana"'
+  child:
+    wait_event: vision.personSeen
+    outputs: {person: who}
+    timeout: 5
+"""))
+    t.mocks.event(1.0, "vision.personSeen", person="Bob", position={"x": 1.0})
+    t.mocks.event(1.0, "vision.personSeen", person="Ana", position={"x": 1.0})
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert run.blackboard["who"] == "Ana" and run.duration == pytest.approx(1.0)
+    t = TreeTest(tree(tmp_path, """
+root:
+  sequence:
+    - wait: 2
+    - repeat: 2
+      child:
+        wait_event: vision.personSeen
+        outputs: {person: who}
+        timeout: 5
+"""))
+    t.mocks.event(1.0, "vision.personSeen", person="Bob", position={"x": 1.0})  # before the leaf started: not for it
+    t.mocks.event(3.0, "vision.personSeen", person="Ana", position={"x": 1.0})
+    t.mocks.event(4.0, "vision.personSeen", person="Eve", position={"x": 1.0})
+    run = t.run()
+    assert run.succeeded and run.blackboard["who"] == "Eve" and run.duration == pytest.approx(4.0)
+
+
 def test_recall_from_the_blackboard(tmp_path):
     t = TreeTest(tree(tmp_path, """
 root:
