@@ -48,6 +48,7 @@ FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
     "round": ((1, 1), "number", "number"),
     "min": ((1, 8), "number", "number"),
     "max": ((1, 8), "number", "number"),
+    "at": ((2, 2), "", ""),
 }
 
 
@@ -399,6 +400,8 @@ def _apply(name: str, args: List[Any]) -> Any:
         if want and kind_of(a) != want:
             raise ExprError("%s() takes a %s, got %s" % (name, want, _described(a)))
     a = args[0]
+    if name == "at":
+        return _at(a, args[1])
     if name == "len":
         if kind_of(a) not in ("string", "list"):
             raise ExprError("len() takes a string or a list, got %s" % _described(a))
@@ -414,6 +417,20 @@ def _apply(name: str, args: List[Any]) -> Any:
     if name == "round":
         return int(round(a))
     return min(args) if name == "min" else max(args)
+
+
+def _at(seq: Any, i: Any) -> Any:
+    """``at(xs, i)``: the element of ``xs`` at position ``i`` (0 the first, -1 the last), where ``i`` is
+    worked out when the node runs (``xs[0]`` takes a fixed position only)."""
+    seq = unwrap(seq)
+    if kind_of(seq) not in ("list", "string"):
+        raise ExprError("at() takes a list or a string first, got %s" % _described(seq))
+    n = unwrap(i)
+    if kind_of(n) != "number" or isinstance(n, float) and not n.is_integer():
+        raise ExprError("at() takes a whole number as position, got %s" % _described(i))
+    if not -len(seq) <= int(n) < len(seq):
+        raise ExprError("at(): no position %d in a %s of %d" % (n, kind_of(seq), len(seq)))
+    return seq[int(n)]
 
 
 def text_of(v: Any) -> str:
@@ -479,6 +496,13 @@ def _static(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tu
         return "number"
     if op == "call":
         name, args, at = node[1], node[2], node[3]
+        if name == "at":
+            kinds = [_static(arg, key_kind, errors) for arg in args]
+            if kinds[0] not in (None, "list", "string"):
+                errors.append((at, "at() takes a list or a string first, not a %s" % kinds[0]))
+            if len(kinds) > 1 and kinds[1] not in (None, "number"):
+                errors.append((at, "at() takes a number as position, not a %s" % kinds[1]))
+            return None   # an element: its kind is not known here
         want = FUNCTIONS[name][1]
         for arg in args:
             k = _static(arg, key_kind, errors)

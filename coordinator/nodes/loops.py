@@ -181,6 +181,7 @@ class ForEachSpec:
     policy: str = "all"
     max: Any = DEFAULT_MAX
     max_pos: Optional[Pos] = None
+    index: str = ""                 # the tree key the element's position is written to (none if "")
 
 
 class ForEach(Guarded):
@@ -221,6 +222,8 @@ class ForEach(Guarded):
     def _bind(self, i: int) -> None:
         self.i = i
         self.ctx.write(self.spec.key, self.items[i])
+        if self.spec.index:
+            self.ctx.write(self.spec.index, i)
         self.feedback_message = "element %d of %d: %s = %r" % (i + 1, len(self.items), self.spec.key,
                                                                unwrap(self.items[i]))
 
@@ -246,6 +249,8 @@ class ForEachKind(NodeKind):
     value = ("list", "a list: `[a, b]`, `$key` or `$( … )`")
     summary = "run the child once per element, the element written to the key `as` first"
     options = (Option("as", "key", "the tree key each element is written to", required=True),
+               Option("index", "key", "a tree key the element's position is written to (0 for the first: "
+                                      "`$(at(names, i))` reads the same position of another list)", shown="none"),
                CHILD,
                Option("policy", "policy", "`all`: every run must succeed (FAILURE at the first that fails); "
                                           "`one`: SUCCESS at the first run that succeeds (a search)", default="all"),
@@ -265,8 +270,12 @@ class ForEachKind(NodeKind):
         if "as" in raw and (not isinstance(key, str) or not key.isidentifier()):
             p.err(raw.val_pos["as"], "'as' must be a tree key (an identifier), got %r" % (key,))
             key = None
+        index = raw.get("index")
+        if "index" in raw and (not isinstance(index, str) or not index.isidentifier() or index == key):
+            p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier) other than 'as', got %r" % (index,))
+            index = None
         spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all"), limit,
-                           raw.val_pos["max"] if "max" in raw else None)
+                           raw.val_pos["max"] if "max" in raw else None, index or "")
         if "child" in raw:
             p.child(node, raw["child"], raw.val_pos["child"])
         return spec
@@ -287,7 +296,7 @@ class ForEachKind(NodeKind):
         spec = node.spec
         f.need(node, self.reads(node), avail)
         nothing: FrozenSet[str] = frozenset()
-        key = frozenset([spec.key]) if spec.key else nothing
+        key = frozenset(k for k in (spec.key, spec.index) if k)
         ok, failed = f.outcome(node.children[0], avail | key) if node.children else (nothing, nothing)
         run_ok, run_failed = join(key, ok), join(key, failed)
         items = spec.items
@@ -304,7 +313,7 @@ class ForEachKind(NodeKind):
         return ok, failed
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
-        return {node.spec.key: None} if node.spec.key else {}
+        return {k: None for k in (node.spec.key, node.spec.index) if k}
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         spec = node.spec

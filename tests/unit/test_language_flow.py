@@ -421,3 +421,44 @@ def test_endless_seconds_are_refused_by_the_check(tmp_path, node):
     """``.inf`` would make a bounded wait, delay or timeout endless."""
     errs = errors_of(tmp_path, "format: 1\nroot:\n  " + node + "\n")
     assert len(errs) == 1 and "inf" in errs[0] and ("seconds" in errs[0]), errs
+
+
+def test_for_each_index_pairs_an_element_with_the_same_position_of_another_list(tree):
+    """Vision gives names and poses as two lists: `index:` and at() read the same position of both."""
+    t = tree("""
+  for_each: $names
+  as: thing
+  index: i
+  child:
+    call: speech.say
+    inputs: {text: "{thing} is in the {at(rooms, i)}, the last is {at(rooms, -1)}"}
+""", inputs="  names: {default: [cup, apple]}\n  rooms: {default: [kitchen, hall]}\n")
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert said(run) == ["cup is in the kitchen, the last is hall", "apple is in the hall, the last is hall"]
+    assert run.blackboard["i"] == 1
+
+
+def test_at_out_of_range_or_of_the_wrong_kind_fails_or_is_an_error(tree, tmp_path):
+    t = tree("""
+  for_each: [a, b, c]
+  as: x
+  index: i
+  child: {check: 'at(two, i) != ""'}
+""", inputs="  two: {default: [p, q]}\n")
+    run = t.run()
+    assert run.failed and "at(): no position 2 in a list of 2" in run.reason, run.reason
+    with pytest.raises(TreeErrors) as err:
+        tree("""
+  sequence:
+    - call: speech.listen
+      inputs: {seconds: 1}
+      outputs: {success: ok}
+    - for_each: [a]
+      as: x
+      index: x
+      child: {check: 'at(ok, 0)'}
+""")
+    text = str(err.value)
+    assert "'index' must be a tree key (an identifier) other than 'as', got 'x'" in text, text
+    assert "at() takes a list or a string first, not a bool" in text, text
