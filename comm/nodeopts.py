@@ -17,8 +17,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from comm.rpc import proxy
 
-__all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "count",
-           "PORT", "node_name"]
+__all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "factor",
+           "count", "PORT", "node_name"]
 
 
 def seconds(zero: str = "") -> Callable[[Any], float]:
@@ -35,6 +35,22 @@ def seconds(zero: str = "") -> Callable[[Any], float]:
                 "of 0 or more (0: %s)" % zero if zero else "greater than 0", text))
         return value
     parse.__name__ = "seconds"  # argparse names the type in its messages
+    return parse
+
+
+def factor() -> Callable[[Any], float]:
+    """An argparse ``type`` for a factor (``replay --speed``: times the recorded pace): a finite
+    number greater than 0."""
+    def parse(text: Any) -> float:
+        try:
+            value = float(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError("expected a number (a factor, e.g. 2 for twice as fast), got %r" % (text,))
+        if not math.isfinite(value) or value <= 0:
+            raise argparse.ArgumentTypeError("expected a factor greater than 0 (e.g. 2 for twice as fast), got %r"
+                                             % (text,))
+        return value
+    parse.__name__ = "factor"
     return parse
 
 

@@ -8,7 +8,16 @@ from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
 from comm.messages import MIN_MAX_BYTES
-from comm.nodeopts import PORT, count, fill_from_params, myargv, node_params, private_namespace, seconds
+from comm.nodeopts import (
+    PORT,
+    count,
+    factor,
+    fill_from_params,
+    myargv,
+    node_params,
+    private_namespace,
+    seconds,
+)
 from coordinator import __version__
 from coordinator.cliutil import (
     EXIT_ENV,
@@ -321,7 +330,7 @@ def make_parser() -> argparse.ArgumentParser:
     how.add_argument("--step", action="store_true", help="tick by tick (Enter for the next one on a terminal)")
     how.add_argument("--failure", action="store_true", help="jump to the first failing leaf")
     how.add_argument("--scenario", metavar="OUT.yaml", help="write a 'bmtree test' scenario that replays this run")
-    rp.add_argument("--speed", type=seconds(), metavar="X", help="play at X times the recorded pace (on a terminal "
+    rp.add_argument("--speed", type=factor(), metavar="X", help="play at X times the recorded pace (on a terminal "
                                                              "redrawn in place, like the live display)")
     how.add_argument("--web", action="store_true", help="serve the run as a page with a timeline to scrub")
     rp.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")

@@ -22,7 +22,7 @@ from coordinator.cliutil import (
     set_values,
     wait_master,
 )
-from coordinator.errors import TreeErrors, UsageError
+from coordinator.errors import TreeError, TreeErrors, UsageError
 
 __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run"]
 
@@ -128,6 +128,19 @@ def _needs_live_definitions(exc: TreeErrors) -> bool:
     return any(e.message.startswith("unknown module") for e in exc.errors)
 
 
+def _sim_advice(exc: TreeErrors, defs: Dict[str, Any]) -> TreeErrors:
+    """``exc`` with its unknown modules' advice for ``--sim``: a definition alone (``--modules``) does
+    not start a module there, ``--module DEF.json=FILE.py:CLASS`` does."""
+    from coordinator.language import TreeErrorsWithWarnings
+
+    if not any(e.module for e in exc.errors):
+        return exc
+    errors = [TreeError(e.pos, "unknown module %r (known: %s; --sim starts your module beside the simulated robot "
+                               "with --module DEF.json=FILE.py:CLASS)" % (e.module, ", ".join(sorted(defs))), e.module)
+              if e.module else e for e in exc.errors]
+    return TreeErrorsWithWarnings(errors, list(getattr(exc, "warnings", ())))
+
+
 def _other_runs() -> List[str]:
     """The live nodes, other than this one, that publish a run stream's tree on this master."""
     import rosgraph
@@ -221,7 +234,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:  # validate before anything waits: a typo is exit 2 at once, not after --wait seconds
         tree = load_tree(args.tree, defs, given=set(given))
     except TreeErrors as exc:
-        if args.sim or not _needs_live_definitions(exc):
+        if args.sim:
+            raise _sim_advice(exc, defs)
+        if not _needs_live_definitions(exc):
             raise
     if tree is not None:
         _check_given(tree, given, args.tree)

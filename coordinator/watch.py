@@ -134,7 +134,7 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
         watcher attaching in between would load a past state."""
 
         def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Any) -> None:
-            peer_publish(string(to_json(sink.state.snapshot())))
+            peer_publish(string(to_json(sink.snapshot())))
 
     pub = rospy.Publisher("%s/snapshot" % namespace.rstrip("/"), string, queue_size=10, subscriber_listener=CatchUp())
     view = None

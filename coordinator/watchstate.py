@@ -231,18 +231,36 @@ class SnapshotSink(StateSink):
 
     A tick that comes too soon after the last snapshot is published ``interval`` later by a
     timer: the engine is event-driven, so while a long call runs there may be no next tick, and
-    the latched snapshot must not stay behind the run (a watcher attaching then would load it)."""
+    the latched snapshot must not stay behind the run (a watcher attaching then would load it).
 
-    def __init__(self, publish: Callable[[str], None], interval: float = 0.5):
+    A snapshot is stamped with the run's time when it is taken (``clock`` is the run's clock:
+    its ``tree`` record, on the ``tree`` channel, is the run's time 0), not with its last record's:
+    a watcher attaching 3 s into a 5 s wait sees the state of that moment."""
+
+    def __init__(self, publish: Callable[[str], None], interval: float = 0.5,
+                 clock: Callable[[], float] = time.monotonic):
         super().__init__(WatchState())
         self.publish = publish
         self.interval = interval
+        self.clock = clock
+        self._zero: Optional[float] = None  # clock() at the run's tree record (its t 0)
         self._last = 0.0
         self._lock = threading.Lock()
         self._timer: Optional[threading.Timer] = None
         self._closed = False
 
+    def snapshot(self) -> Dict[str, Any]:
+        """The run's state now, as a ``snapshot`` record whose ``t`` is the run's time now
+        (the time of the end for an ended run)."""
+        with self.state.lock:
+            snap = self.state.snapshot()
+            if self._zero is not None and self.state.end is None:
+                snap["t"] = max(float(snap["t"]), round(self.clock() - self._zero, 6))
+            return snap
+
     def write(self, channel: str, text: str) -> None:
+        if channel == "tree":
+            self._zero = self.clock()
         super().write(channel, text)
         if channel == "control":  # while paused there are no ticks: publish now
             with self._lock:
@@ -251,7 +269,7 @@ class SnapshotSink(StateSink):
 
     def _publish_now(self) -> None:  # with self._lock held
         self._last = time.monotonic()
-        self.publish(to_json(self.state.snapshot()))
+        self.publish(to_json(self.snapshot()))
 
     def flush(self) -> None:
         with self._lock:

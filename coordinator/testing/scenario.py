@@ -445,7 +445,8 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     found = _Problems()
     _check_keys(data, ("tree", "scenarios"), "top-level", found)
-    errors = found.errors
+    errors = found.errors   # the scenario file's own
+    tree_errors: List[TreeError] = []   # its tree's (and its warnings): said first
     defs = definitions if definitions is not None else default_definitions()
     loaded: Optional[TreeFile] = None
     tree = data["tree"]
@@ -459,20 +460,30 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
         try:
             loaded = load_tree(tree_path, defs)   # the tree itself, before the scenarios give it inputs
         except TreeErrors as exc:
-            errors.extend(exc.errors)
-            errors.extend(getattr(exc, "warnings", ()))
+            tree_errors = list(exc.errors) + list(getattr(exc, "warnings", ()))
     if not data["scenarios"]:
         errors.append(TreeError(pos_of(data, "scenarios", top), "scenarios is empty: write at least one scenario"))
-    usable = loaded if not errors else None   # else the scenarios are checked without their tree
+    usable = loaded if not errors and not tree_errors else None   # else the scenarios are checked without it
     scenarios = []
     for i, sc in enumerate(data["scenarios"]):
         try:
             scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs, usable))
         except TreeErrors as exc:
             errors.extend(exc.errors)
-    if errors:
-        raise TreeErrors(errors)
+    if errors or tree_errors:
+        raise _FileErrors(tree_errors, errors)
     return scenarios
+
+
+class _FileErrors(TreeErrors):
+    """A scenario file's problems as docs/scenarios.md says: its tree's errors and warnings (in the
+    tree's file order), then the scenario file's own (in its order), whatever the files' names."""
+
+    def __init__(self, tree_errors: List[TreeError], own: List[TreeError]):
+        super().__init__(own)
+        in_order = sorted(set(tree_errors), key=lambda e: (e.pos.file, e.pos.line, e.pos.column, e.message))
+        self.errors = in_order + self.errors
+        self.args = ("\n".join(str(e) for e in self.errors),)
 
 
 def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:

@@ -37,6 +37,20 @@ def _sim_functions() -> List[str]:
     return sorted(fn.qualified for d in defs.values() for fn in d.functions.values())
 
 
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _default_data() -> Dict[str, Any]:
+    """The default house's top-level keys, as its file writes them."""
+    with open(DEFAULT_WORLD, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    return data if isinstance(data, dict) else {}
+
+
 @dataclass
 class Fault:
     """An outcome that replaces a function's own answer, for ``times`` calls (None: all).
@@ -118,6 +132,8 @@ class World:
     @classmethod
     def load(cls, path: str = DEFAULT_WORLD, others: Any = ()) -> World:
         """The world in ``path``; WorldError says where when it cannot be read or is not valid.
+        Each top-level key the file leaves out is the default house's (``DEFAULT_WORLD``), so a
+        file of ``faults:`` alone is the default house with those faults (see ``from_dict``'s ``base``).
         ``others``: the ``module.function`` of the user's own modules its faults may name too (the
         ``--module`` of ``bmtree run --sim``), or True for any function of a module that is not
         simulated (a simulated module's node, which knows only its own)."""
@@ -132,16 +148,43 @@ class World:
             mark = getattr(exc, "problem_mark", None)
             where = "%s:%d:%d" % (path, mark.line + 1, mark.column + 1) if mark is not None else path
             raise WorldError("%s: not valid YAML: %s" % (where, getattr(exc, "problem", None) or exc))
-        return cls.from_dict(data, path, others)
+        if data is None:  # an empty file: the default house as it is
+            data = {}
+        base = None
+        if not _same_file(path, DEFAULT_WORLD):
+            base = _default_data()
+        return cls.from_dict(data, path, others, base=base)
 
     @classmethod
-    def from_dict(cls, data: Any, source: str = "<world>", others: Any = ()) -> World:
+    def from_dict(cls, data: Any, source: str = "<world>", others: Any = (), base: Optional[Dict[str, Any]] = None
+                  ) -> World:
+        """The world ``data`` describes (``source`` names it in errors; ``others`` as in ``load``).
+
+        ``base``: a world (the default house) whose value of each top-level key ``data`` leaves out is
+        taken as it is; a key ``data`` gives replaces it whole. So ``data`` that gives ``rooms`` is a
+        house of its own: the places, objects, people and start it takes from ``base`` must be in its
+        rooms, and an error says which key came from ``base`` and that it must be given too.
+        """
         if not isinstance(data, dict):
             raise WorldError("%s: the world must be a mapping" % source)
         for key in data:  # a misspelt key would silently leave its part of the world out
             if key not in _WORLD_KEYS:
                 raise WorldError("%s: unknown key %r%s (a world has %s)" % (
                     source, key, did_you_mean(str(key), _WORLD_KEYS), ", ".join(_WORLD_KEYS)))
+        inherited = set()  # the top-level keys taken from base
+        if base is not None:
+            inherited = {k for k in base if k not in data}
+            data = dict(data, **{k: base[k] for k in inherited})
+
+        def why(key: str) -> str:
+            """What to add to an unknown-room error of ``key``: which part came from the default house."""
+            if key in inherited and "rooms" not in inherited:
+                return (" (%s is the default house's, %s: a world that gives rooms: must give a consistent house:"
+                        " give %s: too%s)" % (key, DEFAULT_WORLD, key,
+                                             "" if key == "start" else ", %s: {} for none" % key))
+            if key not in inherited and "rooms" in inherited:
+                return " (the rooms are the default house's, %s: give rooms: for others)" % DEFAULT_WORLD
+            return ""
         known = _sim_functions()
         simulated = {f.split(".")[0] for f in known}
         for key in data.get("faults") or {}:
@@ -159,7 +202,7 @@ class World:
                 out = {}
                 for n, t in (data.get(key) or {}).items():
                     if t["room"] not in rooms:
-                        raise WorldError("%s: %s.%s.room: unknown room %r" % (source, key, n, t["room"]))
+                        raise WorldError("%s: %s.%s.room: unknown room %r%s" % (source, key, n, t["room"], why(key)))
                     out[n] = Thing(n, t["room"], float(t["x"]), float(t["y"]), float(t.get("z", 0.0)),
                                    [str(a) for a in t.get("answers", [])])
                 return out
@@ -173,7 +216,7 @@ class World:
                 raise
             raise WorldError("%s: malformed world: %s" % (source, exc))
         if world.start not in rooms:
-            raise WorldError("%s: start: unknown room %r" % (source, world.start))
+            raise WorldError("%s: start: unknown room %r%s" % (source, world.start, why("start")))
         if world.speed <= 0:
             raise WorldError("%s: speed must be positive" % source)
         return world
