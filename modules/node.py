@@ -319,7 +319,7 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
         sys.modules[mod_name] = module
         sp.loader.exec_module(module)
     else:
-        module = importlib.import_module(where)
+        module = _import_module(where, spec)
     cls = getattr(module, cls_name, None)
     if cls is None:
         from comm.errors import did_you_mean
@@ -331,6 +331,26 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
         raise ValueError("%s: %s is not a subclass of BasicModule (from modules.runtime import BasicModule; "
                          "class %s(BasicModule): ...)" % (where, cls_name, cls_name))
     return cls
+
+
+def _import_module(name: str, spec: str) -> Any:
+    """``import name`` for ``--class name:CLASS``; a module that is not on the path is a ValueError
+    that says how to give its file instead (the current directory is not searched: it is not on
+    the path of a node)."""
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        missing = exc.name or ""
+        if not missing or not (name == missing or name.startswith(missing + ".")):
+            raise  # the module was found, and something it imports was not: said where it imports it
+        cls_name = spec.rsplit(":", 1)[1]
+        path = os.path.join(*name.split(".")) + ".py"
+        if os.path.isfile(path):
+            hint = "give the file, --class %s:%s" % (path, cls_name)
+        else:
+            hint = ("MODULE must be importable (on PYTHONPATH, or installed); --class FILE.py:%s loads a file "
+                    "directly" % cls_name)
+        raise ValueError("%s: no Python module %r on the path (PYTHONPATH): %s" % (spec, name, hint))
 
 
 def _where(exc: BaseException, spec: str) -> str:

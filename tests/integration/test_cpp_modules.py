@@ -565,6 +565,7 @@ def test_an_installed_library_is_found_by_find_package(gripper_exe, tmp_path):
     out = subprocess.run(["cmake", "--install", os.path.dirname(gripper_exe), "--prefix", str(prefix)],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    assert not (prefix / "bin").exists(), os.listdir(str(prefix / "bin"))  # the library only: no example in bin
     project = tmp_path / "my_module"
     project.mkdir()
     (project / "CMakeLists.txt").write_text(

@@ -2,6 +2,7 @@
 start-up checks of a module class, the catkin package's files."""
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import subprocess
@@ -381,13 +382,15 @@ def test_launch_files_use_the_package_executables():
         for node in root.iter("node"):
             if node.get("pkg") == "bmtree":
                 assert node.get("type") in nodes, (name, node.get("type"))
-    for n in nodes:
+    scripts = [n for n in nodes if n.startswith("bmtree") and not n.endswith(".py")]
+    assert len(scripts) == 5, scripts
+    for n in scripts:
         path = os.path.join(ROOT, "nodes", n)
         assert os.access(path, os.X_OK), path
         with open(path) as fh:
-            module = re.search(r"^from (\S+) import main$", fh.read(), re.M).group(1)
+            module = re.search(r'^    sys.exit\(run\("([\w.]+)"\)\)$', fh.read(), re.M).group(1)
         if n != "bmtree-bridge" or os.path.exists(os.path.join(ROOT, "modules", "bridge.py")):
-            __import__(module)
+            assert callable(importlib.import_module(module).main), module
 
 
 def test_package_xml_names_its_dependencies_by_rosdep_keys():
