@@ -38,6 +38,10 @@ class Outcome:
     ``fn`` for respond: called with the call's inputs (as the method gets them), it returns
     the outputs or another Outcome; without ``fn``, the module's own method answers (a fault
     that only delays).
+
+    ``ignores_cancel``: a cancel does not end the delay (an original module behind the bridge,
+    or a function that never looks at its cancel): the call is answered ``cancelled`` after the
+    runtime's grace, and the module stays busy until the delay is over.
     """
 
     kind: OutcomeKind
@@ -45,6 +49,7 @@ class Outcome:
     reason: str = ""
     delay: float = 0.0
     fn: Optional[Callable[..., Any]] = None
+    ignores_cancel: bool = False
 
     def __post_init__(self) -> None:
         self.kind = OutcomeKind(self.kind)
@@ -76,6 +81,7 @@ def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
 
 
 _WRITTEN = ("succeed", "fail", "reject", "hang")
+_OPTIONS = ("delay", "ignores_cancel")
 
 
 def outcome_from_dict(raw: Any) -> Outcome:
@@ -84,10 +90,10 @@ def outcome_from_dict(raw: Any) -> Outcome:
     if not isinstance(raw, dict):
         raise OutcomeError("an outcome is a mapping such as {succeed: {...}} or {fail: reason}, got %r" % (raw,))
     kinds = [k for k in raw if k in _WRITTEN]
-    extra = [k for k in raw if k not in _WRITTEN and k != "delay"]
+    extra = [k for k in raw if k not in _WRITTEN and k not in _OPTIONS]
     if len(kinds) != 1 or extra:
-        hints = ["%r is no key of an outcome%s" % (k, did_you_mean(k, _WRITTEN + ("delay",))) for k in extra]
-        raise OutcomeError("an outcome has one of %s (and optionally delay), got %s%s" % (
+        hints = ["%r is no key of an outcome%s" % (k, did_you_mean(k, _WRITTEN + _OPTIONS)) for k in extra]
+        raise OutcomeError("an outcome has one of %s (and optionally delay, ignores_cancel), got %s%s" % (
             ", ".join(_WRITTEN), ", ".join(map(str, raw)), ": " + "; ".join(hints) if hints else ""))
     kind = kinds[0]
     try:
@@ -96,16 +102,22 @@ def outcome_from_dict(raw: Any) -> Outcome:
         raise OutcomeError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
     if not delay >= 0 or delay == float("inf"):  # NaN fails the first test
         raise OutcomeError("delay must be a finite number of seconds, 0 or more, got %r" % (raw.get("delay"),))
+    ignores = raw.get("ignores_cancel", False)
+    if not isinstance(ignores, bool):
+        raise OutcomeError("ignores_cancel is true or false, got %r" % (ignores,))
     if kind == "succeed":
         outputs = raw["succeed"] or {}
         if not isinstance(outputs, dict):
             raise OutcomeError("succeed takes a mapping of outputs, got %r" % (outputs,))
-        return succeed(delay, **{str(k): v for k, v in outputs.items()})
-    if kind == "fail":
-        return fail(str(raw["fail"]), delay)
-    if kind == "reject":
-        return reject(str(raw["reject"]), delay)
-    return hang()
+        out = succeed(delay, **{str(k): v for k, v in outputs.items()})
+    elif kind == "fail":
+        out = fail(str(raw["fail"]), delay)
+    elif kind == "reject":
+        out = reject(str(raw["reject"]), delay)
+    else:
+        out = hang()
+    out.ignores_cancel = ignores
+    return out
 
 
 def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
@@ -118,4 +130,6 @@ def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
     out: Dict[str, Any] = {kind.value: value}
     if outcome.delay:
         out["delay"] = outcome.delay
+    if outcome.ignores_cancel:
+        out["ignores_cancel"] = True
     return out

@@ -427,6 +427,11 @@ class ModuleServer:
 
     def _follow(self, call: _Call, outcome: Outcome) -> None:
         """Carry out ``outcome`` on the module's clock."""
+        if outcome.ignores_cancel:  # busy as if its code ran: a cancel answers after the grace, the module stays held
+            with self._lock:
+                if call.answered:
+                    return
+                call.running = True
         if outcome.delay > 0:
             self.scheduler.call_later(outcome.delay, lambda: self.executor.submit(self._effect, call, outcome))
         else:
@@ -435,10 +440,15 @@ class ModuleServer:
     def _effect(self, call: _Call, outcome: Outcome) -> None:
         kind = outcome.kind
         with self._lock:
-            if call.answered:  # cancelled meanwhile
-                return
-            if kind == OutcomeKind.RESPOND:
+            if outcome.ignores_cancel and kind != OutcomeKind.HANG:
+                call.running = False
+            answered = call.answered
+            if not answered and kind == OutcomeKind.RESPOND:
                 call.running = True
+        if answered:  # cancelled meanwhile: an outcome that ignored the cancel frees the module only now
+            if outcome.ignores_cancel:
+                self._finish(call, self._cancelled(call))
+            return
         if kind == OutcomeKind.RESPOND:
             self._run(call, outcome.fn or getattr(self.impl, call.fn.name))
         elif kind == OutcomeKind.SUCCEED:

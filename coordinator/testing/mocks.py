@@ -12,6 +12,7 @@ through the real service, as results of earlier runs would.
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
@@ -171,6 +172,7 @@ class FunctionMock:
         self.outcomes: List[Outcome] = []
         self.calls: List[Dict[str, Any]] = []
         self._default: Optional[Outcome] = None
+        self.ignores_cancel = False   # every outcome ignores cancels (see ignoring_cancels)
 
     def _check(self, outcome: Outcome) -> Outcome:
         """Complete a succeed's outputs with the defaults of :func:`_zero` and check them against the definition."""
@@ -225,6 +227,13 @@ class FunctionMock:
         index = min(len(self.calls) - 1, len(self.outcomes) - 1)
         return self.outcomes[index]
 
+    def ignoring_cancels(self) -> FunctionMock:
+        """Every outcome ignores cancels, as an original module behind ``bmtree-bridge`` does (it
+        cannot be interrupted): a halted call is answered ``cancelled`` after the runtime's grace,
+        and the module stays busy (``rejected: busy``) until the scripted delay is over."""
+        self.ignores_cancel = True
+        return self
+
     def answer(self, inputs: Dict[str, Any], errors: List[MockError]) -> Outcome:
         """Record a call (its inputs as plain data) and give its outcome; a respond's function
         gets the plain inputs, and its outputs are completed and checked like a succeed's (a
@@ -232,6 +241,8 @@ class FunctionMock:
         plain_inputs = {k: plain(v) for k, v in inputs.items()}
         self.calls.append(plain_inputs)
         outcome = self.next_outcome()
+        if self.ignores_cancel:
+            outcome = dataclasses.replace(outcome, ignores_cancel=True)
         if outcome.kind != OutcomeKind.RESPOND or outcome.fn is None:
             return outcome
         user_fn = outcome.fn
@@ -239,12 +250,13 @@ class FunctionMock:
         def compute(**_messages: Any) -> Outcome:
             out = user_fn(**plain_inputs)
             try:
-                return self._check(out if isinstance(out, Outcome) else succeed(**(out or {})))
+                checked = self._check(out if isinstance(out, Outcome) else succeed(**(out or {})))
             except MockError as exc:
                 errors.append(exc)
                 raise
+            return dataclasses.replace(checked, ignores_cancel=True) if self.ignores_cancel else checked
 
-        return respond(compute, outcome.delay)
+        return dataclasses.replace(respond(compute, outcome.delay), ignores_cancel=outcome.ignores_cancel)
 
 
 class Mocks:
@@ -295,6 +307,22 @@ class Mocks:
         if problems:
             raise MockError("; ".join(map(str, problems)))
         self.stored_values.append(entries)
+        return self
+
+    def ignoring_cancels(self, *targets: str) -> Mocks:
+        """``module`` or ``module.function``: its outcomes ignore cancels, as an original module
+        behind ``bmtree-bridge`` (see :meth:`FunctionMock.ignoring_cancels`)."""
+        __tracebackhide__ = True
+        for target in targets:
+            mod, _, fname = target.partition(".")
+            if not fname:
+                if mod not in self.definitions:
+                    raise MockError("no module %r to mock%s" % (mod, did_you_mean(mod, self.definitions)
+                                                                  or " (known: %s)" % ", ".join(sorted(self.definitions))))
+                for name in self.definitions[mod].functions:
+                    self["%s.%s" % (mod, name)].ignoring_cancels()
+            else:
+                self[target].ignoring_cancels()
         return self
 
     def event(self, at: float, target: str, **params: Any) -> None:

@@ -373,9 +373,9 @@ def test_misspelt_outcome_keys_get_a_suggestion_at_the_key(tmp_path, capsys):
                  "      vision.find_object: {succeed: {success: true}, dealy: 2}\n" % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 2
     err = capsys.readouterr().err
-    assert "%s:4:26: an outcome has one of succeed, fail, reject, hang (and optionally delay), got fial: 'fial' is " \
+    assert "%s:4:26: an outcome has one of succeed, fail, reject, hang (and optionally delay, ignores_cancel), got fial: 'fial' is " \
            "no key of an outcome (did you mean 'fail'?)" % f in err
-    assert "%s:5:54: an outcome has one of succeed, fail, reject, hang (and optionally delay), got succeed, dealy: " \
+    assert "%s:5:54: an outcome has one of succeed, fail, reject, hang (and optionally delay, ignores_cancel), got succeed, dealy: " \
            "'dealy' is no key of an outcome (did you mean 'delay'?)" % f in err
 
 
