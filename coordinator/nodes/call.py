@@ -83,8 +83,9 @@ class Call(Leaf):
             return self._fail(self.reason)
         result = rec.result
         if result is None:
-            if rec.ended is not None:
-                return self._fail(rec.error or rec.status)
+            if rec.ended is not None:  # ended without an answer (its module was lost): say which call
+                return self._fail("%s %s: %s" % (rec.target, rec.status, rec.error) if rec.error
+                                  else "%s %s" % (rec.target, rec.status))
             if self.ctx.clock.now() >= self.deadline:
                 self.ctx.cancel(rec, RecordStatus.TIMEOUT, "no answer within %gs" % self.timeout)
                 return self._fail("%s: no answer within %gs" % (rec.target, self.timeout))

@@ -108,7 +108,7 @@ def test_a_run_reports_module_lost_long_before_the_call_timeout(ros_graph, tmp_p
     finally:
         stop_run(run)
     assert run.returncode == 1, out
-    assert "module_lost" in out and "module probe lost" in out, out
+    assert "module_lost" in out and "probe.work module_lost: module probe lost" in out, out
 
 
 def test_a_blackboard_restarted_while_a_result_came_makes_the_recall_fail_not_stale(ros_graph, tmp_path):
