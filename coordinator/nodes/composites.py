@@ -100,9 +100,10 @@ class Selector(_Composite):
 
 class Parallel(_Composite):
     name = "parallel"
-    summary = "children ticked together"
+    summary = "children ticked together; under either policy it fails as soon as one child fails, halting the others"
     options = (Option("policy", "policy", "`all`: succeed when all do; `one`: succeed when one does, halting the "
-                                          "others", default="all"),
+                                          "others (a child that fails first still fails the parallel: wrap it in "
+                                          "`force_success` to let the others go on)", default="all"),
                Option("synchronise", "bool", "with `all`, a child that succeeded is not ticked again",
                       default=True))
 
