@@ -218,7 +218,7 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
 def cmd_test(args: argparse.Namespace) -> int:
     from coordinator.testing.scenario import run_scenarios
 
-    return run_scenarios(args.scenarios, modules=args.modules)
+    return run_scenarios(args.scenarios, modules=args.modules, coverage=args.coverage)
 
 
 def cmd_runs(args: argparse.Namespace) -> int:
@@ -316,6 +316,8 @@ def make_parser() -> argparse.ArgumentParser:
     dump.set_defaults(func=cmd_blackboard)
     t = sub.add_parser("test", help="run YAML test scenarios against mocked modules")
     t.add_argument("scenarios", nargs="+")
+    t.add_argument("--coverage", action="store_true",
+                   help="then report which nodes of the trees ran and which outcomes they reached")
     with_modules(t)
     t.set_defaults(func=cmd_test)
     rs = sub.add_parser("runs", help="list recorded runs (newest first)")

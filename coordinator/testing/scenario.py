@@ -53,7 +53,7 @@ from coordinator.testing.expected import (
     legacy_times,
     want_form,
 )
-from coordinator.testing.kit import TreeRun, TreeTest
+from coordinator.testing.kit import Coverage, TreeRun, TreeTest
 from coordinator.testing.mocks import (
     MockError,
     Mocks,
@@ -171,7 +171,7 @@ class TickGuard(RunObserver):
 
 
 def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition],
-              tree: Optional[TreeFile] = None) -> _Scenario:
+              tree: Optional[TreeFile] = None, coverage: Optional[Coverage] = None) -> _Scenario:
     """Check one scenario (TreeErrors listing every problem, with positions) and script its mocks and events;
     ``tree`` (loaded from ``tree_path``) None: the tree is missing or invalid (already reported), the rest is
     checked all the same."""
@@ -193,7 +193,7 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
         before = len(out.errors)
         _check_inputs(tree, inputs, sc, at, out)
         if len(out.errors) == before:   # the tree is valid (checked before), its inputs given
-            test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs))
+            test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs), coverage=coverage)
     mocked = test.mocks if test is not None else Mocks(defs)
     stored = _stored(sc, at, defs, out)
     if stored:
@@ -430,8 +430,10 @@ def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
             out.add(outputs.val_pos[name], said_of("%s output %r" % (fn.qualified, name), exc))
 
 
-def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None) -> List[_Scenario]:
-    """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file."""
+def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
+                       coverage: Optional[Coverage] = None) -> List[_Scenario]:
+    """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file.
+    ``coverage``: record which nodes of the trees ran (``bmtree test --coverage``)."""
     top = Pos(path, 1, 1)
     try:  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
         text = read_text(path)
@@ -467,7 +469,7 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
     scenarios = []
     for i, sc in enumerate(data["scenarios"]):
         try:
-            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs, usable))
+            scenarios.append(_scenario(sc, i, data["scenarios"].item_pos[i], tree_path, defs, usable, coverage))
         except TreeErrors as exc:
             errors.extend(exc.errors)
     if errors or tree_errors:
@@ -526,11 +528,11 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
 
 
 def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
-                      out: Optional[TextIO] = None) -> List[bool]:
+                      out: Optional[TextIO] = None, coverage: Optional[Coverage] = None) -> List[bool]:
     """Run every scenario of a file (all checked first); one PASS/FAIL line each. TreeErrors for a bad file."""
     out = out or sys.stdout
     results = []
-    for s in load_scenario_file(path, definitions):
+    for s in load_scenario_file(path, definitions, coverage):
         t0 = time.perf_counter()
         run, problems = _run(s)
         ms = (time.perf_counter() - t0) * 1000
@@ -542,15 +544,18 @@ def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinitio
     return results
 
 
-def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None) -> int:
-    """``bmtree test``: exit 0 if every scenario passed, 1 if one failed, 2 for an invalid file."""
+def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None,
+                  coverage: bool = False) -> int:
+    """``bmtree test``: exit 0 if every scenario passed, 1 if one failed, 2 for an invalid file;
+    ``coverage``: then which nodes of the trees ran and which outcomes they reached."""
     out = out or sys.stdout
     defs = default_definitions(modules or ())
+    cov = Coverage() if coverage else None
     results: List[bool] = []
     invalid = 0  # files
     for path in paths:
         try:
-            results.extend(run_scenario_file(path, defs, out))
+            results.extend(run_scenario_file(path, defs, out, cov))
         except TreeErrors as exc:
             sys.stderr.write(str(exc) + "\n")
             invalid += 1
@@ -560,6 +565,8 @@ def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Op
     passed = sum(results)
     out.write("%d passed, %d failed%s\n" % (passed, len(results) - passed, ", %d scenario file%s not valid (above)" % (
         invalid, " is" if invalid == 1 else "s are") if invalid else ""))
+    if cov is not None and cov.trees:
+        out.write(cov.report() + "\n")
     if invalid:
         return 2
     return 0 if passed == len(results) else 1

@@ -392,3 +392,13 @@ def test_the_format_page_says_exactly_what_a_missing_succeed_output_gets(tmp_pat
     t.mocks["vision.find_object"].succeed(room="kitchen")   # no success given: true, and the apple is seen
     outputs = t.run().calls("navigation.go_to")[0].outputs
     assert outputs["success"].data is True and outputs["position"].x == 0.0
+
+
+def test_bmtree_test_coverage_says_which_nodes_the_scenarios_reached(capsys):
+    """Scenario users (no Python) get the coverage report pytest --bmtree-coverage gives."""
+    path = os.path.join(ROOT, "tests", "scenarios", "find_apple.scenarios.yaml")
+    assert bmtree(["test", "--coverage", path]) == 0
+    out = capsys.readouterr().out
+    assert "bmtree tree coverage" in out and "trees/find_apple.yaml: 9 of 9 nodes ran" in out, out
+    assert "trees/find_apple.yaml:25: call 'approach the apple' reached SUCCESS; never FAILURE" in out, out
+    assert bmtree(["test", path]) == 0 and "coverage" not in capsys.readouterr().out
