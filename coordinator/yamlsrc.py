@@ -11,8 +11,8 @@ import yaml
 
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_value", "load_yaml", "pos_of", "read_text", "settle",
-           "text_pos"]
+__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_file", "load_value", "load_yaml", "pos_of", "read_text",
+           "settle", "text_pos"]
 
 
 class OnDemandPos:
@@ -411,6 +411,19 @@ def read_text(path: str, limit: Optional[int] = None) -> str:
         raise OSError(errno.EFBIG, "larger than %d MiB" % (limit >> 20) if limit >= 1 << 20
                       else "larger than %d bytes" % limit)
     return data.decode("utf-8")
+
+
+def load_file(path: str) -> Any:
+    """A YAML file (:func:`read_text`'s limits) as position-carrying data; a file that cannot be read
+    or is not UTF-8 is a TreeErrors at its start or at the bad byte, as a syntax error is."""
+    try:
+        text = read_text(path)
+    except OSError as exc:
+        raise TreeErrors([TreeError(Pos(path, 1, 1), "cannot read %s: %s" % (path, exc.strerror or exc))])
+    except UnicodeDecodeError as exc:
+        raise TreeErrors([TreeError(Pos(path, *text_pos(exc.object, exc.start)),
+                                    "not UTF-8 text: byte 0x%02x" % exc.object[exc.start])])
+    return load_yaml(text, path)
 
 
 def load_yaml(text: str, file: str) -> Any:

@@ -37,7 +37,7 @@ from coordinator.testing.mocks import (
     outcome_from_dict,
     outcome_to_dict,
 )
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
+from coordinator.yamlsrc import LList, LMap, load_file, pos_of
 from modules.definition import DefinitionError, ModuleDefinition, default_module_paths, load_definitions
 
 __all__ = ["load_script", "scripted_module", "script_of", "start_mock_node", "main"]
@@ -80,14 +80,7 @@ def load_script(path: str, definitions: Dict[str, ModuleDefinition]) -> Tuple[Mo
     from coordinator.testing.scenario import _check_outputs, _check_reason
 
     top = Pos(path, 1, 1)
-    try:
-        text = read_text(path)
-    except OSError as exc:
-        raise TreeErrors([TreeError(top, "cannot read %s: %s" % (path, exc.strerror or exc))])
-    except UnicodeDecodeError as exc:
-        raise TreeErrors([TreeError(Pos(path, *text_pos(exc.object, exc.start)),
-                                    "not UTF-8 text: byte 0x%02x" % exc.object[exc.start])])
-    data = load_yaml(text, path)
+    data = load_file(path)  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
     known = " (known: %s)" % (", ".join(sorted(definitions)) or "none")
     if not isinstance(data, LMap) or "module" not in data:
         raise TreeErrors([TreeError(getattr(data, "pos", None) or top, "a mock node's script needs 'module: NAME', "

@@ -63,7 +63,7 @@ from coordinator.testing.mocks import (
     stored_value,
 )
 from coordinator.treeast import TreeFile
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
+from coordinator.yamlsrc import LList, LMap, load_file, pos_of
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
 
@@ -435,14 +435,7 @@ def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefiniti
     """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file.
     ``coverage``: record which nodes of the trees ran (``bmtree test --coverage``)."""
     top = Pos(path, 1, 1)
-    try:  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
-        text = read_text(path)
-    except OSError as exc:
-        raise TreeErrors([TreeError(top, "cannot read %s: %s" % (path, exc.strerror or exc))])
-    except UnicodeDecodeError as exc:
-        raise TreeErrors([TreeError(Pos(path, *text_pos(exc.object, exc.start)),
-                                    "not UTF-8 text: byte 0x%02x" % exc.object[exc.start])])
-    data = load_yaml(text, path)
+    data = load_file(path)  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     found = _Problems()
