@@ -330,7 +330,9 @@ def make_parser() -> argparse.ArgumentParser:
     how = rp.add_mutually_exclusive_group()
     how.add_argument("--at", type=seconds("the start"), metavar="SECONDS", help="the tree, blackboard and calls at that moment")
     how.add_argument("--step", action="store_true", help="tick by tick (Enter for the next one on a terminal)")
-    how.add_argument("--failure", action="store_true", help="jump to the first failing leaf")
+    how.add_argument("--failure", action="store_true", help="jump to the failure the run's reason names (for a run stopped "
+                     "from outside: its last tick before the stop): where, why, the failing call's inputs, the "
+                     "state after that tick")
     how.add_argument("--scenario", metavar="OUT.yaml", help="write a 'bmtree test' scenario that replays this run")
     rp.add_argument("--speed", type=factor(), metavar="X", help="play at X times the recorded pace (on a terminal "
                                                              "redrawn in place, like the live display)")

@@ -11,7 +11,7 @@ attempts a ``retry`` above it made before giving up:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -19,12 +19,12 @@ from py_trees.common import Status
 from coordinator.nodes.decorators import Retry
 from coordinator.runevents import Change, RunObserver
 
-__all__ = ["FailureExplainer", "Origin"]
+__all__ = ["FailureExplainer", "FailureTrail", "Origin", "originates"]
 
 
 @dataclass
 class Origin:
-    """One failure where it started."""
+    """One failure where it started: ``behaviour`` is the behaviour (live) or its recorded id (replay)."""
 
     seq: int
     behaviour: Any
@@ -32,17 +32,30 @@ class Origin:
     time: float
 
 
-def _originates(b: Any) -> bool:
-    """True if ``b`` failed by itself: a leaf, or a decorator or composite that failed with its own
-    reason while none of its children failed (a timeout that fired, a loop that hit its maximum,
-    a switch without a matching case); ``force_failure`` only reports."""
-    if isinstance(b, py_trees.decorators.SuccessIsFailure):
+def originates(kind: Optional[str], leaf: bool, message: str, child_failed: bool) -> bool:
+    """True if a node that turned FAILURE failed by itself: a leaf, an ``inverter``, or a decorator or
+    composite that failed with its own reason while none of its children failed (a timeout that
+    fired, a loop that hit its maximum, a switch without a matching case); ``force_failure`` only
+    reports. ``kind`` is the tree language's (the run log's ``kind``): one rule for the live reason
+    and the replay, so both name the same failure."""
+    if kind == "force_failure":
         return False
+    if kind == "inverter" or leaf:
+        return True
+    return bool(message) and not child_failed
+
+
+def _kind(b: Any) -> Optional[str]:
+    if isinstance(b, py_trees.decorators.SuccessIsFailure):
+        return "force_failure"
     if isinstance(b, py_trees.decorators.Inverter):
-        return True
-    if not b.children:
-        return True
-    return bool(b.feedback_message) and all(c.status != Status.FAILURE for c in b.children)
+        return "inverter"
+    return None
+
+
+def _originates(b: Any) -> bool:
+    return originates(_kind(b), not b.children, b.feedback_message,
+                      any(c.status == Status.FAILURE for c in b.children))
 
 
 def _ancestors(b: Any) -> List[Any]:
@@ -54,29 +67,72 @@ def _ancestors(b: Any) -> List[Any]:
     return out
 
 
+class FailureTrail:
+    """Where failures started, and which of them an ancestor recovered from (it succeeded later: a
+    selector moved on to a child that succeeded, a retry succeeded), over a run's status changes in
+    order. The live reason keeps one over behaviours, ``bmtree replay --failure`` one over the
+    recorded ids, so the failure the replay shows is the one the run's reason names.
+
+    Args:
+        parent: a node's parent (None at the root).
+        keep: how many origins to keep (the live run: only recent ones can be the cause).
+    """
+
+    def __init__(self, parent: Callable[[Any], Any], keep: Optional[int] = None):
+        self.parent = parent
+        self.keep = keep
+        self.seq = 0
+        self.origins: List[Origin] = []
+        self.succeeded: Dict[Any, int] = {}  # node -> seq of its latest SUCCESS
+
+    def change(self, node: Any, status: Status, origin: bool, message: str, time: float) -> Optional[Origin]:
+        """One status change; the Origin it starts (``origin``: :func:`originates` said so), if any."""
+        self.seq += 1
+        if status is Status.SUCCESS:
+            self.succeeded[node] = self.seq
+        elif status is Status.FAILURE and origin:
+            o = Origin(self.seq, node, message or "failed", time)
+            self.origins.append(o)
+            if self.keep:
+                del self.origins[:-self.keep]
+            return o
+        return None
+
+    def ancestors(self, node: Any) -> List[Any]:
+        out: List[Any] = []
+        node = self.parent(node)
+        while node is not None and len(out) < 1000:
+            out.append(node)
+            node = self.parent(node)
+        return out
+
+    def recovered_by(self, o: Origin) -> Any:
+        """The nearest ancestor that succeeded after ``o`` (None: nothing recovered from it)."""
+        return next((a for a in self.ancestors(o.behaviour) if self.succeeded.get(a, -1) > o.seq), None)
+
+    def root_cause(self) -> Optional[Origin]:
+        """The latest failure no ancestor recovered from."""
+        for o in reversed(self.origins):
+            if self.recovered_by(o) is None:
+                return o
+        return None
+
+
 class FailureExplainer(RunObserver):
     """Watches status changes; :meth:`reason` explains a FAILURE of the root."""
 
     def __init__(self) -> None:
-        self._seq = 0
-        self._succeeded: Dict[Any, int] = {}
-        self._origins: List[Origin] = []
+        self.trail = FailureTrail(lambda b: b.parent, keep=64)
         self._gave_up: Dict[Any, Tuple[int, int, int]] = {}  # retry -> (seq, runs, times)
 
     def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
         fired: List[Origin] = []
         for b, old, new in changes:
-            self._seq += 1
-            if new is Status.SUCCESS:
-                self._succeeded[b] = self._seq
-            elif new is Status.FAILURE:
-                if _originates(b):
-                    self._origins.append(Origin(self._seq, b, b.feedback_message or "failed", now))
-                    del self._origins[:-64]  # only recent ones can be the cause
-                    if b.children:
-                        fired.append(self._origins[-1])
-                if isinstance(b, Retry) and isinstance(getattr(b, "times", None), int):
-                    self._gave_up[b] = (self._seq, b.runs, b.times)
+            o = self.trail.change(b, new, new is Status.FAILURE and _originates(b), b.feedback_message, now)
+            if o is not None and b.children:
+                fired.append(o)
+            if new is Status.FAILURE and isinstance(b, Retry) and isinstance(getattr(b, "times", None), int):
+                self._gave_up[b] = (self.trail.seq, b.runs, b.times)
             elif new is Status.INVALID and old is Status.RUNNING and (
                     not b.children or getattr(b, "resume_at", None) is not None):
                 for o in fired:  # a timeout halted this leaf (or a retry waiting out its delay): say what ran
@@ -86,10 +142,7 @@ class FailureExplainer(RunObserver):
 
     def root_cause(self) -> Optional[Origin]:
         """The latest failure no ancestor recovered from."""
-        for o in reversed(self._origins):
-            if all(self._succeeded.get(a, -1) < o.seq for a in _ancestors(o.behaviour)):
-                return o
-        return None
+        return self.trail.root_cause()
 
     def reason(self, root: Any) -> str:
         o = self.root_cause()

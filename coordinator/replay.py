@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import json
 import os
+import re
 import sys
 import types
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, TextIO, Tuple
@@ -18,9 +19,10 @@ from typing import Any, Callable, Dict, List, NamedTuple, Optional, TextIO, Tupl
 import py_trees
 from py_trees.common import Status
 
+from coordinator.reasons import FailureTrail, originates
 from coordinator.runevents import Notice, RunObserver, control_line
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
-from coordinator.runner import Display
+from coordinator.runner import Display, call_line, short_json, stop_label
 
 __all__ = ["Replay", "find_run", "cmd_runs", "cmd_replay"]
 
@@ -80,13 +82,61 @@ def _skeleton(nodes: List[Dict[str, Any]]) -> Tuple[Any, Dict[int, Any]]:
 
 
 class Failure(NamedTuple):
-    """Where a failure started: its place among the status changes, its tick record, node and message."""
+    """Where a failure started: its place among the status changes, its tick record, node and message;
+    for one the run got past, the node that did (``by``: recovered, or went on), and the include it
+    was in with the arguments it had then (``within``)."""
 
     seq: int
     index: int
     node: int
     message: str
     t: float
+    by: Optional[int] = None
+    recovered: bool = False
+    within: str = ""
+
+
+_ARG = re.compile(r"(?:^|(?<=, ))([A-Za-z_][A-Za-z0-9_]*)=")
+
+
+class _IncludeArgs:
+    """The values an include's arguments had: what its ``arguments of …`` leaf wrote, i.e. the tree
+    blackboard writes of the tick in which that leaf last succeeded. The recorded name of an include
+    says only ``search_room(room=$room)``; the values say which room it was."""
+
+    def __init__(self, nodes: Dict[int, Dict[str, Any]]):
+        self.nodes = nodes
+        self.setter = {i: n.get("parent") for i, n in nodes.items() if n.get("kind") == "set"
+                       and str(n.get("name", "")).startswith("arguments of ")
+                       and nodes.get(n.get("parent"), {}).get("kind") == "include"}
+        self.values: Dict[Any, Dict[str, Any]] = {}
+        self._window: Dict[str, Any] = {}
+
+    def write(self, key: str, value: Any) -> None:
+        self._window[key] = value
+
+    def tick(self, changes: List[Any]) -> None:
+        for change in changes:
+            inc = self.setter.get(change[0])
+            if inc is not None and change[1] == "SUCCESS":
+                self.values[inc] = dict(self._window)
+        self._window = {}
+
+    def name(self, node_id: Any) -> str:
+        """The include's name with its arguments' values (``search_room(room="kitchen")``), when known."""
+        name = str(self.nodes.get(node_id, {}).get("name", "?"))
+        values = self.values.get(node_id)
+        head, paren, inner = name.partition("(")
+        if not values or not paren or not inner.endswith(")"):
+            return name
+        inner = inner[:-1]
+        keys = list(_ARG.finditer(inner))
+        parts = []
+        for k, m in enumerate(keys):
+            key = m.group(1)
+            text = inner[m.end():keys[k + 1].start() - 2 if k + 1 < len(keys) else len(inner)]
+            parts.append("%s=%s" % (key, short_json(values[key], 40) if key in values else text))
+        return "%s(%s)" % (head, ", ".join(parts)) if parts else name
 
 
 class Replay:
@@ -100,6 +150,11 @@ class Replay:
         except (KeyError, TypeError, ValueError) as exc:
             raise RunLogError("%s:1: the tree record is malformed: %s" % (log.path, exc))
         self.blackboard: Dict[str, Any] = dict(log.tree.get("blackboard") or {})
+        self.parent = {i: n.get("parent") for i, n in self.nodes.items()}
+        self.kids: Dict[Any, List[int]] = {}
+        for i, p in self.parent.items():
+            self.kids.setdefault(p, []).append(i)
+        self.args = _IncludeArgs(self.nodes)
         self.pending: Dict[str, Dict[str, Any]] = {}
         self.finished: List[Dict[str, Any]] = []
         self.events: List[Dict[str, Any]] = []
@@ -124,6 +179,7 @@ class Replay:
                 b.feedback_message = change[2] if len(change) > 2 else ""
                 # as it was at this change: a retry may restart the leaf in the same tick
                 changes.append((types.SimpleNamespace(name=b.name, feedback_message=b.feedback_message), old, new))
+            self.args.tick(rec.get("changes") or [])
             if display is not None:
                 display.on_tick(self.root, changes, self.t)
         elif kind == "call_start":
@@ -133,6 +189,7 @@ class Replay:
             self.finished.append(dict(rec, started=(start or {}).get("t", rec.get("t"))))
         elif kind == "write":
             self.blackboard[str(rec.get("key"))] = rec.get("value")
+            self.args.write(str(rec.get("key")), rec.get("value"))
         elif kind == "event":
             self.events.append(rec)
         elif kind == "notice":
@@ -157,15 +214,43 @@ class Replay:
             raise RunLogError("%s: record %d (%s) is malformed: %s" % (self.log.path, self.index, rec.get("type"), exc))
         return rec
 
-    def to_failure(self, f: Failure) -> None:
-        """Apply the records up to failure ``f``'s own change: its tick only as far as that change
-        (not a retry restarting the failed leaf later in the same tick)."""
-        while self.index < f.index and self.next() is not None:
+    def to_tick(self, index: int) -> None:
+        """Apply the records up to and including the tick record ``index``, and draw the state after
+        that tick: a node it halted is shown halted; one it reset after it ended keeps that outcome
+        (a retry or loop resets the failed leaf in the tick it failed)."""
+        while self.index < index and self.next() is not None:
             pass
-        before = sum(len(r.get("changes") or []) for r in self.log.records[:f.index] if r.get("type") == "tick")
-        rec = self.log.records[f.index]
-        self.apply(dict(rec, changes=(rec.get("changes") or [])[:max(0, f.seq - before)]))
-        self.index = f.index + 1
+        rec = self.log.records[index]
+        changes = rec.get("changes") or []
+        now = {c[0]: (self.by_id[c[0]].status, self.by_id[c[0]].feedback_message) for c in changes
+               if c[0] in self.by_id}
+        shown: Dict[Any, Tuple[Status, str]] = {}
+        for c in changes:
+            if c[0] not in now:
+                continue
+            new = Status(c[1])
+            was, said = now[c[0]]
+            if new is Status.INVALID and was is Status.RUNNING:
+                shown[c[0]] = (Status.INVALID, "halted")
+            elif new is Status.INVALID and was in (Status.SUCCESS, Status.FAILURE):
+                shown[c[0]] = (was, said)
+            else:
+                shown.pop(c[0], None)
+            now[c[0]] = (new, c[2] if len(c) > 2 else "")
+        self.next()
+        self.index = index + 1
+        for nid, (status, said) in shown.items():
+            self.by_id[nid].status, self.by_id[nid].feedback_message = status, said
+
+    def stop_tick(self) -> Optional[int]:
+        """The tick record of a stop from outside (Ctrl-C, ``max_duration``: the root halted while
+        running, not ended by the tree), or None."""
+        root = self.kids.get(None, [None])[0]
+        ticks = [i for i, r in enumerate(self.log.records) if r.get("type") == "tick"]
+        if not ticks or self.log.end is None:
+            return None
+        last = self.log.records[ticks[-1]].get("changes") or []
+        return ticks[-1] if any(c[0] == root and c[1] == "INVALID" for c in last) else None
 
     def until(self, stop: Callable[[Dict[str, Any]], bool]) -> bool:
         """Apply records up to and including the first for which ``stop`` is true; False if none is."""
@@ -177,55 +262,94 @@ class Replay:
                 return True
 
     def failures(self) -> Tuple[Optional[Failure], List[Failure]]:
-        """Where failures started, over the whole log (a leaf, or a node failing by itself: a timeout
-        that fired): the one that ended the run (None if none did), and those the tree recovered from
-        (an ancestor succeeded later: a selector moved on, a retry succeeded), in order."""
-        parent = {i: n.get("parent") for i, n in self.nodes.items()}
-        kids: Dict[Any, List[int]] = {}
-        for i, p in parent.items():
-            kids.setdefault(p, []).append(i)
+        """Where failures started, over the whole log, by the rule of the live reason
+        (:class:`coordinator.reasons.FailureTrail`): the one that ended the run (None if none did:
+        it succeeded, or was stopped from outside), and the others before it, in order: those an
+        ancestor recovered from (it succeeded later) and those the tree went on past (a ``for_each``
+        took its next element, a selector its next child, a retry made its next attempt)."""
+        trail = FailureTrail(self.parent.get)
         status: Dict[int, str] = {}
-        succeeded: Dict[int, int] = {}
-        origins: List[Failure] = []
-        seq = 0
+        args = _IncludeArgs(self.nodes)
+        found: Dict[int, Failure] = {}
         for index, rec in enumerate(self.log.records):
-            if rec.get("type") != "tick":
+            kind = rec.get("type")
+            if kind == "write":
+                args.write(str(rec.get("key")), rec.get("value"))
+            if kind != "tick":
                 continue
+            failed_now = set()
+            here = []
             for change in rec.get("changes") or []:
-                seq += 1
                 nid, new = change[0], change[1]
+                message = change[2] if len(change) > 2 else ""
+                kids = self.kids.get(nid, [])
+                origin = new == "FAILURE" and originates(
+                    self.nodes.get(nid, {}).get("kind"), not kids, message,
+                    any(status.get(k) == "FAILURE" for k in kids))
                 status[nid] = new
-                if new == "SUCCESS":
-                    succeeded[nid] = seq
-                elif new == "FAILURE" and (not kids.get(nid) or (len(change) > 2 and change[2] and all(
-                        status.get(k) != "FAILURE" for k in kids[nid]))):
-                    origins.append(Failure(seq, index, nid, change[2] if len(change) > 2 else "failed",
-                                           float(rec.get("t") or 0.0)))
-
-        def ancestors(nid: Any) -> List[Any]:
-            out = []
-            while parent.get(nid) is not None and len(out) < 200:
-                nid = parent[nid]
-                out.append(nid)
-            return out
-
-        recovered = [f for f in origins if any(succeeded.get(a, -1) > f.seq for a in ancestors(f.node))]
+                if new == "FAILURE":
+                    failed_now.add(nid)
+                o = trail.change(nid, Status(new), origin, message, float(rec.get("t") or 0.0))
+                if o is not None:
+                    here.append(o)
+            for o in here:  # the nearest include above it, with its arguments then; who went on
+                up = trail.ancestors(o.behaviour)
+                inc = next((a for a in up if self.nodes.get(a, {}).get("kind") == "include"), None)
+                found[o.seq] = Failure(o.seq, index, o.behaviour, o.message, o.time,
+                                       by=next((a for a in up if a not in failed_now), None),
+                                       within=args.name(inc) if inc is not None else "")
+            args.tick(rec.get("changes") or [])
         ended = None
         end = self.log.end
-        if end is not None and end.get("status") == "FAILURE":
-            unrecovered = [f for f in origins if f not in recovered]
-            ended = unrecovered[-1] if unrecovered else None
-        return ended, recovered
+        if end is not None and end.get("status") == "FAILURE" and self.stop_tick() is None:
+            cause = trail.root_cause()
+            ended = found[cause.seq] if cause is not None else None
+        others = []
+        for o in trail.origins:
+            if ended is not None and o.seq >= ended.seq:
+                continue
+            by = trail.recovered_by(o)
+            f = found[o.seq]
+            others.append(f._replace(by=by, recovered=True) if by is not None else f)
+        return ended, others
 
-    def snapshot(self, out: TextIO) -> None:
-        """The tree, the tree blackboard and the calls in flight now."""
-        out.write(py_trees.display.unicode_tree(self.root, show_status=True) + "\n")
+    def failing_call(self, f: Failure) -> Tuple[Optional[Dict[str, Any]], Optional[Dict[str, Any]]]:
+        """The call of failure ``f`` (made at or under its node before it: the failed call, or the
+        call a timeout halted): its start and end records (None when there is none)."""
+        under, todo = set(), [f.node]
+        while todo:
+            n = todo.pop()
+            under.add(n)
+            todo.extend(self.kids.get(n, []))
+        start = None
+        for rec in self.log.records[:f.index]:
+            if rec.get("type") == "call_start" and rec.get("node") in under:
+                start = rec
+        if start is None:
+            return None, None
+        end = next((r for r in self.log.records if r.get("type") == "call_end"
+                    and r.get("call_id") == start.get("call_id")), None)
+        return start, end
+
+    def snapshot(self, out: TextIO, stopped: str = "") -> None:
+        """The tree (includes with the values their arguments had), the tree blackboard and the calls
+        in flight now; ``stopped``: what then happened to those calls (the run was stopped)."""
+        names = {i: b.name for i, b in self.by_id.items()}
+        for i in self.args.values:
+            if i in self.by_id:
+                self.by_id[i].name = self.args.name(i)
+        try:
+            out.write(py_trees.display.unicode_tree(self.root, show_status=True) + "\n")
+        finally:
+            for i, name in names.items():
+                self.by_id[i].name = name
         if self.paused:
             out.write("paused by control (%s)\n" % control_line(self.control[-1]))
         out.write("tree blackboard:\n")
         for k in sorted(self.blackboard):
             out.write("  %s = %s\n" % (k, json.dumps(self.blackboard[k], ensure_ascii=False)))
-        out.write("calls in flight:%s\n" % ("" if self.pending else " none"))
+        out.write("calls in flight%s:%s\n" % (" (%s)" % stopped if stopped and self.pending else "",
+                                              "" if self.pending else " none"))
         for rec in self.pending.values():
             out.write("  %-26s since %.3fs  inputs %s  (node %s)\n" % (
                 rec.get("target"), float(rec.get("t") or 0.0), json.dumps(rec.get("inputs"), ensure_ascii=False),
@@ -275,23 +399,54 @@ def cmd_runs(args: Any) -> int:
     return 0
 
 
+def _stop(replay: Replay) -> Tuple[Optional[int], str, Callable[[Dict[str, Any]], Tuple[str, str]]]:
+    """A stop from outside: its tick record (None if the run was not stopped so), what it was
+    (``interrupted at 2.110s``), and the (status, error) of a call as a summary shows it: the
+    calls that stop halted are said so (``interrupted``), not "halted by the tree"."""
+    log = replay.log
+    end = log.end or {}
+    stop = replay.stop_tick()
+    interrupted = end.get("status") == "INVALID"
+    what = ""
+    if stop is not None:  # the stop's own time: the last tick before it may be long before
+        what = "%s at %.3fs" % ("interrupted" if interrupted else "stopped", log.last_alive)
+    after = max((i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop), default=-1)
+    stopped_calls = set()
+    if stop is not None:
+        stopped_calls = {str(r.get("call_id")) for r in log.records[after + 1:stop]
+                         if r.get("type") == "call_end" and r.get("status") == "halted"}
+
+    def label(c: Dict[str, Any]) -> Tuple[str, str]:
+        if str(c.get("call_id")) in stopped_calls:
+            return stop_label(interrupted, str(end.get("reason") or ""))
+        return str(c.get("status")), str(c.get("error") or "")
+
+    return stop, what, label
+
+
 def _report(replay: Replay, out: TextIO) -> None:
-    end = replay.log.end
-    name = replay.log.tree.get("name", "?")
+    log = replay.log
+    end = log.end
+    name = log.tree.get("name", "?")
     out.write("\n")
     if end is None:
-        out.write("%s: the log ends at %.3fs without the run's end (the process was killed?)%s\n" % (
-            name, replay.t, "; its last record was cut" if replay.log.truncated else ""))
+        out.write("%s: UNFINISHED: last seen alive at %.2fs (its log's last record is at %.3fs%s), and the log has "
+                  "no end: the process was killed?\n" % (
+                      name, log.last_alive, replay.t, "; that record was cut" if log.truncated else ""))
     else:
         out.write("%s: %s in %.2f s (%s ticks)\n" % (name, end.get("status"), float(end.get("duration") or 0.0),
                                                      end.get("ticks")))
         if end.get("reason") and end.get("status") != "SUCCESS":
             out.write("reason: %s\n" % end.get("reason"))
+    ended, _others = replay.failures()
+    failing = replay.failing_call(ended)[0] if ended is not None else None
+    _stop_tick, _what, label = _stop(replay)
     out.write("calls:\n")
     for c in replay.finished:
-        out.write("  +%7.3fs  %-26s %-11s %7.3fs  %s\n" % (float(c.get("started") or 0.0), c.get("target"),
-                                                         c.get("status"), float(c.get("duration") or 0.0),
-                                                         c.get("error") or ""))
+        status, error = label(c)
+        out.write(call_line(float(c.get("started") or 0.0), c.get("target"), status, float(c.get("duration") or 0.0),
+                            error, failing.get("inputs") if failing is not None
+                            and failing.get("call_id") == c.get("call_id") else None) + "\n")
     for c in replay.pending.values():
         out.write("  +%7.3fs  %-26s %-11s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
     if replay.notices:
@@ -305,39 +460,68 @@ def _report(replay: Replay, out: TextIO) -> None:
 
 
 def _jump_to_failure(replay: Replay, out: TextIO) -> None:
-    """``--failure``: the failure that ended the run (not one the tree recovered from), where, why,
-    and the state then; for a run stopped from outside, the state just before the stop."""
+    """``--failure``: the failure the run's reason names (not one the tree recovered from or went on
+    past), where, why, the call that failed with its inputs, and the state after that tick; for a run
+    stopped from outside or killed, when that was and the state at its last tick before it."""
     log = replay.log
-    ended, recovered = replay.failures()
+    ended, others = replay.failures()
     end = log.end or {}
 
     def where(f: Failure) -> str:
         n = replay.nodes.get(f.node, {})
-        return "'%s' (%s:%s): %s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"), f.message)
+        inside = " in %s" % f.within if f.within else ""
+        return "'%s' (%s:%s)%s: %s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"), inside, f.message)
 
+    def got_past(f: Failure) -> str:
+        n = replay.nodes.get(f.by, {}) if f.by is not None else {}
+        if not n:
+            return ""
+        return " (%s: '%s' [%s] %s)" % ("recovered" if f.recovered else "moved past", n.get("name"),
+                                        n.get("kind", n.get("shape")),
+                                        "succeeded after it" if f.recovered else "went on")
+
+    stop, stopped, label = _stop(replay)
+    shown = ended
     if ended is not None:
-        replay.to_failure(ended)
+        replay.to_tick(ended.index)
         out.write("the failure that ended the run, at %.3fs: %s\n" % (ended.t, where(ended)))
-    elif end.get("status") == "FAILURE" or end.get("status") == "INVALID" or not end:
-        ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick"]
-        stop = ticks[-2] if len(ticks) >= 2 and end else (ticks[-1] if ticks else 0)  # before the halting tick
-        replay.until(lambda rec: replay.index > stop)
-        out.write("no leaf's failure ended this run: %s\nthe state at %.3fs, its last tick before that:\n" % (
-            end.get("reason") or "its log ends without the run's end (the process was killed?)", replay.t))
-    elif recovered:
-        replay.to_failure(recovered[0])
+    elif stop is not None or end.get("status") in ("FAILURE", "INVALID") or not end:
+        ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop]
+        last = ticks[-1] if ticks else 0
+        replay.until(lambda rec: replay.index > last)
+        if not end:
+            why = ("its log has no end record: the process was killed (or lost power) at about %.2fs, when it "
+                   "was last seen alive (its log was last written or touched then)" % log.last_alive)
+            when = "its last tick"
+        else:
+            why = "%s%s" % (end.get("reason") or "the run ended %s" % end.get("status"),
+                            " (at %.3fs)" % log.last_alive if stopped else "")
+            when = "its last tick before %s" % ("it was stopped" if stopped else "its end")
+        out.write("no leaf's failure ended this run: %s\nthe state at %s, at %.3fs:\n" % (why, when, replay.t))
+    elif others:
+        shown = others[0]
+        replay.to_tick(shown.index)
         out.write("the run succeeded; the tree recovered from %d failure%s, the first at %.3fs: %s\n" % (
-            len(recovered), "" if len(recovered) == 1 else "s", recovered[0].t, where(recovered[0])))
+            len(others), "" if len(others) == 1 else "s", shown.t, where(shown)))
     else:
         out.write("no leaf failed in this run\n")
         return
-    if end.get("reason") and end.get("status") != "SUCCESS":
+    if end.get("reason") and end.get("status") != "SUCCESS" and ended is not None:
         out.write("the run ended %s: %s\n" % (end.get("status"), end.get("reason")))
-    earlier = [f for f in recovered if ended is None or f.seq < ended.seq]
-    if earlier and ended is not None:
-        out.write("before it, the tree recovered from: %s\n" % "; ".join(
-            "%s at %.3fs" % (where(f), f.t) for f in earlier[:5]))
-    replay.snapshot(out)
+    if shown is not None:
+        start, stop_rec = replay.failing_call(shown)
+        if start is not None:
+            status, error = label(stop_rec) if stop_rec is not None else ("no end", "")
+            out.write("the failing call:\n%s\n" % call_line(
+                float(start.get("t") or 0.0), start.get("target"), status,
+                float(stop_rec.get("duration") or 0.0) if stop_rec is not None else None, error, start.get("inputs")))
+    if ended is not None and others:
+        out.write("before it, the tree recovered from or went on past %d failure%s:\n" % (len(others), "" if len(others) == 1 else "s"))
+        for f in others[:5]:
+            out.write("  +%7.3fs  %s%s\n" % (f.t, where(f), got_past(f)))
+        if len(others) > 5:
+            out.write("  … and %d more\n" % (len(others) - 5))
+    replay.snapshot(out, stopped if ended is None and stopped else "")
 
 
 def _test_command(log: RunLog, scenario: str) -> str:

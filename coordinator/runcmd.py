@@ -35,14 +35,10 @@ PREFLIGHT_AT_LEAST = 2.0  # s the preflight has even when the --wait before it i
 
 
 def _report(result: Any, tree_name: str) -> None:
-    print()
-    print("%s: %s in %.2f s (%d ticks)" % (tree_name, result.status.value, result.duration, result.ticks))
-    if result.reason and not result.succeeded:
-        print("reason: %s" % result.reason)
-    print("calls:")
-    for c in result.calls:
-        dur = "%.3fs" % c.duration if c.duration is not None else "-"
-        print("  +%7.3fs  %-26s %-11s %8s  %s" % (c.started - result.started, c.target, c.status, dur, c.error))
+    from coordinator.runner import summary_lines
+
+    for line in summary_lines(result, tree_name):
+        print(line)
 
 
 def _warn_without_blackboard() -> None:

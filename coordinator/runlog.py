@@ -21,7 +21,7 @@ from comm.errors import InvalidInput
 from coordinator.runstream import Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
-           "new_log_path", "prune", "empty_file", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
+           "new_log_path", "prune", "empty_file", "last_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
 
 DEFAULT_KEEP = 50
 MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
@@ -235,6 +235,7 @@ class RunLog:
     path: str
     records: List[Dict[str, Any]]
     truncated: bool = False        # the last line was cut (the process died while writing)
+    mtime: Optional[float] = None  # when the file was last written or touched (the writer's heartbeat)
 
     @property
     def tree(self) -> Dict[str, Any]:
@@ -248,6 +249,24 @@ class RunLog:
     def of_type(self, kind: str) -> List[Dict[str, Any]]:
         return [r for r in self.records if r.get("type") == kind]
 
+    @property
+    def last_alive(self) -> float:
+        """Seconds from the start the run lived: its end's, or for a killed run (no end record) the
+        later of its last record and the last heartbeat touch of the file, as ``bmtree runs`` lists it."""
+        end = self.end
+        if end is not None:
+            return float(end.get("duration") or end.get("t") or 0.0)
+        return last_alive(float(self.tree.get("started") or 0.0), self.records[-1].get("t"), self.mtime)
+
+
+def last_alive(started: float, last_t: Any, mtime: Optional[float]) -> float:
+    """How long a run without an end record lived: its last record's time, or later if the writer
+    touched the file after it (it does every second while the run is quiet)."""
+    t = float(last_t) if isinstance(last_t, (int, float)) else 0.0
+    if started and mtime is not None:
+        t = max(t, mtime - started)
+    return t
+
 
 # what the readers of a log rely on, wherever a record has the key
 _FIELDS = (("t", (int, float), "a number of seconds"), ("started", (int, float), "a number of seconds"),
@@ -259,6 +278,7 @@ _FIELDS = (("t", (int, float), "a number of seconds"), ("started", (int, float),
 def read_log(path: str) -> RunLog:
     """Read a run log; a cut last line is dropped. RunLogError for anything else that is wrong."""
     size = os.path.getsize(path)
+    mtime = os.path.getmtime(path)
     if size > MAX_LOG_BYTES:
         raise RunLogError("%s: %d bytes is larger than the %d a run log may have" % (path, size, MAX_LOG_BYTES))
     records: List[Dict[str, Any]] = []
@@ -293,7 +313,7 @@ def read_log(path: str) -> RunLog:
     if records[0].get("v") != 1:
         raise RunLogError("%s:1: run log version %r is not supported (this bmtree reads version 1)" % (
             path, records[0].get("v")))
-    return RunLog(path, records, truncated)
+    return RunLog(path, records, truncated, mtime)
 
 
 @dataclass
@@ -337,7 +357,7 @@ def list_runs(directory: str) -> List[RunSummary]:
             duration = end.get("t") if end else last_t
             started = float(head.get("started") or 0.0)
             if end is None and started:  # killed: it lived until its log was last written or touched
-                duration = max(float(duration or 0.0), os.path.getmtime(path) - started)
+                duration = last_alive(started, duration, os.path.getmtime(path))
             out.append(RunSummary(
                 path=path, name=str(head.get("name", "?")), started=started,
                 duration=float(duration) if duration is not None else None,

@@ -8,6 +8,7 @@ coverage of the test kit, the status changes that observers such as the display 
 """
 from __future__ import annotations
 
+import json
 import sys
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, Tuple
@@ -20,7 +21,8 @@ from coordinator.reasons import FailureExplainer
 from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
 from coordinator.running import while_running
 
-__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited"]
+__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line", "short_json",
+           "stop_label", "summary_lines"]
 
 
 @dataclass
@@ -33,6 +35,8 @@ class RunResult:
     reason: str = ""
     history: Dict[Any, List[Status]] = field(default_factory=dict)
     started: float = 0.0  # the clock's time at the first tick (call times are on the same clock)
+    failed_call: Optional[CallRecord] = None  # the call of the failure the reason names (its inputs are shown)
+    stopped_at: Optional[float] = None  # when it was stopped from outside (Ctrl-C, max_duration), clock time
 
     @property
     def succeeded(self) -> bool:
@@ -82,6 +86,48 @@ class NoticeLines(RunObserver):
     def on_notice(self, notice: Any, now: float) -> None:
         self.stream.write("[%7.3fs] NOTICE    %s\n" % (now - self._start, notice.text))
         self.stream.flush()
+
+
+def short_json(value: Any, width: int = 60) -> str:
+    """``value`` as compact JSON, cut to ``width`` characters: inputs on a summary line stay one line."""
+    text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
+def call_line(started: float, target: Any, status: Any, duration: Optional[float], error: Any,
+              inputs: Any = None) -> str:
+    """One call of an end-of-run summary (the live one and ``bmtree replay``'s print the same lines);
+    ``inputs`` are given for the failing call: what it was asked is half of why it failed."""
+    dur = "%.3fs" % duration if duration is not None else "-"
+    line = "  +%7.3fs  %-26s %-11s %8s  %s" % (started, target, status, dur, error or "")
+    if inputs is not None:
+        line += "%sinputs %s" % ("  " if error else "", short_json(inputs))
+    return line.rstrip()
+
+
+def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
+    """(status, error) shown for a call halted because the run was stopped from outside, instead of
+    the call's own "halted by the tree": ``interrupted`` for Ctrl-C, the limit for ``max_duration``."""
+    if interrupted:
+        return "interrupted", ""
+    return "halted", reason.split(" while ", 1)[0] or "the run was stopped"
+
+
+def summary_lines(result: RunResult, tree_name: str) -> List[str]:
+    """The end-of-run summary: result, reason, every call (the failing one with its inputs; those the
+    stop from outside halted said so)."""
+    lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, result.status.value, result.duration, result.ticks)]
+    if result.reason and not result.succeeded:
+        lines.append("reason: %s" % result.reason)
+    lines.append("calls:")
+    for c in result.calls:
+        status, error = c.status, c.error
+        if (result.stopped_at is not None and str(status) == "halted" and c.ended is not None
+                and c.ended >= result.stopped_at):
+            status, error = stop_label(result.status == Status.INVALID, result.reason)
+        lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
+                               c.inputs if c is result.failed_call else None))
+    return lines
 
 
 class Display(RunObserver):
@@ -213,6 +259,8 @@ class TreeRunner:
         if ctx.observers:
             notify(ctx.observers, "on_start", self.tree_file, self.root, ctx)
         reason = ""
+        stopped_at: Optional[float] = None
+        failed_call: Optional[CallRecord] = None
         try:
             while True:
                 if self.gate is None or self.gate.may_tick():
@@ -225,6 +273,7 @@ class TreeRunner:
                     reason = stop_when()
                 if reason:
                     reason += while_running(self.root)
+                    stopped_at = ctx.clock.now()
                     self.root.stop(Status.INVALID)
                     self._tell([])
                     break
@@ -241,11 +290,12 @@ class TreeRunner:
                         item = None
         except BaseException:
             why = "interrupted" + while_running(self.root)
+            stopped_at = ctx.clock.now()
             self.root.stop(Status.INVALID)
             self._tell([])
             self.result = RunResult(status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
                                     blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=why,
-                                    history=self.history, started=start)
+                                    history=self.history, started=start, stopped_at=stopped_at)
             if ctx.observers:
                 notify(ctx.observers, "on_end", self.result)
             raise
@@ -254,10 +304,21 @@ class TreeRunner:
             status = Status.FAILURE
         elif status == Status.FAILURE:
             reason = self.explainer.reason(self.root)
+            failed_call = self._failed_call()
         result = RunResult(status=status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
                            blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
-                           started=start)
+                           started=start, failed_call=failed_call, stopped_at=stopped_at)
         self.result = result
         if ctx.observers:
             notify(ctx.observers, "on_end", result)
         return result
+
+    def _failed_call(self) -> Optional[CallRecord]:
+        """The latest call made at or under the node where the failure the reason names started
+        (the failed call itself, or the call a timeout halted) before that failure."""
+        o = self.explainer.root_cause()
+        if o is None:
+            return None
+        under = set(o.behaviour.iterate())
+        made = [c for c in self.ctx.calls if c.owner in under and c.started <= o.time]
+        return made[-1] if made else None

@@ -430,8 +430,9 @@ def test_replay_failure_goes_to_the_failure_that_ended_the_run_not_one_the_tree_
     assert cmd_replay(_args(run=log_path, failure=True)) == 0
     out = capsys.readouterr().out
     assert "the failure that ended the run, at 1.0" in out and "'arrived' (" in out and "speaker unplugged" in out, out
-    assert "before it, the tree recovered from: 'navigation.go_to' (" in out and "blocked at 0.000s" in out, out
-    assert "arrived [✕]" in out
+    assert "before it, the tree recovered from or went on past 1 failure:\n  +  0.000s  'navigation.go_to' (" in out, out
+    assert "blocked (recovered: 'go to the kitchen' [retry] succeeded after it)" in out, out
+    assert "arrived [✕]" in out and "take a message to the kitchen [✕]" in out, out  # the state after that tick
 
     (tmp_path / "ok").mkdir()
     log_path, run = recorded(GO_RETRY, sim_defs, tmp_path / "ok", blocked_once)
@@ -451,8 +452,9 @@ def test_replay_failure_of_an_interrupted_run_shows_what_ran_when_it_was_stopped
         t.run(observers=[RunStream([RunLogWriter(log, fsync=False)]), CtrlC(2.0)])
     assert cmd_replay(_args(run=log, failure=True)) == 0
     out = capsys.readouterr().out
-    assert "no leaf's failure ended this run: interrupted while 'go to the kitchen' was running" in out, out
-    assert "go to the kitchen [*]" in out and "navigation.go_to" in out.split("calls in flight:")[1], out
+    assert "no leaf's failure ended this run: interrupted while 'go to the kitchen' was running (at 2." in out, out
+    assert "the state at its last tick before it was stopped, at 0.000s:" in out, out
+    assert "go to the kitchen [*]" in out and "navigation.go_to" in out.split("calls in flight (interrupted at 2.")[1], out
 
 
 def test_find_run_by_number_name_and_last(sim_defs, tmp_path):
