@@ -236,10 +236,14 @@ class ModuleNode:
         rospy.set_param(self._param, ann)
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
         rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))
+        injected = _injected(self.definition.name, self.impl, faults)
+        if injected:
+            log.info("%s", injected)
 
     def _orphaned(self, lost: Any) -> None:
         """The node that sent these calls is gone (killed, crashed): nobody waits for their answers,
-        and running on they would drive the hardware and hold the module. Cancel them."""
+        and running on they would drive the hardware and hold the module. Cancel them (a call its
+        coordinator cancelled already is not cancelled again, nor reported as cancelled here)."""
         for call_id in lost.call_ids:
             if self.server is not None and self.server.cancel(call_id):
                 log.warning("cancelled call %s of module %s: its caller %s is gone (%s)", call_id,
@@ -286,6 +290,17 @@ def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:
         except WorldError as exc:
             raise BindingError("parameter ~faults: %s" % exc)
     return out
+
+
+def _injected(module: str, impl: BasicModule, faults: Dict[str, Any]) -> str:
+    """The start-up line naming the faults this node injects: its ``~faults`` and, for a simulated
+    module, its world's (``faults injected: navigation.go_to: fail 'blocked' ×1``), "" for none."""
+    from modules.sim.world import Fault, describe_faults
+
+    own = getattr(impl, "faults", None)  # a simulated module's faults of its world (SimModule.before_call)
+    every = {fn: f for fn, f in own.items() if isinstance(f, Fault)} if isinstance(own, dict) else {}
+    every.update(faults)  # ~faults answer first
+    return describe_faults(module, every)
 
 
 def _uri_of(node: str) -> Optional[str]:

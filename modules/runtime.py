@@ -9,8 +9,11 @@ same runtime: busy, refusals, cancels and ``Concurrent`` answer alike in both.
 from __future__ import annotations
 
 import logging
+import os
 import re
+import sysconfig
 import threading
+import traceback
 from typing import Any, Callable, Dict, List, Optional, Set, Union
 
 from comm.errors import ProtocolError
@@ -32,6 +35,14 @@ __all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "ModuleServer", 
 
 log = logging.getLogger("bmtree.module")
 
+#: the longest ``error`` text the runtime sends (a message that long is cut, the place in the code kept)
+MAX_ERROR_CHARS = 2000
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+# bmtree's own code: never "the place" of a module's error (modules/sim/ is a module's code, so it is not)
+_OURS = tuple(os.path.join(os.path.dirname(_HERE), d, "") for d in ("comm", "coordinator", "blackboard"))
+_LIBRARY = tuple({os.path.join(sysconfig.get_paths()[k], "") for k in ("stdlib", "platstdlib")})
+
 _KEY_TEXT = {k: re.compile(r'"%s"\s*:\s*"([^"\\]{1,200})"' % k) for k in ("basic_mod", "function", "call_id")}
 
 
@@ -47,6 +58,70 @@ def _salvage(text: Any) -> Dict[str, str]:
         if m:
             out[key] = m.group(1)
     return out
+
+
+def _bounded(text: str, limit: int = MAX_ERROR_CHARS) -> str:
+    """``text`` cut to ``limit`` characters: an error text travels in every answer and run log."""
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _ours(path: str) -> bool:
+    path = os.path.abspath(path)
+    return os.path.dirname(path) == _HERE or path.startswith(_OURS)
+
+
+def _library(path: str) -> bool:
+    return path.startswith(_LIBRARY) or path.startswith("<frozen") or any(
+        d in path for d in (os.sep + "site-packages" + os.sep, os.sep + "dist-packages" + os.sep))
+
+
+def _author_files(impl: Any) -> Set[str]:
+    """The files that define the methods of ``impl``'s class and its bases, bmtree's own excepted."""
+    files = set()
+    for cls in type(impl).__mro__:
+        if cls in (BasicModule, object):
+            continue
+        for value in vars(cls).values():
+            code = getattr(getattr(value, "__func__", value), "__code__", None)
+            if code is not None and not _ours(code.co_filename):
+                files.add(os.path.abspath(code.co_filename))
+    return files
+
+
+def _place_of(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
+    """``arm.py:10 in pick``: the innermost frame of the module author's code in ``exc``'s traceback.
+
+    That is the line the author fixes: not the runtime's frames that called the method, and not
+    the standard library's or an installed package's frames it called, unless it is in one of the
+    ``authors`` files (the class's own, which may be installed) or no other frame is left. ""
+    when the exception came from bmtree's own code alone."""
+    authors = authors or set()
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not _ours(f.filename)]
+    if not frames:
+        return ""
+    frame = next((f for f in reversed(frames) if os.path.abspath(f.filename) in authors or not _library(f.filename)),
+                 frames[-1])
+    return "%s:%s in %s" % (os.path.basename(frame.filename), frame.lineno, frame.name)
+
+
+def _raised_text(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
+    """The ``error`` of a call whose method raised: ``KeyError: 'banana' (arm.py:10 in pick)``, or
+    ``AssertionError at arm.py:10 in pick`` for an empty message; bounded in size, the place kept,
+    so the tree's log says where to look without the module's terminal."""
+    name = type(exc).__name__
+    try:
+        message = str(exc)
+    except Exception:  # a broken __str__ must not lose the answer
+        message = "(its message cannot be shown)"
+    place = _place_of(exc, authors)
+    message = _bounded(message, MAX_ERROR_CHARS - len(name) - len(place) - 8)
+    if not message:
+        return "%s at %s" % (name, place) if place else name
+    return "%s: %s (%s)" % (name, message, place) if place else "%s: %s" % (name, message)
+
+
+def _which(call_id: Optional[str]) -> str:
+    return "call %s" % call_id if call_id is not None else "a call without an id"
 
 
 class Failure(Exception):
@@ -80,10 +155,11 @@ class CallContext:
                 return
         callback()
 
-    def cancel(self) -> None:
+    def cancel(self) -> bool:
+        """Cancel the call; False if it was cancelled already (a second cancel changes nothing)."""
         with self._lock:
             if self.cancelled.is_set():
-                return
+                return False
             self.cancelled.set()
             callbacks, self._callbacks = self._callbacks, []
         for cb in callbacks:
@@ -91,6 +167,7 @@ class CallContext:
                 cb()
             except Exception:
                 log.exception("cancel callback of %s failed", self.function)
+        return True
 
     def sleep(self, seconds: float) -> bool:
         """Sleep unless cancelled first; True if the full time passed (an infinite time waits for the
@@ -165,7 +242,7 @@ def _public_methods(obj: Any) -> Set[str]:
 class _Call:
     """One accepted call and where it stands: its code running, answered, holding the module."""
 
-    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered")
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late")
 
     def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
         self.ctx = ctx
@@ -174,6 +251,7 @@ class _Call:
         self.exclusive = exclusive
         self.running = True       # the author's code runs, or is queued to
         self.answered = False
+        self.late = False         # cancelled, and its code still ran when the grace was over
 
 
 CANCELLED_TEXT = "cancelled by the coordinator"
@@ -224,6 +302,7 @@ class ModuleServer:
         #: (the world's faults of a user's own module under ``bmtree run --sim``)
         self.faults: Dict[str, Any] = {}
         self._bind()
+        self._authors = _author_files(impl)  # where an exception's place is looked for first
         impl._server = self
 
     def _bind(self) -> None:
@@ -350,26 +429,40 @@ class ModuleServer:
             self.cancel(req.call_id)
 
     def cancel(self, call_id: str) -> bool:
-        """Cancel a call as a cancel request would (its caller went away); False if it is not running."""
+        """Cancel a call as a cancel request would (its caller went away); False if it is not running
+        or was cancelled already (so nobody reports a second cancel as the one that stopped it)."""
         with self._lock:
             call = self._calls.get(call_id)
-            queued = call is not None and self._waiting is call
+            if call is None or call.ctx.cancelled.is_set():
+                return False
+            queued = self._waiting is call
             if queued:  # never started: nothing to stop
                 self._waiting = None
                 call.running = False
-        if call is None:
+        if not call.ctx.cancel():
             return False
-        call.ctx.cancel()
         if queued:
             self._finish(call, self._cancelled(call))
             return True
         with self._lock:
             running = call.running
         if running:  # its code may still stop the hardware: wait for it, but not forever
-            self.scheduler.call_later(self.cancel_grace, lambda: self._finish(call, self._cancelled(call)))
+            self.scheduler.call_later(self.cancel_grace, lambda: self._grace_over(call))
         else:        # waiting on an outcome's delay, or hanging: nothing to stop
             self._finish(call, self._cancelled(call))
         return True
+
+    def _grace_over(self, call: _Call) -> None:
+        """The cancel's grace is over: answer ``cancelled``, and say so in the module's log when the
+        call's code still runs: the module refuses calls (busy) until it returns, and only here can
+        its author learn that the function does not look at its cancel."""
+        with self._lock:
+            late = call.late = call.running and not call.answered
+        if late:
+            log.warning("%s of %s was cancelled but its code has not returned after %g s; %s", _which(call.ctx.call_id),
+                        call.fn.qualified, self.cancel_grace, "%s stays busy until it does" % self.definition.name
+                        if call.exclusive else "it goes on running")
+        self._finish(call, self._cancelled(call))
 
     # -- running ---------------------------------------------------------------------
     def _run(self, call: _Call, work: Optional[Callable[..., Any]]) -> None:
@@ -383,7 +476,7 @@ class ModuleServer:
             try:
                 if work is None:
                     fault = self.faults.get(call.fn.name)
-                    out = fault.outcome if fault is not None and fault.take() else None
+                    out = fault.answer(call.fn.qualified, ctx.call_id) if fault is not None and fault.take() else None
                     if out is None:
                         out = self.impl.before_call(call.fn.name, call.inputs)
                     if out is None:
@@ -399,12 +492,16 @@ class ModuleServer:
             except Rejected as exc:
                 result = self._result(call, CallStatus.REJECTED, str(exc) or "rejected")
             except Exception as exc:
-                log.exception("%s raised", call.fn.qualified)
-                result = self._result(call, CallStatus.FAILED, "%s: %s" % (type(exc).__name__, exc))
+                log.exception("%s raised (%s)", call.fn.qualified, _which(ctx.call_id))
+                result = self._result(call, CallStatus.FAILED, _raised_text(exc, self._authors))
             finally:
                 self.impl._local.ctx = None
         with self._lock:
             call.running = False
+            late, call.late = call.late, False
+        if late:
+            log.info("the code of cancelled %s of %s has returned; %s is free again", _which(ctx.call_id),
+                     call.fn.qualified, self.definition.name)
         if ctx.cancelled.is_set():
             self._finish(call, self._cancelled(call))
         elif outcome is not None:
@@ -419,11 +516,20 @@ class ModuleServer:
         if out is None:
             out = {}
         if not isinstance(out, dict):
-            raise ProtocolError("%s returned %s, expected a dict of outputs" % (call.fn.qualified, type(out).__name__))
+            return self._invalid_outputs(call, "returned %s, expected a dict of outputs" % type(out).__name__)
         try:
             return call.fn.build_result(out, call.ctx.call_id)
         except ProtocolError as exc:
-            return self._result(call, CallStatus.FAILED, "invalid outputs: %s" % exc)
+            return self._invalid_outputs(call, str(exc))
+
+    def _invalid_outputs(self, call: _Call, problem: str) -> FunctionResult:
+        """Outputs that break the definition: the module author's bug, so logged here (with the call to
+        match the run log) as well as answered; the answer does not name the target again (the
+        coordinator says ``arm.pick failed: …`` already)."""
+        prefix = call.fn.qualified + ": "
+        problem = problem[len(prefix):] if problem.startswith(prefix) else problem
+        log.warning("%s: invalid outputs (%s): %s", call.fn.qualified, _which(call.ctx.call_id), _bounded(problem))
+        return self._result(call, CallStatus.FAILED, "invalid outputs: %s" % problem)
 
     def _follow(self, call: _Call, outcome: Outcome) -> None:
         """Carry out ``outcome`` on the module's clock."""
@@ -440,11 +546,16 @@ class ModuleServer:
     def _effect(self, call: _Call, outcome: Outcome) -> None:
         kind = outcome.kind
         with self._lock:
+            late = False
             if outcome.ignores_cancel and kind != OutcomeKind.HANG:
                 call.running = False
+                late, call.late = call.late, False
             answered = call.answered
             if not answered and kind == OutcomeKind.RESPOND:
                 call.running = True
+        if late:
+            log.info("cancelled %s of %s is over; %s is free again", _which(call.ctx.call_id), call.fn.qualified,
+                     self.definition.name)
         if answered:  # cancelled meanwhile: an outcome that ignored the cancel frees the module only now
             if outcome.ignores_cancel:
                 self._finish(call, self._cancelled(call))
@@ -455,7 +566,7 @@ class ModuleServer:
             try:
                 self._finish(call, call.fn.build_result(outcome.outputs, call.ctx.call_id))
             except ProtocolError as exc:
-                self._finish(call, self._result(call, CallStatus.FAILED, "invalid outputs: %s" % exc))
+                self._finish(call, self._invalid_outputs(call, str(exc)))
         elif kind == OutcomeKind.FAIL:
             self._finish(call, self._result(call, CallStatus.FAILED, outcome.reason or "failed"))
         elif kind == OutcomeKind.REJECT:
@@ -494,10 +605,10 @@ class ModuleServer:
 
     def _result(self, call: _Call, status: CallStatus, error: str) -> FunctionResult:
         return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.definition.name, function=call.ctx.function,
-                              status=status, error=error)
+                              status=status, error=_bounded(error))
 
     def _reject(self, call_id: Optional[str], function: Any, error: str) -> None:
-        error = error if len(error) <= 2000 else error[:2000] + "..."
+        error = _bounded(error)
         log.warning("rejected call %s of %s.%s: %s", call_id, self.definition.name, function, error)
         fname = function if isinstance(function, str) else None
         self._publish_result(FunctionResult(call_id=call_id, basic_mod=self.definition.name, function=fname,

@@ -50,7 +50,7 @@ class SimModule(BasicModule):
         fault = self.faults.get(function)
         if fault is None or not fault.take():
             return None
-        return fault.outcome
+        return fault.answer("%s.%s" % (self.definition.name, function), self.context.call_id)
 
     def setup(self, node: Any) -> None:
         import rospy

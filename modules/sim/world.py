@@ -1,6 +1,7 @@
 """The simulated house: rooms, places, objects, people, and injected faults."""
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -9,11 +10,18 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from comm.errors import did_you_mean
-from modules.outcome import Outcome, OutcomeError, OutcomeKind, outcome_from_dict
+from modules.outcome import Outcome, OutcomeError, OutcomeKind, fail, outcome_from_dict
 
-__all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault"]
+__all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault", "INJECTED", "describe_faults"]
 
 DEFAULT_WORLD = os.path.join(os.path.dirname(__file__), "world.yaml")
+
+#: ends the answer of every injected fault: on the tree's side it looks like the hardware's own failure otherwise
+INJECTED = " (injected fault)"
+#: the text of ``crash: true``
+CRASH_TEXT = "injected crash"
+
+log = logging.getLogger("bmtree.module")
 
 
 class WorldError(ValueError):
@@ -21,9 +29,15 @@ class WorldError(ValueError):
 
 
 def _crash(text: str) -> Any:
+    """A crash answers as a method that raised RuntimeError would, but raises nothing: a traceback
+    through the runtime and this file would send the module's author looking for a bug of theirs."""
     def crash(**inputs: Any) -> Any:
-        raise RuntimeError(text)
+        return fail("RuntimeError: %s%s" % (text, INJECTED))
     return crash
+
+
+def _crash_text(value: Any) -> str:
+    return CRASH_TEXT if value is True or value is None or value == "" else str(value)
 
 
 _WORLD_KEYS = ("rooms", "places", "objects", "people", "start", "speed", "faults")
@@ -62,6 +76,7 @@ class Fault:
 
     outcome: Outcome
     times: Optional[int] = None
+    what: str = ""  # as written, for the module's log: "fail 'wheel motor overheated' after 2 s"
 
     @classmethod
     def parse(cls, key: str, raw: Any) -> Fault:
@@ -74,21 +89,38 @@ class Fault:
         times = raw.get("times")
         if times is not None and (not isinstance(times, int) or times < 0):
             raise WorldError("faults.%s.times must be a non-negative integer" % key)
-        spec = {k: v for k, v in raw.items() if k != "times" and not (k == "hang" and v is False)}
+        spec = {k: v for k, v in raw.items() if k != "times" and not (k in ("hang", "crash") and v is False)}
         try:
             delay = float(spec.get("delay", 0.0))
         except (TypeError, ValueError):
             raise WorldError("faults.%s.delay must be a number of seconds" % key)
+        later = " after %g s" % delay if delay else ""
         if "crash" in spec:
             if len(spec) > (2 if "delay" in spec else 1):
                 raise WorldError("faults.%s: crash goes alone (with delay, times)" % key)
-            return cls(Outcome(OutcomeKind.RESPOND, fn=_crash(str(spec["crash"])), delay=delay), times)
+            text = _crash_text(spec["crash"])
+            return cls(Outcome(OutcomeKind.RESPOND, fn=_crash(text), delay=delay), times,
+                       ("crash" if text == CRASH_TEXT else "crash %r" % text) + later)
         if set(spec) <= {"delay"}:
-            return cls(Outcome(OutcomeKind.RESPOND, delay=delay), times)
+            return cls(Outcome(OutcomeKind.RESPOND, delay=delay), times, "delay %g s" % delay)
+        for kind, default in (("fail", "failed"), ("reject", "rejected")):
+            if kind in spec and (spec[kind] is True or spec[kind] is None or spec[kind] == ""):
+                spec[kind] = default  # not "True" (injected fault)
         try:
-            return cls(outcome_from_dict(spec), times)
+            outcome = outcome_from_dict(spec)
         except OutcomeError as exc:
             raise WorldError("faults.%s: %s" % (key, exc))
+        if outcome.kind in (OutcomeKind.FAIL, OutcomeKind.REJECT):
+            what = "%s %r" % (outcome.kind.value, outcome.reason)
+            outcome.reason += INJECTED
+        else:
+            what = outcome.kind.value
+        return cls(outcome, times, what + later)
+
+    def answer(self, target: str, call_id: Optional[str]) -> Outcome:
+        """The outcome for call ``call_id`` of ``target`` (taken), noted in the module's log."""
+        log.info("call %s of %s: an injected fault answers (%s)", call_id, target, self.what)
+        return self.outcome
 
     def take(self) -> bool:
         """True if this fault applies to the next call (and count it)."""
@@ -101,6 +133,15 @@ class Fault:
 
 
 _FAULT_KEYS = ("fail", "reject", "crash", "hang", "delay", "times")
+
+
+def describe_faults(module: str, faults: Dict[str, Fault]) -> str:
+    """``faults injected: navigation.go_to: fail 'wheel motor overheated' ×5; …`` for a module's log at
+    start-up ("" for none): its answers would otherwise pass for the hardware's own failures."""
+    if not faults:
+        return ""
+    return "faults injected: " + "; ".join("%s.%s: %s%s" % (module, fn, f.what, "" if f.times is None else " ×%d" % f.times)
+                                           for fn, f in sorted(faults.items()))
 
 
 @dataclass

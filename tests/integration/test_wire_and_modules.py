@@ -68,7 +68,7 @@ def test_sim_modules_answer_reject_fail_busy_cancel_and_emit(sim_nodes, sim_defs
     assert r.values["success"].data is True
     # exception in user code -> failed, and the node still serves
     r = c.call(sim_defs, "speech.say", text="hola")
-    assert (r.status, r.error) == ("failed", "RuntimeError: speaker on fire")
+    assert (r.status, r.error) == ("failed", "RuntimeError: speaker on fire (injected fault)")
     r = c.call(sim_defs, "speech.say", text="¿Quieres cenar?")
     assert r.status == "succeeded"
     said.wait_for(lambda t: t == "¿Quieres cenar?")

@@ -71,10 +71,11 @@ def test_calls_rejections_failures_and_exceptions(sim_defs):
     s = Served(sim_defs["speech"], Voice())
     assert s.result(s.call("say", text="hola, ¿qué tal?")).status == "succeeded"
     r = s.result(s.call("say", text="boom"))
-    assert (r.status, r.error) == ("failed", "RuntimeError: speaker on fire")
+    assert r.status == "failed" and r.error.startswith("RuntimeError: speaker on fire (test_runtime.py:")
+    assert r.error.endswith(" in say)"), r.error  # the line of the method that raised
     assert s.result(s.call("say", text="no")).error == "muted"
     r = s.result(s.call("listen", seconds=1.0))
-    assert r.status == "failed" and "invalid outputs" in r.error and "text" in r.error
+    assert r.status == "failed" and r.error.startswith("invalid outputs: output 'text'"), r.error
     bad = FunctionCall("speech", "sing", [], names=[], call_id="x1")
     s.server.handle_call(bad.encode())
     r = s.result("x1")
@@ -156,10 +157,11 @@ def test_sim_faults_and_world_errors(sim_defs):
         rooms={"a": {"x": 0, "y": 0}, "b": {"x": 1, "y": 0}}, start="a", speed=100,
         faults={"navigation.go_to": {"fail": "wheel jammed", "times": 2}, "speech.say": {"crash": "segfault"}}))
     s = Served(sim_defs["navigation"], Navigation(world))
-    assert [s.result(s.call("go_to", place="b")).error for _ in range(3)] == ["wheel jammed", "wheel jammed", ""]
+    assert [s.result(s.call("go_to", place="b")).error for _ in range(3)] == [
+        "wheel jammed (injected fault)", "wheel jammed (injected fault)", ""]
     assert s.result(s.call("go_to", place="attic")).error.startswith("unknown place 'attic'")
     sp = Served(sim_defs["speech"], Speech(world))
-    assert sp.result(sp.call("say", text="x")).error == "RuntimeError: segfault"
+    assert sp.result(sp.call("say", text="x")).error == "RuntimeError: segfault (injected fault)"
     with pytest.raises(WorldError, match="unknown room 'garage'"):
         World.from_dict({"rooms": {"a": {"x": 0, "y": 0}}, "objects": {"car": {"room": "garage", "x": 0, "y": 0}}})
     with pytest.raises(WorldError, match="unknown keys explode"):
