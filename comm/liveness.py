@@ -22,6 +22,7 @@ on the node began, is left to the call's timeout (as a restart before the first 
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -29,7 +30,7 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from comm.rpc import PidLine, wait_closed
 
-__all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "DEFAULT_PERIOD"]
+__all__ = ["ModuleLost", "BlackboardLost", "Watchdog", "NodeWatch", "DEFAULT_PERIOD"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -255,3 +256,125 @@ class Watchdog:
         if now == -1:
             return "node %s stopped (its process is gone)" % node
         return "node %s was restarted (pid %d, was %d)" % (node, now, pid)
+
+
+class NodeWatch:
+    """Watches one node's process, found by ``resolve``, as the :class:`Watchdog` does (its
+    ``getPid`` over one kept connection, waited on, never polled while it stays open).
+
+    ``on_gone(node, reason)`` once when its process is gone (the port refuses, the connection
+    breaks, or it answers with another pid: restarted; ``reason`` says which, without the node's
+    name); then, while it is gone, ``resolve`` and
+    ``lookup`` are asked every ``period`` seconds, and ``on_back(node)`` is called once a node
+    (the same name restarted, or another) answers again. A node that is merely slow to answer
+    (busy, stopped with SIGSTOP), or a master that does not answer, is not taken for gone.
+    A node not found at the start is waited for silently (``on_back`` only follows ``on_gone``);
+    one found registered but dead is gone at once with ``dead_is_gone``, else waited for too.
+
+    Args:
+        resolve: the node's name now, or None (may raise OSError while the master is away).
+        lookup: a node's XML-RPC URI, or None when it is not registered (may raise OSError).
+        recheck: seconds after which a quiet kept connection is asked again anyway.
+    """
+
+    def __init__(self, resolve: Callable[[], Optional[str]], lookup: Callable[[str], Optional[str]],
+                 on_gone: Callable[[str, str], None], on_back: Optional[Callable[[str], None]] = None,
+                 period: float = 0.5, ping_timeout: float = 0.5, recheck: float = 60.0,
+                 line: Callable[[str, float, str], Any] = PidLine, caller: str = "/bmtree_liveness",
+                 dead_is_gone: bool = False):
+        self.resolve = resolve
+        self.dead_is_gone = dead_is_gone
+        self.lookup = lookup
+        self.on_gone = on_gone
+        self.on_back = on_back
+        self.period = period
+        self.ping_timeout = ping_timeout
+        self.recheck = recheck
+        self.caller = caller
+        self._line_of = line
+        self.node: Optional[str] = None
+        self.gone = False
+        self._uri = ""
+        self._pid: Optional[int] = None
+        self._line: Any = None
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._thread: Optional[threading.Thread] = None
+
+    def start(self) -> NodeWatch:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._loop, name="bmtree-nodewatch", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        try:
+            self._wake_w.send(b"x")
+        except OSError:  # stopped twice
+            pass
+
+    def _loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    self.check()
+                except Exception as exc:  # the master may be away: try again later
+                    log.debug("watching node %s: %s", self.node, exc)
+                line = self._line
+                if line is not None and line.fileno() >= 0:
+                    woke, closed = wait_closed({"node": line}, self.recheck, self._wake_r)
+                    if woke:
+                        return
+                elif self._stop.wait(self.period):
+                    return
+        finally:
+            if self._line is not None:
+                self._line.close()
+            self._wake_r.close()
+            self._wake_w.close()
+
+    def _drop(self) -> None:
+        if self._line is not None:
+            self._line.close()
+        self._line, self._pid, self._uri = None, None, ""
+
+    def check(self) -> None:
+        """One look (the watching thread's; callable directly in tests)."""
+        if self._pid is not None:  # watching a live process
+            try:
+                pid = self._line.ask()
+            except OSError:
+                pid = -1
+            if pid is None or pid == self._pid:
+                return
+            node = self.node or "?"
+            reason = "its process ended" if pid == -1 else "it was restarted: pid %d, was %d" % (pid, self._pid)
+            self._drop()
+            self.gone = True
+            self.on_gone(node, reason)
+            if pid == -1:
+                return
+        node = self.resolve()
+        if node is None:
+            return
+        uri = self.lookup(node)
+        if not uri:
+            return
+        line = self._line_of(uri, self.ping_timeout, self.caller)
+        try:
+            pid = line.ask()
+        except OSError:  # a dead node still registered (killed outright): gone, or still gone
+            line.close()
+            if self.dead_is_gone and not self.gone:
+                self.node, self.gone = node, True
+                self.on_gone(node, "its process ended")
+            return
+        if pid is None:
+            line.close()
+            return
+        self.node, self._uri, self._pid, self._line = node, uri, pid, line
+        if self.gone:
+            self.gone = False
+            if self.on_back is not None:
+                self.on_back(node)

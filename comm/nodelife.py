@@ -27,7 +27,7 @@ import select
 import signal
 import sys
 import threading
-from typing import Any, Callable, Dict, Iterator, Optional
+from typing import Any, Callable, Dict, Iterator, List, Optional
 
 __all__ = ["Interrupts", "StopSignals", "registering", "stop_requested"]
 
@@ -181,6 +181,8 @@ class Interrupts:
         self._depth = 0
         self._pending = False
         self._previous: Dict[int, Any] = {}
+        #: called (in the signal handler: take no lock) when a signal is held inside ``registering()``
+        self.on_held: List[Callable[[], None]] = []
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._previous[sig] = signal.getsignal(sig)
             signal.signal(sig, self._on_signal)
@@ -189,6 +191,8 @@ class Interrupts:
     def _on_signal(self, signum: int, frame: Any) -> None:
         if self._depth:
             self._pending = True
+            for hook in list(self.on_held):
+                hook()
             return
         raise KeyboardInterrupt
 

@@ -34,9 +34,9 @@ from comm import (
     sync_publisher,
 )
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
-from comm.errors import ProtocolError
+from comm.errors import EnvironmentProblem, ProtocolError
 from comm.limits import check_depth
-from comm.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, Watchdog
+from comm.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, NodeWatch, Watchdog
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
@@ -47,6 +47,7 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.nodelife import registering
+from comm.rpc import PidLine, wait_closed
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runevents import Notice
 from coordinator.runstream import CHANNELS, Sink
@@ -55,7 +56,8 @@ from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
 from modules.discovery import PARAM_ROOT, LiveModule, live_modules, node_alive
 
-__all__ = ["RosTransport", "RosStreamSink", "diff_definitions", "address_problem", "SEND_QUEUE"]
+__all__ = ["RosTransport", "RosStreamSink", "StartupGuard", "MasterGone", "diff_definitions", "address_problem",
+           "SEND_QUEUE"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -85,6 +87,152 @@ def address_problem() -> str:
             "here) or ROS_HOSTNAME to a name the other machines resolve" % what)
 
 
+class MasterGone(EnvironmentProblem):
+    """The ROS master stopped answering while ``bmtree run`` was starting (exit 3)."""
+
+
+def _end_registration_retries() -> None:
+    """End rospy's retries of a registration with a master that does not answer.
+
+    ``rospy.Publisher``, ``rospy.Subscriber`` and ``init_node`` (its ``/rosout``) register with the
+    master in a loop that only ``rospy.is_shutdown()`` ends, holding rospy's topic lock. Raising
+    the shutdown flag ends it; rospy's shutdown hooks are not run, as their unregistering asks the
+    master with no timeout (a master that does not answer would hang the process there), and there
+    is nothing to unregister from a master that is gone."""
+    import rospy.core
+
+    rospy.core._shutdown_flag = True
+
+
+class StartupGuard:
+    """Bounds ``bmtree run``'s start-up when the ROS master stops answering meanwhile.
+
+    A thread asks the master for its pid over one kept connection and waits for it to close
+    (as :class:`comm.masterwatch.MasterWatch`, which exists only once the node is up): a master
+    that stops answering gets ``limit`` seconds to answer again (rospy keeps retrying its
+    registrations meanwhile, and they succeed then). After that rospy's retries are ended, and
+    :meth:`check` (and :meth:`watching`) raise :class:`MasterGone`. A stop signal held while a
+    registration waits for a master that does not answer ends that wait at once.
+
+    Args:
+        limit: seconds a master that stopped answering has to answer again (``--wait``).
+        say: where the progress lines go (stderr).
+        interrupts: the run's :class:`comm.nodelife.Interrupts`, whose held signals end a wait.
+    """
+
+    def __init__(self, limit: float, say: Callable[[str], None], interrupts: Any = None, period: float = 0.25,
+                 timeout: float = 1.0, master_uri: str = ""):
+        import rosgraph
+
+        self.limit = limit
+        self.say = say
+        self.period = period
+        self.timeout = timeout
+        self.master_uri = master_uri or rosgraph.get_master_uri()
+        self.down = False  # the master does not answer now
+        self.expired = False  # ... and did not answer again within ``limit``: start-up is over
+        self._interrupts = interrupts
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._thread: Optional[threading.Thread] = None
+
+    def start(self) -> StartupGuard:
+        if self._thread is None:
+            if self._interrupts is not None:
+                self._interrupts.on_held.append(self._on_held)
+            self._thread = threading.Thread(target=self._loop, name="bmtree-startup-guard", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Start-up is over (the run's own master watch takes over)."""
+        if self._interrupts is not None and self._on_held in self._interrupts.on_held:
+            self._interrupts.on_held.remove(self._on_held)
+        self._stop.set()
+        try:
+            self._wake_w.send(b"x")
+        except OSError:
+            pass
+
+    def _on_held(self) -> None:
+        """A stop signal came inside a registration (signal handler, main thread: no lock taken)."""
+        if self.down:
+            _end_registration_retries()
+
+    def _loop(self) -> None:
+        line = PidLine(self.master_uri, self.timeout, "/bmtree_startup")
+        down_since = None
+        try:
+            while not self._stop.is_set():
+                pid = line.pid()
+                if self._stop.is_set():
+                    return
+                if pid is None:
+                    now = time.monotonic()
+                    if down_since is None:
+                        down_since = now
+                        self.down = True
+                        self.say("the ROS master at %s stopped answering during start-up; waiting up to %g s "
+                                 "(--wait) for it to answer again ..." % (self.master_uri, self.limit))
+                    elif now - down_since >= self.limit:
+                        self.expired = True
+                        _end_registration_retries()
+                        return
+                elif down_since is not None:
+                    down_since = None
+                    self.down = False
+                    self.say("the ROS master at %s answers again; starting goes on" % self.master_uri)
+                if down_since is None and line.fileno() >= 0:
+                    if wait_closed({"master": line}, 60.0, self._wake_r)[0]:
+                        return
+                elif self._stop.wait(self.period):
+                    return
+        finally:
+            line.close()
+
+    def answers(self) -> bool:
+        """The master answers now (asked afresh)."""
+        return PidLine(self.master_uri, self.timeout, "/bmtree_startup").pid() is not None
+
+    def error(self, cause: Any = None) -> MasterGone:
+        if self.expired:
+            return MasterGone("the ROS master at %s stopped answering during start-up and did not answer again within "
+                              "%g s (--wait): nothing was called (start it again, then the run)"
+                              % (self.master_uri, self.limit))
+        return MasterGone("the ROS master at %s stopped answering during start-up%s: nothing was called (start it "
+                          "again, then the run)" % (self.master_uri, " (%s)" % cause if cause else ""))
+
+    def check(self) -> None:
+        """MasterGone once the master did not come back in time."""
+        if self.expired:
+            raise self.error()
+
+    def wait_back(self) -> None:
+        """The end of start-up: while the master does not answer, wait for it (bounded: MasterGone)."""
+        while self.down and not self.expired and self._thread is not None and self._thread.is_alive():
+            time.sleep(0.05)
+        self.check()
+
+    @contextlib.contextmanager
+    def watching(self) -> Iterator[None]:
+        """Start-up steps: what they raise because the master does not answer becomes MasterGone."""
+        import rosgraph
+        import rospy
+
+        try:
+            yield
+        except (MasterGone, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            if self.expired:
+                raise self.error() from None
+            if isinstance(exc, (OSError, rosgraph.masterapi.Error, rospy.exceptions.ROSException)) and \
+                    not self.answers():
+                raise self.error(exc) from None
+            raise
+        self.check()
+
+
 class RosTransport(Transport):
     """Publishes calls/cancels/requests; decodes results/events/answers in rospy's threads."""
 
@@ -96,6 +244,7 @@ class RosTransport(Transport):
         self._other_runs: Set[str] = set()  # nodes of other runs on this master, each noticed once
         self._deliver: Callable[[Any], None] = self._hold
         self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
+        self._bb_watch: Optional[NodeWatch] = None  # the Blackboard node's process, while the run goes on
         self.watchdog = Watchdog(self._from_watchdog, self._node_of, self._uri_of, period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
@@ -206,8 +355,22 @@ class RosTransport(Transport):
             early, self._early = self._early, []
             self._deliver = deliver
         for item in early:
+            if isinstance(item, Notice) and item.what in ("master_down", "master_back"):
+                # it happened before the first tick: the run's clock would date it at 0.0 s
+                item = Notice(item.what, "during start-up, before the first tick: " + item.text)
             deliver(item)
         self.watchdog.start()
+        if self._bb_watch is None:
+            self._bb_watch = NodeWatch(lambda: self._node_of(BLACKBOARD), self._uri_of, self._blackboard_gone,
+                                       self._blackboard_back, period=1.0).start()
+
+    def _blackboard_gone(self, node: str, reason: str) -> None:
+        self._deliver(Notice("blackboard_down", "the Blackboard node %s is gone: results from now on are not stored "
+                                                "(%s)" % (node, reason)))
+
+    def _blackboard_back(self, node: str) -> None:
+        self._deliver(Notice("blackboard_back", "the Blackboard node %s is back: results from now on are stored "
+                                                "again (those of the calls that ended meanwhile are not)" % node))
 
     @staticmethod
     def _node_of(module: str) -> Optional[str]:
@@ -428,6 +591,9 @@ class RosTransport(Transport):
                 if hook in hooks:
                     hooks.remove(hook)
         self.watchdog.stop()
+        if self._bb_watch is not None:
+            self._bb_watch.stop()
+            self._bb_watch = None
         for s in self._subs:
             s.unregister()
         for p in list(self._pubs.values()) + list(self._routes.values()):
@@ -468,17 +634,33 @@ class RosStreamSink(Sink):
 
     def settle(self, timeout: float = 3.0) -> bool:
         """Wait (bounded) until every viewer already subscribed is connected, so that it misses
-        nothing of the run; True if all are."""
+        nothing of the run; True if all are.
+
+        A subscriber whose node does not answer its XML-RPC (``getPid``) is left out: a viewer or
+        run killed outright stays registered with the master for ever, and would otherwise cost
+        every later run the whole wait for a connection that never comes."""
         import rosgraph
 
         master = rosgraph.Master("/bmtree_stream")
         end = time.monotonic() + timeout
+        dead: Set[str] = set()
+        alive: Set[str] = set()
         while True:
             try:
-                subs = {t: len(n) for t, n in master.getSystemState()[1]}
+                subs = {t: list(n) for t, n in master.getSystemState()[1]}
             except Exception:
                 return False
-            if all(p.get_num_connections() >= subs.get(p.resolved_name, 0) for p in self._pubs.values()):
+            missing = {n for p in self._pubs.values() for n in subs.get(p.resolved_name, ())
+                       if not p.impl.has_connection(n)} - dead
+            for node in sorted(missing - alive):  # each asked once
+                try:
+                    answers = node_alive(master.lookupNode(node), 0.5)
+                except Exception:  # no longer registered
+                    answers = False
+                (alive if answers else dead).add(node)
+                if not answers:
+                    log.debug("run stream: subscriber %s is registered but does not answer: not waited for", node)
+            if not missing - dead:
                 return True
             if time.monotonic() >= end:
                 return False

@@ -252,6 +252,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     transport = None
     runner = None
     interrupts = Interrupts()  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
+    guard = None
     try:
         deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
         if not args.sim:
@@ -259,8 +260,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 err("error: no ROS master at %s after %g s (start one, or use --sim)" % (os.environ.get(
                     "ROS_MASTER_URI", "http://localhost:11311/"), args.wait))
                 return EXIT_ENV
+            guard = _start_guard(args.wait, interrupts)
             if tree is None:  # modules known only to the live graph
-                tree = _load_announced(args.tree, defs, set(given), deadline)
+                with guard.watching():
+                    tree = _load_announced(args.tree, defs, set(given), deadline)
                 if tree is None:
                     return EXIT_ENV
                 _check_given(tree, given, args.tree)
@@ -288,55 +291,62 @@ def cmd_run(args: argparse.Namespace) -> int:
                 return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
             graph.adopt()  # loopback: the private graph works whatever the hostname
             print("simulated robot up, master at %s" % graph.uri)
-        from coordinator.ros_transport import RosTransport, address_problem
+            guard = _start_guard(args.wait, interrupts)
+        assert guard is not None
+        with guard.watching():  # a master that stops answering now: a bounded wait, then exit 3
+            from coordinator.ros_transport import RosTransport, address_problem
 
-        hint = address_problem()
-        if hint:
-            err("warning: %s" % hint)
-        transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
-        stream_sink = transport.stream_sink()
-        from coordinator.watch import STREAM_NS
+            hint = address_problem()
+            if hint:
+                err("warning: %s" % hint)
+            transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
+            stream_sink = transport.stream_sink()
+            from coordinator.watch import STREAM_NS
 
-        for other in [] if args.sim else _other_runs():  # a private graph has no other run
-            err("warning: another bmtree run is running on this master (node %s): both store results under the "
-                "same Blackboard names (a recall may read its values), both publish the run stream on %s (bmtree "
-                "watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
-        try:
-            left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
-            transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err,
-                                 where=first_uses(tree))
-        except OSError as exc:
-            err("error: %s" % exc)
-            return EXIT_ENV
-        stream_sink.settle()
-        import rosgraph
+            for other in [] if args.sim else _other_runs():  # a private graph has no other run
+                err("warning: another bmtree run is running on this master (node %s): both store results under the "
+                    "same Blackboard names (a recall may read its values), both publish the run stream on %s (bmtree "
+                    "watch shows them mixed) and both take bmtree control commands" % (other, STREAM_NS))
+            try:
+                left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
+                transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err,
+                                     where=first_uses(tree))
+            except OSError as exc:
+                if not guard.answers():
+                    raise guard.error(exc) from None
+                err("error: %s" % exc)
+                return EXIT_ENV
+            stream_sink.settle()
+            import rosgraph
 
-        from modules.discovery import announced_modules
+            from modules.discovery import announced_modules
 
-        try:
-            limits = {n: m.call_limit for n, m in announced_modules().items() if n in mods and m.call_limit}
-        except (OSError, rosgraph.masterapi.Error):  # the master went away meanwhile: the run will say so
-            limits = {}
-        for line in call_limit_warnings(tree, limits, args.call_timeout):
-            err(line)
-        if not recall and not args.sim:
-            _warn_without_blackboard()
-        ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
-        root = build_tree(tree, ctx, given)
-        from coordinator.watch import run_view
+            try:
+                limits = {n: m.call_limit for n, m in announced_modules().items() if n in mods and m.call_limit}
+            except (OSError, rosgraph.masterapi.Error):  # the master went away meanwhile: the run will say so
+                limits = {}
+            for line in call_limit_warnings(tree, limits, args.call_timeout):
+                err(line)
+            if not recall and not args.sim:
+                _warn_without_blackboard()
+            ctx = RunContext(transport, RealClock(), defs, default_timeout=args.call_timeout)
+            root = build_tree(tree, ctx, given)
+            from coordinator.watch import run_view
 
-        view, sinks = run_view(transport, args.quiet)
-        display = None if args.quiet or view is not None else Display()
-        print("running %s" % tree.name)
-        recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
-                                  control=bool(getattr(args, "control", False)),
-                                  modules=list(args.modules or []) + [um.definition_path for um in user_modules])
-        from coordinator.control import ros_controller
+            view, sinks = run_view(transport, args.quiet)
+            display = None if args.quiet or view is not None else Display()
+            print("running %s" % tree.name)
+            recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
+                                      control=bool(getattr(args, "control", False)),
+                                      modules=list(args.modules or []) + [um.definition_path for um in user_modules])
+            from coordinator.control import ros_controller
 
-        steer = ros_controller(getattr(args, "control", False))
-        quiet_notices = [NoticeLines()] if display is None and view is None else []
-        runner = TreeRunner(root, ctx, period=args.period, display=display,
-                            observers=[recorder, steer] + quiet_notices, tree=tree, gate=steer)
+            steer = ros_controller(getattr(args, "control", False))
+            quiet_notices = [NoticeLines()] if display is None and view is None else []
+            runner = TreeRunner(root, ctx, period=args.period, display=display,
+                                observers=[recorder, steer] + quiet_notices, tree=tree, gate=steer)
+            guard.wait_back()  # no first tick while the master is away (bounded)
+        guard.stop()  # from the first tick on, the run's master watch tells (notices)
         try:
             result = runner.run(args.max_duration)
         finally:
@@ -346,16 +356,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         files.report(print)
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
-        err("interrupted: running calls were cancelled")
+        sent = runner is not None and runner.result is not None and bool(runner.result.calls)
+        err("interrupted: running calls were cancelled" if sent else
+            "interrupted during start-up: nothing was called" if runner is None else
+            "interrupted before any call was sent")
         if runner is not None and runner.result is not None and tree is not None:
             with registering():  # what it did and where its log is, before a second Ctrl-C
                 _report(runner.result, tree.name)
                 files.report(print)
         return EXIT_ENV
     finally:
+        if guard is not None:
+            guard.stop()
         try:
             with registering():  # a second Ctrl-C must not cut the unregistering short
-                _leave_graph(transport)
+                _leave_graph(transport, master_gone=guard is not None and (guard.expired or guard.down))
         except KeyboardInterrupt:
             pass
         interrupts.restore()
@@ -363,11 +378,24 @@ def cmd_run(args: argparse.Namespace) -> int:
             graph.close()
 
 
-def _leave_graph(transport: Any) -> None:
+def _start_guard(limit: float, interrupts: Interrupts) -> Any:
+    """A master that stops answering during start-up gets ``limit`` s (``--wait``) to come back."""
+    from coordinator.ros_transport import StartupGuard
+
+    return StartupGuard(limit, err, interrupts).start()
+
+
+def _leave_graph(transport: Any, master_gone: bool = False) -> None:
     """Unregister everything this process registered with the master (also when a stop signal
-    came before the transport was made: ``init_node`` may have registered already)."""
+    came before the transport was made: ``init_node`` may have registered already). With
+    ``master_gone`` (it does not answer since it stopped during start-up) nothing is asked of it:
+    rospy's unregistering has no timeout."""
     from coordinator.watch import quiet_unregistering
 
+    if master_gone:
+        if transport is not None:
+            transport.watchdog.stop()
+        return
     with quiet_unregistering():  # a master that is gone: one warning per topic, for nothing left to undo
         if transport is not None:
             transport.close()

@@ -15,8 +15,9 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Iterator, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
 
+from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals
 from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
@@ -43,6 +44,7 @@ class RosWatcher:
         self.namespace = namespace.rstrip("/")
         self.on_record = on_record
         self._subs: List[Any] = []
+        self.nodes: Dict[str, str] = {}  # run id -> the node that published its tree (the run's own)
 
     def start(self) -> None:
         import rospy
@@ -58,6 +60,14 @@ class RosWatcher:
             return
         if not isinstance(rec, dict):
             return
+        if rec.get("type") in ("tree", "snapshot"):
+            node = (getattr(msg, "_connection_header", None) or {}).get("callerid")
+            if node and rec.get("run"):
+                self.nodes[str(rec["run"])] = node
+        self.apply(rec)
+
+    def apply(self, rec: Dict[str, Any]) -> None:
+        """A record, as if it came from the stream (the watch's own ``end`` of a run that is gone)."""
         with self.state.lock:
             self.state.apply(rec)
             if self.on_record is not None:
@@ -222,6 +232,68 @@ def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Option
     return t
 
 
+def gone_record(state: WatchState, node: str, reason: str) -> Dict[str, Any]:
+    """The watch's own ``end`` of a run whose process is gone before its end (killed outright, crashed):
+    status ``UNFINISHED``, ``gone`` true; never on the run stream, which that run can no longer write."""
+    started = state.tree.get("started")
+    wall = ""
+    if isinstance(started, (int, float)):
+        wall = " (%s)" % time.strftime("%H:%M:%S", time.localtime(started + state.tick_t))
+    return {"v": 1, "type": "end", "run": state.run, "t": state.t, "status": "UNFINISHED", "gone": True,
+            "reason": "the run (pid %s, node %s) is gone, its last tick (%d) at %.3fs%s: %s; it did not stop its "
+                      "calls" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t, wall, reason),
+            "ticks": state.tick, "duration": state.t, "calls": len(state.calls)}
+
+
+class RunLiveness:
+    """Ends the view of a run whose process is gone: a run killed outright (``kill -9``) never
+    publishes its end. The run's node (the publisher of its tree record) is watched as the run
+    watches modules (:class:`comm.liveness.NodeWatch`: its ``getPid`` over one kept connection,
+    waited on, never polled); when it is gone and no end came within :data:`END_TICKS_GRACE`,
+    the view gets :func:`gone_record`."""
+
+    def __init__(self, watcher: RosWatcher):
+        self.watcher = watcher
+        self.state = watcher.state
+        self.node_watch = NodeWatch(self._node, self._uri_of, self._gone, period=0.5, dead_is_gone=True,
+                                    caller="/bmtree_watch_liveness")
+
+    def start(self) -> RunLiveness:
+        self.node_watch.start()
+        return self
+
+    def stop(self) -> None:
+        self.node_watch.stop()
+
+    def _node(self) -> Optional[str]:
+        """The node of the run shown, while it has not ended."""
+        with self.state.lock:
+            if not self.state.nodes or self.state.end is not None:
+                return None
+            return self.watcher.nodes.get(self.state.run)
+
+    @staticmethod
+    def _uri_of(node: str) -> Optional[str]:
+        import rosgraph
+
+        try:
+            return rosgraph.Master("/bmtree_watch_liveness").lookupNode(node)
+        except rosgraph.masterapi.MasterError:
+            return None
+
+    def _gone(self, node: str, reason: str) -> None:
+        with self.state.lock:
+            run = self.state.run
+            if self.watcher.nodes.get(run) != node:
+                return
+        # an ending run leaves right after its (latched) end: give it the time to arrive
+        if self.state.wait(lambda s: s.end is not None or s.run != run, END_TICKS_GRACE):
+            return
+        with self.state.lock:
+            if self.state.end is None and self.state.run == run:
+                self.watcher.apply(gone_record(self.state, node, reason))
+
+
 def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
@@ -239,6 +311,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     # registers a subscriber would leave that subscriber on the master, which each later run waits for
     signals = StopSignals()
     watcher = None
+    liveness = None
     server = None
     view = None
     client = None
@@ -259,6 +332,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         watcher = RosWatcher(state, args.namespace,
                              on_record=(lambda r: printer.record(r, state)) if printer else None)
         watcher.start()
+        liveness = RunLiveness(watcher).start()
         from coordinator.control import ControlClient
 
         client = ControlClient()
@@ -292,9 +366,15 @@ def cmd_watch(args: argparse.Namespace) -> int:
             sys.stdout.flush()
             if wait(lambda s: server.end_served.is_set(), END_GRACE):
                 wait(lambda s: False, 1.0)
+        if state.end is not None and state.end.get("gone"):
+            if printer is None and not (signals.requested or stop.is_set()):
+                err("the run did not finish: %s" % state.end.get("reason"))
+            return EXIT_ENV
         return EXIT_OK
     finally:
         stop.set()
+        if liveness is not None:
+            liveness.stop()
         if view is not None:
             view.stop()
         if server is not None:

@@ -53,6 +53,7 @@ class WatchState:
         self.paused = False
         self.t = 0.0
         self.tick = 0
+        self.tick_t = 0.0  # the run's time of its last tick (or snapshot)
         self.caught_up = False
 
     # applying ---------------------------------------------------------------------------
@@ -107,6 +108,7 @@ class WatchState:
             if n and n <= self.tick:
                 return  # already in the snapshot
             self.tick = n or self.tick + 1
+            self.tick_t = self.t
             for change in rec.get("changes") or []:
                 i, new = int(change[0]), str(change[1])
                 old = self.status.get(i, "INVALID")
@@ -146,6 +148,7 @@ class WatchState:
     def _load(self, rec: Dict[str, Any]) -> None:
         self.t = float(rec.get("t") or 0.0)
         self.tick = int(rec.get("n") or 0)
+        self.tick_t = self.t
         self.status = {int(k): str(v) for k, v in (rec.get("status") or {}).items()}
         self.halted = {int(k): True for k in rec.get("halted") or []}
         self.feedback = {int(k): str(v) for k, v in (rec.get("feedback") or {}).items()}

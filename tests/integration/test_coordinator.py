@@ -191,7 +191,7 @@ def test_ctrl_c_cancels_and_cleans_up(slow_world):
     assert proc.returncode == 3 and "interrupted" in err, seen + out + err
     # what it did, why it ended and where its log is, as at a normal end
     assert "reason: interrupted while 'navigation.go_to' was running" in out, out
-    assert "navigation.go_to           halted" in out and "run log: " in out and "module logs: " in out, out
+    assert "navigation.go_to           interrupted" in out and "run log: " in out and "module logs: " in out, out
     port = int(uri.rstrip("/").rsplit(":", 1)[1])
     with socket.socket() as s:
         assert s.connect_ex(("127.0.0.1", port)) != 0, "the private rosmaster still runs"
