@@ -148,4 +148,6 @@ def test_the_issue_case_default_mocks_and_the_simulated_robot_agree(tmp_path):
     calls = [line.strip()[1:].split(None, 4) for line in out.stdout.splitlines() if line.startswith("  +")]
     assert [(c[1], c[2]) for c in calls] == [(c.target, c.status) for c in mocked.calls()]
     busy = re.compile(r"busy with call [0-9a-f]{16} \(go_to\)$")
-    assert busy.match(calls[1][4]) and busy.match(mocked.calls()[1].error)
+    # the failing call's line of the summary also says what it was asked
+    assert re.match(busy.pattern[:-1] + r'  inputs \{"target":\{"x":1\.0,"y":0\.0,"z":0\.0\}\}$', calls[1][4]), calls
+    assert busy.match(mocked.calls()[1].error)
