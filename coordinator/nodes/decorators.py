@@ -1,6 +1,7 @@
 """Decorators: ``retry``, ``timeout`` (on the run's clock), ``inverter``, ``force_*`` (py_trees'); loops are in ``loops``."""
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass
 from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional, Tuple
 
@@ -287,9 +288,9 @@ class _Wrap(NodeKind):
             return frozenset(), frozenset()
         return self.ends(*f.outcome(node.children[0], avail))
 
+    @abc.abstractmethod
     def ends(self, ok: FrozenSet[str], failed: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """What is surely written when this node succeeds and fails, from the same of its child."""
-        raise NotImplementedError
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return self.behaviour(node.name, child(node.children[0]))

@@ -60,13 +60,11 @@ def test_a_missing_dependency_is_one_line_and_exit_3(script, tmp_path):
 
 @pytest.mark.parametrize("script", SCRIPTS)
 def test_with_the_system_python_the_fix_is_the_venv_of_make_setup(script, tmp_path):
-    """Debian 12's /usr/bin/python3 (what catkin_make uses unless told otherwise) as it is."""
-    if not os.access(SYSTEM_PYTHON, os.X_OK):
-        pytest.skip("no %s" % SYSTEM_PYTHON)
-    has = _run([SYSTEM_PYTHON, "-s", "-c", "import py_trees, rospy_message_converter, jsonschema"], _env(), tmp_path)
-    if has.returncode == 0:
-        pytest.skip("%s has bmtree's dependencies" % SYSTEM_PYTHON)
-    out = _run([SYSTEM_PYTHON, "-s", os.path.join(ROOT, "nodes", script), "--version"], _env(PYTHONPATH=ROOT), tmp_path)
+    """Debian 12's /usr/bin/python3 (what catkin_make uses unless told otherwise), without the packages
+    Debian does not have (hidden by stubs, should someone have installed them there)."""
+    assert os.access(SYSTEM_PYTHON, os.X_OK), "Debian 12 has %s" % SYSTEM_PYTHON
+    out = _run([SYSTEM_PYTHON, "-s", os.path.join(ROOT, "nodes", script), "--version"],
+               _env(PYTHONPATH=_stubs(tmp_path)), tmp_path)
     assert out.returncode == 3, out.stdout + out.stderr
     assert "Traceback" not in out.stderr and out.stdout == ""
     m = MISSING.match(out.stderr)
