@@ -356,7 +356,8 @@ def test_original_cpp_module_runs_unchanged_behind_the_bridge(ros_graph, tmp_pat
     This test is about compatibility, not that race, so it leaves the node and the bridge time
     to spare: the node's own 1 s wait shortened to 0.2 s, a 0.2 s input gap (50 ms lost an
     input once in CI-like load: the node's own echo of an output can land after the next
-    call's input)."""
+    call's input; under make test's full load the node's echo of functionA's text once landed after
+    functionB's Contexto, 0.4 s on: the tree leaves it half a second to arrive between calls)."""
     ros_graph.start_node([sys.executable, os.path.join(NODES, "original_cpp_demo_bm.py"), "_delay:=0.2"], "/DEMO_BM")
     definition = os.path.join(REFERENCE, "DEMO_BM.json")
     ros_graph.start_node(["-m", "modules.bridge", "--definition", definition, "--input-gap", "0.2"],
@@ -369,9 +370,11 @@ root:
     - call: DEMO_BM.functionA
       inputs: {Aviso: hola, Bandera: true}
       outputs: {status: s1}
+    - wait: 0.5
     - call: DEMO_BM.functionB
       inputs: {LSB: true, Contexto: invert}
       outputs: {flag: f}
+    - wait: 0.5
     - call: DEMO_BM.functionA
       inputs: {Aviso: adios, Bandera: false}
       outputs: {status: s2}
