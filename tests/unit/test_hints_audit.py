@@ -10,15 +10,7 @@ from coordinator.cli import main as bmtree
 from coordinator.runlog import RunLogWriter, read_log
 from coordinator.runstream import RunStream
 from coordinator.testing import TreeTest
-
-
-def check(tmp_path, capsys, text: str):
-    """``bmtree check`` of a tree: its exit status and its stderr lines, file names shortened to t.yaml."""
-    path = tmp_path / "t.yaml"
-    path.write_text(text)
-    status = bmtree(["check", str(path)])
-    return status, [line.replace(str(path), "t.yaml") for line in capsys.readouterr().err.splitlines()]
-
+from tests.unit.test_check_messages import check
 
 # 1. a failed check says the values it compared -----------------------------------------------------
 ROOMS = """format: 1
