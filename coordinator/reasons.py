@@ -151,7 +151,7 @@ class FailureExplainer(RunObserver):
         b = o.behaviour
         label = b.name
         if o.message.startswith(b.name) and b.parent is not None:
-            label = b.parent.name  # an unnamed call leaf is named after its target: say where it is
+            label = _where(b)  # an unnamed call leaf is named after its target: say where it is
         text = "%s: %s" % (label, o.message) if label and not o.message.startswith(label) else o.message
         for a in _ancestors(b):
             gave = self._gave_up.get(a)
@@ -159,6 +159,15 @@ class FailureExplainer(RunObserver):
                 text += " (%d of %d attempts)" % (gave[1], gave[2])
                 break
         return text
+
+
+def _where(b: Any) -> str:
+    """The nearest ancestor's name that says something: not a bare kind (an unnamed ``sequence``)."""
+    for a in _ancestors(b):
+        node = getattr(a, "bmtree_node", None)
+        if node is None or a.name != node.kind:
+            return a.name
+    return ""
 
 
 def _deepest_feedback(root: Any) -> str:

@@ -203,3 +203,32 @@ def test_the_run_that_succeeded_shows_its_first_recovered_failure_with_its_call(
     assert "the run succeeded; the tree recovered from 1 failure, the first at 0.000s: 'navigation.go_to'" in out
     assert 'navigation.go_to           failed        0.000s  blocked  inputs {"place":"kitchen"}' in out, out
     assert "navigation.go_to [✕]" in out, out
+
+
+UNNAMED = """format: 1
+name: unnamed_steps
+root:
+  sequence:
+    name: take a message to the kitchen
+    children:
+      - sequence:
+          - call: speech.say
+            inputs: {text: "going"}
+          - call: navigation.go_to
+            inputs: {place: kitchen}
+"""
+
+
+@pytest.mark.parametrize("named", [True, False])
+def test_the_reason_names_the_nearest_named_node_not_a_bare_kind(sim_defs, tmp_path, named):
+    """An unnamed call sits in an unnamed sequence: the reason said 'sequence: navigation.go_to failed',
+    which tells nothing; it names the nearest node with a name of its own, or none."""
+    text = UNNAMED if named else UNNAMED.replace("    name: take a message to the kitchen\n", "")
+    path = tmp_path / "unnamed.yaml"
+    path.write_text(text)
+    t = TreeTest(str(path), sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    run = t.run()
+    assert run.status == Status.FAILURE
+    said = "navigation.go_to failed: blocked"
+    assert run.reason == ("take a message to the kitchen: " + said if named else said)
