@@ -8,15 +8,20 @@ Types: a ``$reference`` whose value's ROS type (known from the definitions of th
 write the key) cannot be converted to the input it is passed to, or whose path names a field that
 type does not have (``coordinator.values.follow``); a count, duration or ``for_each`` list of a type
 that cannot be one (``coordinator.nodes.base.param_type_errors``). A key is typed only when all its
-writers give one type (a ``set``, a tree input or an include argument gives none).
+writers give one type: a node's definition gives it, or the reference whose value it copies (a ``set``
+or an include argument of ``$pose``, ``for_each``'s element: the list's element type); a tree input, a
+literal or an expression gives none. A tree input that nothing else writes is checked, as a count,
+duration or list, with the literals it is given (its default, the includes' arguments).
 """
 from __future__ import annotations
 
-from typing import Dict, FrozenSet, List, Optional, Sequence, Set
+from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 
 from coordinator.errors import TreeError
 from coordinator.nodes.base import Flow
+from coordinator.refs import Computed, Ref
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of
+from coordinator.values import Binding, KeyTypes, ref_type
 
 __all__ = ["check_flow", "check_types", "key_types"]
 
@@ -32,25 +37,111 @@ def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[Tree
     return errors
 
 
-def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> Dict[str, Set[Optional[str]]]:
-    """For each tree key, the ROS types written to it (None: not known statically)."""
-    types: Dict[str, Set[Optional[str]]] = {k: {None} for k in tree.inputs}
+def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
+              given: FrozenSet[str] = frozenset()) -> KeyTypes:
+    """For each tree key, the ROS types written to it (None: not known statically), and the literals the
+    tree inputs that nothing else writes are given (``bound``; ``given``: inputs the caller sets, whose
+    defaults are not used)."""
+    types = KeyTypes((k, {None}) for k in tree.inputs)
     nodes = nodes_of(tree.root) if nodes is None else nodes
-    if not any(nk.own_writes for nk in kinds_in(nodes)):
-        return types
-    for n in nodes:
-        nk = n.nodekind
-        written = nk.writes(n) if nk.own_writes else None   # the base writes nothing
-        for key, rostype in written.items() if written else ():
-            types.setdefault(key, set()).add(rostype)
+    kinds = kinds_in(nodes)
+    binders = [n for n in nodes if n.nodekind.own_binds] if any(nk.own_binds for nk in kinds) else []
+    inputs = set(tree.inputs)   # the keys that are inputs of a file
+    for b in binders:
+        bound = b.nodekind.binds(b)
+        inputs.update(bound[0].inputs if bound is not None else ())
+    writers: Dict[str, List[TreeNode]] = {}   # of those keys
+    copies: List[Tuple[str, Ref]] = []
+    if any(nk.own_writes for nk in kinds):
+        for n in nodes:
+            nk = n.nodekind
+            written = nk.writes(n) if nk.own_writes else None   # the base writes nothing
+            if not written:
+                continue
+            like = nk.copies(n) if nk.own_copies else None
+            for key, rostype in written.items():
+                if like and key in like:
+                    copies.append((key, like[key]))
+                    types.setdefault(key, set())
+                else:
+                    types.setdefault(key, set()).add(rostype)
+                if key in inputs:
+                    writers.setdefault(key, []).append(n)
+        if copies:
+            _settle(types, copies)
+    if inputs:
+        types.bound = _bindings(tree, binders, writers, given)
     return types
 
 
-def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None) -> List[TreeError]:
-    """References that cannot fit the input they are passed to."""
+def _settle(types: KeyTypes, copies: List[Tuple[str, Ref]]) -> None:
+    """Add the type each copy gives its key: the type its reference holds. A reference into a key only
+    copies write waits until one of them gave a type (a loop of copies of one value holds its type);
+    keys that still have none at the end (copies of each other only) are not known."""
+    while True:
+        changed = True
+        while changed:
+            changed = False
+            for key, ref in copies:
+                source = types.get(ref.key)
+                if source is not None and not source:
+                    continue
+                t = ref_type(types, ref)
+                if t not in types[key]:
+                    types[key].add(t)
+                    changed = True
+        stuck = [key for key, _ in copies if not types[key]]
+        if not stuck:
+            return
+        for key in stuck:
+            types[key].add(None)
+
+
+def _literal(value: Any) -> bool:
+    """A number, text, true/false or a list, written in the tree (a mapping is not checked this way)."""
+    return isinstance(value, (bool, int, float, str, list)) and not isinstance(value, (Ref, Computed))
+
+
+def _bindings(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[TreeNode]],
+              given: FrozenSet[str]) -> Dict[str, Dict[str, List[Binding]]]:
+    """The literals each file's inputs start with, where no node but the includes of that file writes them:
+    the values its counts, durations and lists read as ``$input`` (see ``KeyTypes``). An include that
+    gives a value another one gave already is not listed again (its fix is the same)."""
+    out: Dict[str, Dict[str, List[Binding]]] = {}
+    here = tree.root.pos.file
+    for k, default in tree.inputs.items():
+        if k not in given and k not in writers and _literal(default):
+            out.setdefault(k, {}).setdefault(here, []).append((default, "", None))
+    files: Dict[int, Tuple[TreeFile, Dict[str, Any], TreeNode]] = {}   # each include node once
+    for b in binders:
+        bound = b.nodekind.binds(b)
+        if bound is not None:
+            files.setdefault(id(b), (bound[0], bound[1], b))
+    sole: Dict[str, Optional[TreeFile]] = {}   # the one file whose includes are all the key's writers
+    for k, ws in writers.items():
+        subs = {id(files[id(w)][0]) if id(w) in files else 0 for w in ws}
+        sole[k] = files[id(ws[0])][0] if len(subs) == 1 and 0 not in subs else None
+    seen: Set[Tuple[str, str, str, str]] = set()
+    for sub, args, b in files.values():
+        for k, default in sub.inputs.items():
+            value = args.get(k, default)
+            if sole.get(k) is not sub or not _literal(value):   # (nor REQUIRED)
+                continue
+            arg = k if k in args else ""
+            said = (k, arg, type(value).__name__, repr(value))
+            if said not in seen:
+                seen.add(said)
+                out.setdefault(k, {}).setdefault(sub.root.pos.file, []).append((value, arg, b.pos))
+    return out
+
+
+def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
+                given: FrozenSet[str] = frozenset()) -> List[TreeError]:
+    """References that cannot fit the input they are passed to (``given``: inputs the caller sets); a
+    ``warning: `` among them is one (the tree's default of an input that cannot be used as it is)."""
     errors: List[TreeError] = []
     nodes = nodes_of(tree.root) if nodes is None else nodes
-    types = key_types(tree, nodes)
+    types = key_types(tree, nodes, given)
     for n in nodes:
         nk = n.nodekind
         if nk.own_check_types:   # the base checks nothing

@@ -545,8 +545,10 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         if tree is not None:
             nodes = nodes_of(tree.root)
             errors.extend(check_flow(tree, frozenset(given)))
-            errors.extend(check_types(tree, nodes))
-            found = sorted(set(parser.warnings) | set(warnings(nodes)),
+            typed = check_types(tree, nodes, frozenset(given))
+            warned = {e for e in typed if e.message.startswith("warning: ")}
+            errors.extend(e for e in typed if e not in warned)
+            found = sorted(set(parser.warnings) | set(warnings(nodes)) | warned,
                            key=lambda e: (e.pos.file, e.pos.line, e.pos.column, e.message))
             if not errors:
                 tree.warnings = found

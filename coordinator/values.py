@@ -16,7 +16,7 @@ from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
-__all__ = ["ExprValue", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
+__all__ = ["Binding", "ExprValue", "KeyTypes", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
            "read_at", "ref_errors", "ref_kind", "ref_type", "value_kind", "value_type_errors"]
 
 _LOOSE = re.compile(r"(?<![$\w])\$([^\W\d]\w*)")
@@ -214,6 +214,21 @@ def _stands_for(t: str) -> str:
             break
         t = cls._slot_types[0]
     return t
+
+
+Binding = Tuple[Any, str, Optional[Pos]]
+"""A literal a tree input is given: the value, the include argument's name ('' for the input's default),
+and where the include that gives it is (None: the default of the tree checked)."""
+
+
+class KeyTypes(dict):  # type: ignore[type-arg]
+    """For each tree key, the ROS types written to it (None: not known statically); and ``bound``: for a
+    key that only its files' inputs give (no node but an include of that file writes it), the literals
+    it starts with in each file, by the path of the file (``coordinator.dataflow.key_types``)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.bound: Dict[str, Dict[str, List[Binding]]] = {}
 
 
 def held(t: str) -> str:

@@ -152,8 +152,9 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
     the wrong kind and references into fields their keys' types do not have, in its expressions; a
     reference or an expression whose type the definitions give (``$answer`` after ``speech.listen``
     wrote it: text, not seconds); and a constant expression worked out when the tree loaded
-    (``$(2.5)``: not a count). A value whose type is not known (a tree input, a key ``set`` writes)
-    is left to :func:`run_param`, when the node starts.
+    (``$(2.5)``: not a count). A tree input ``$key`` that nothing but its default or its includes'
+    arguments writes is checked with those literals (``tries: {default: three}``: not a count); another
+    value whose type is not known (a key a ``set`` of a literal writes) is left to :func:`run_param`.
 
     ``where``: the value's position, or a function that makes it (read only when there is an error).
     """
@@ -162,12 +163,17 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
     from coordinator.values import value_kind, value_type_errors
 
     found: List[Tuple[int, str]] = []
+    at = None
     if isinstance(value, (Ref, Computed)):
         found = value_type_errors(value, types)
         if not found:   # (else its own errors say what is wrong)
             kind, said = value_kind(types, value)
             if kind is not None and kind != _PARAM_KINDS[type_name]:
                 found.append((0, "%s %s, not %s" % (label, said, TYPES[type_name].expect or "a list")))
+            elif kind is None and isinstance(value, Ref) and not value.path and value.key in getattr(
+                    types, "bound", ()):
+                at = where() if callable(where) else where   # a tree input: the literals it is given
+                found = _bound_errors(value, at, types, type_name, label) if at is not None else []
     elif isinstance(value, list):   # a literal list: its elements may hold references
         found = value_type_errors(value, types)
     elif type_name == "list":
@@ -180,11 +186,37 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
             found.append((0, "%s is %r, not %s" % (label, value, t.expect)))
     if not found:
         return
-    at = where() if callable(where) else where
+    at = at or (where() if callable(where) else where)
     if at is None:
         return
     for off, msg in found:
         errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
+
+
+def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str) -> List[Tuple[int, str]]:
+    """The literals a tree input ``$key`` is given (``types.bound``: the default, an include's argument;
+    only where nothing else writes its key) that cannot be this count, duration or list: errors, but a
+    warning for a default of the tree checked (whoever runs it may set the input)."""
+    from coordinator.expr import brief
+
+    t = TYPES[type_name]
+    out: List[Tuple[int, str]] = []
+    for value, arg, include in types.bound[ref.key].get(at.file, ()):
+        v = int(value) if type_name == "count" and isinstance(value, float) and value.is_integer() else value
+        if isinstance(v, list) if t.ok is None else t.ok(v):
+            continue
+        warn, fix = "", "give the input a default that is one"
+        if arg:
+            origin, fix = "argument %r of the include at %s" % (arg, where(include, at)), "pass one there"
+        elif include is not None:
+            origin = "the default of input %r; the include at %s passes no argument" % (ref.key, where(include, at))
+            fix += ", or pass one"
+        else:   # the tree's own: its caller may set it
+            warn, origin = "warning: ", "the default of input %r" % ref.key
+            fix = "a run that does not set the input fails here; " + fix.replace("the input", "it")
+        out.append((0, "%s%s %s is %s (%s), not %s: %s" % (warn, label, ref, brief(value), origin,
+                                                           t.expect or "a list", fix)))
+    return out
 
 
 @dataclass(frozen=True)
@@ -318,14 +350,14 @@ class NodeKind(abc.ABC):
     parse_without_pos = False
     # whether the kind overrides these hooks (set for each subclass): the whole-tree walks skip the base's,
     # which find nothing
-    own_expand = own_writes = own_check_types = own_warnings = own_outcome = False
+    own_expand = own_writes = own_check_types = own_warnings = own_outcome = own_copies = own_binds = False
     # a leaf kind's behaviour class, made as ``leaf(node, ctx)``: the builder makes it without calling
     # ``build`` (None: ``build`` makes the behaviour)
     leaf: Optional[Callable[[TreeNode, Any], py_trees.behaviour.Behaviour]] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        for hook in ("expand", "writes", "check_types", "warnings", "outcome"):
+        for hook in ("expand", "writes", "check_types", "warnings", "outcome", "copies", "binds"):
             setattr(cls, "own_" + hook, getattr(cls, hook) is not getattr(NodeKind, hook))
         if cls.build is not NodeKind.build:
             cls.leaf = None   # its own build decides
@@ -348,6 +380,17 @@ class NodeKind(abc.ABC):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         """Tree keys written on SUCCESS, each with its ROS type when known (for the type checks)."""
         return {}
+
+    def copies(self, node: TreeNode) -> Dict[str, Ref]:
+        """Keys among ``writes`` given the value of a reference the node reads, each with that reference
+        (a ``set`` of ``$pose``, ``for_each``'s element ``$list[0]``): the key holds the type it holds."""
+        return {}
+
+    def binds(self, node: TreeNode) -> Optional[Tuple[TreeFile, Dict[str, Any]]]:
+        """The tree file whose inputs the node sets before running it (an include) and the arguments it
+        gives (an input without one gets its default): the counts, durations and lists it reads are
+        checked with these values."""
+        return None
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
         """Keys surely written when ``node`` succeeds (``NEVER``: it never does); its reads are checked

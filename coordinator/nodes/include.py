@@ -75,6 +75,13 @@ class IncludeKind(NodeKind):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec.bound())
 
+    def copies(self, node: TreeNode) -> Dict[str, Ref]:
+        """An argument ``$pose`` gives the input what it holds."""
+        return {k: v for k, v in node.spec.args.items() if isinstance(v, Ref)}
+
+    def binds(self, node: TreeNode) -> Optional[Tuple[TreeFile, Dict[str, Any]]]:
+        return (node.spec.tree, node.spec.args) if node.spec.tree is not None else None
+
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         where = node.spec.arg_pos
         for k, v in node.spec.args.items():

@@ -19,7 +19,7 @@ from coordinator.nodes.base import (
     run_param,
 )
 from coordinator.nodes.leafbase import Leaf
-from coordinator.refs import RefError, refs_in, resolve
+from coordinator.refs import Ref, RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at, value_type_errors
 
@@ -360,6 +360,10 @@ class SetKind(NodeKind):
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec)
+
+    def copies(self, node: TreeNode) -> Dict[str, Ref]:
+        """A key set to ``$pose`` or ``$g.position`` holds what it holds (a literal: not known)."""
+        return {k: v for k, v in node.spec.items() if isinstance(v, Ref)}
 
     leaf = SetKeys
 

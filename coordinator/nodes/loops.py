@@ -315,6 +315,11 @@ class ForEachKind(NodeKind):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return {k: None for k in (node.spec.key, node.spec.index) if k}
 
+    def copies(self, node: TreeNode) -> Dict[str, Ref]:
+        """The ``as`` key holds an element of the list: of a ``$reference``, its element type (``$poses[0]``)."""
+        items = node.spec.items
+        return {node.spec.key: Ref(items.key, items.path + (0,))} if isinstance(items, Ref) and node.spec.key else {}
+
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         spec = node.spec
         param_type_errors(spec.items, lambda: node.value_pos or node.pos, types, "list", "for_each", errors)
