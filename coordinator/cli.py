@@ -243,10 +243,10 @@ def make_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    def with_modules(sp: argparse.ArgumentParser) -> None:
+    def with_modules(sp: argparse.ArgumentParser, more: str = "") -> None:
         sp.add_argument("--modules", action="append", metavar="PATH",
                         help="more module definitions, file or directory (repeatable; added to the simulated "
-                             "robot's, the ROS packages' on $ROS_PACKAGE_PATH and $BMTREE_MODULE_PATH)")
+                             "robot's, the ROS packages' on $ROS_PACKAGE_PATH and $BMTREE_MODULE_PATH)" + more)
 
     def run_options(sp: argparse.ArgumentParser) -> None:
         with_modules(sp)
@@ -314,11 +314,13 @@ def make_parser() -> argparse.ArgumentParser:
     dump.add_argument("--name", help="show the history of this name (or module/function/name)")
     dump.add_argument("--history", type=count(), default=20, help="how many values of --name")
     dump.set_defaults(func=cmd_blackboard)
-    t = sub.add_parser("test", help="run YAML test scenarios against mocked modules")
-    t.add_argument("scenarios", nargs="+")
+    t = sub.add_parser("test", help="run YAML test scenarios against mocked modules",
+                       epilog="The scenario file format: docs/scenarios.md (top level: tree, modules, scenarios; "
+                              "expect: status, calls (or calls: {in_order: [...]}), blackboard, reason, duration).")
+    t.add_argument("scenarios", nargs="+", metavar="SCENARIO.yaml")
     t.add_argument("--coverage", action="store_true",
                    help="then report which nodes of the trees ran and which outcomes they reached")
-    with_modules(t)
+    with_modules(t, ". Given, it wins: a scenario file's own top-level 'modules:' is then not loaded (only checked)")
     t.set_defaults(func=cmd_test)
     rs = sub.add_parser("runs", help="list recorded runs (newest first)")
     rs.add_argument("--dir", help="where the run logs are (default $ROS_HOME/bmtree/runs)")

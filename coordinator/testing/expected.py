@@ -27,8 +27,8 @@ from comm.errors import ProtocolError
 from comm.rostypes import resolve_type, single_field, to_message
 from coordinator.context import plain
 
-__all__ = ["Difference", "ExpectedCall", "calls_diff", "difference", "expect_calls", "expected_message", "legacy_times",
-           "shown", "want_form"]
+__all__ = ["Difference", "ExpectedCall", "calls_diff", "difference", "expect_calls", "expect_calls_in_order",
+           "expect_duration", "expected_message", "legacy_times", "shown", "want_form"]
 
 _NANOSECONDS = re.compile(r"^-?[0-9]+$")
 _TIMES = ("time", "duration")
@@ -307,4 +307,93 @@ def expect_calls(run: Any, expected: List[ExpectedCall]) -> List[str]:
     if problems:
         problems.append("calls changed (- expected only, + made only, = both):")
         problems.extend(calls_diff(expected, actual))
+    return problems
+
+
+def _first_difference(want: ExpectedCall, call: Any) -> str:
+    """How a made call of ``want``'s function differs from it: its first input that does not match."""
+    for k in want.inputs:
+        if k not in call.messages:
+            return "it has no input %r" % k
+        d = want.difference(k, call.messages[k])
+        if d is not None:
+            return d.said("input %s" % k)
+    return ""
+
+
+def _not_found(k: int, expected: List[ExpectedCall], actual: List[Any], after: Optional[int],
+               matched: Dict[int, int]) -> List[str]:
+    """Why ``expected[k]`` was not found after the made call ``after`` (None: from the start), with
+    what the run did instead: its calls of that function after, or only before, that call."""
+    want = expected[k]
+    head = "calls in order: expected call %d of %d, %s, not found " % (k + 1, len(expected),
+                                                                      _show(want.target, want.inputs))
+    if after is None:
+        return [head + "from the start of the run"] + _instead(want, actual, 0, matched)
+    got = actual[after]
+    head += "after call %d, %s (which matched expected call %d)" % (after + 1, _show(got.target, got.inputs), matched[after] + 1)
+    return [head] + _instead(want, actual, after + 1, matched)
+
+
+def _instead(want: ExpectedCall, actual: List[Any], start: int, matched: Dict[int, int]) -> List[str]:
+    """What the run did instead of ``want`` after call ``start`` (1-based; 0: from the start): its
+    calls of that function and how each differs (the first three); a matching call up to call
+    ``start`` (the order differs), or that the function was called only before, or never."""
+    later = [i for i in range(start, len(actual)) if actual[i].target == want.target]
+    said = ["  call %d (%s): %s" % (i + 1, want.target, _first_difference(want, actual[i])) for i in later[:3]]
+    if len(later) > 3:
+        said.append("  and %d more %s call%s" % (len(later) - 3, want.target, "s" if len(later) > 4 else ""))
+    earlier = [i for i in range(start) if actual[i].target == want.target]
+    same = [i for i in earlier if want.matches(actual[i])]
+    if same:
+        i = same[-1]
+        said.append("  call %d matches it, but %s" % (i + 1, "it is not after call %d: the order differs" % start
+                    if i + 1 < start else "it is expected call %d already: each made call matches one expected call"
+                    % (matched[i] + 1)))
+    elif earlier and not later:
+        said.append("  %s was called only up to call %d: call%s %s" % (
+            want.target, start, "s" if len(earlier) > 1 else "", ", ".join(str(i + 1) for i in earlier)))
+    if not earlier and not later:
+        said.append("  the run made no %s call" % want.target)
+    return said
+
+
+def expect_calls_in_order(run: Any, expected: List[ExpectedCall]) -> List[str]:
+    """What is missing of ``expect: calls: {in_order: [...]}``: each expected call must be made after
+    the made call that matched the one before it (the first: from the start of the run); other
+    calls may come between. Each expected call is matched with the earliest made call that fits,
+    and one not found is said with the made call it was looked for after; the next expected call
+    is then looked for after that same call."""
+    actual = run.calls()
+    matched: Dict[int, int] = {}    # made call -> the expected call it matched
+    missing: Dict[Optional[int], List[int]] = {}   # made call (None: the start) -> expected calls not found after it
+    problems: List[str] = []
+    after: Optional[int] = None
+    for k, want in enumerate(expected):
+        start = 0 if after is None else after + 1
+        found = next((i for i in range(start, len(actual)) if want.matches(actual[i])), None)
+        if found is None:
+            problems.extend(_not_found(k, expected, actual, after, matched))
+            missing.setdefault(after, []).append(k)
+            continue
+        matched[found] = k
+        after = found
+    if not problems:
+        return []
+    problems.append("calls made (= matched an expected call; - an expected call not found after the call above; "
+                    "the others may come between):")
+    lines = ["  - %s" % _show(expected[k].target, expected[k].inputs) for k in missing.get(None, [])]
+    for i, c in enumerate(actual):
+        lines.append("  %s %d %s" % ("=" if i in matched else " ", i + 1, _show(c.target, c.inputs)))
+        lines.extend("  - %s" % _show(expected[k].target, expected[k].inputs) for k in missing.get(i, []))
+    return problems + lines
+
+
+def expect_duration(duration: float, bounds: Dict[str, float]) -> List[str]:
+    """``expect: duration``: the run's simulated seconds against ``at_least`` and ``at_most``."""
+    problems = []
+    if "at_least" in bounds and duration < bounds["at_least"] - 1e-9:
+        problems.append("duration %g s (simulated), expected at least %g s" % (duration, bounds["at_least"]))
+    if "at_most" in bounds and duration > bounds["at_most"] + 1e-9:
+        problems.append("duration %g s (simulated), expected at most %g s" % (duration, bounds["at_most"]))
     return problems

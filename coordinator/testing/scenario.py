@@ -1,6 +1,7 @@
 """YAML test scenarios for ``bmtree test``: module scripts, expected calls, expected status.
 
     tree: ../trees/find_apple.yaml
+    modules: ../defs                                 # the file's own definitions, unless --modules is given
     scenarios:
       - name: apple in the kitchen
         inputs: {object: apple}
@@ -21,10 +22,11 @@
             - speech.say
             - navigation.go_to: {place: living_room}
           blackboard: {object_room: kitchen}
+          duration: {at_most: 60}                    # simulated seconds; at_least too
       - name: vision is blind
         mocks:
           vision.find_object: {fail: camera covered}
-        expect: {status: failure, reason: camera covered}
+        expect: {status: failure, reason: camera covered, calls: {in_order: [speech.say, vision.find_object]}}
 
 The whole file is checked before any scenario runs. Every run ends: after ``max_duration``
 simulated seconds, ``max_ticks`` ticks, or ``max_ticks_per_instant`` ticks without the simulated
@@ -35,7 +37,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from typing import Any, Dict, List, Optional, Set, TextIO, Tuple
+from typing import Any, Dict, List, Optional, Set, TextIO, Tuple, Union
 
 from py_trees.common import Status
 
@@ -49,9 +51,9 @@ from coordinator.testing.expected import (
     calls_diff,
     difference,
     expect_calls,
-    expected_message,
+    expect_calls_in_order,
+    expect_duration,
     legacy_times,
-    want_form,
 )
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
 from coordinator.testing.mocks import (
@@ -62,10 +64,22 @@ from coordinator.testing.mocks import (
     outcome_from_dict,
     stored_value,
 )
+from coordinator.testing.scenariokeys import (
+    ScenarioDefinitions,
+    check_calls,
+    check_duration,
+    duration_of,
+    expected_calls,
+    listed_calls,
+    modules_key,
+)
+from coordinator.testing.scenariokeys import function_of as _function
 from coordinator.treeast import TreeFile
 from coordinator.yamlsrc import LList, LMap, load_file, pos_of
 from modules.definition import ModuleDefinition
 from modules.search import default_definitions
+
+Definitions = Union[Dict[str, ModuleDefinition], ScenarioDefinitions, None]
 
 __all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_INSTANT", "ExpectedCall", "TickGuard",
            "calls_diff", "load_scenario_file", "run_scenario_file", "run_scenarios"]
@@ -78,7 +92,8 @@ DEFAULT_MAX_TICKS_PER_INSTANT = 10000
 """Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
 _SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS
-_EXPECT_KEYS = ("status", "calls", "blackboard", "reason")
+_EXPECT_KEYS = ("status", "calls", "blackboard", "reason", "duration")
+_TOP_KEYS = ("tree", "modules", "scenarios")
 _EVENT_KEYS = ("at", "event", "params", "after", "nth")
 _OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
 
@@ -94,9 +109,11 @@ class _Problems:
 
 
 def _check_keys(m: LMap, allowed: Any, what: str, out: _Problems) -> None:
+    """Each key of ``m`` one of ``allowed``: else an error with the closest one, or all of them."""
     for k in m:
         if k not in allowed:
-            out.add(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed)))
+            out.add(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed) or " (%s keys: %s)" % (
+                what, ", ".join(allowed))))
 
 
 def _number(m: LMap, key: str, default: float, at: Pos, out: _Problems) -> float:
@@ -134,7 +151,7 @@ class _Scenario:
     def __init__(self, name: str, test: TreeTest, expect: Any, limits: Dict[str, Any], given: Set[str],
                  calls: Optional[List[ExpectedCall]] = None):
         self.name, self.test, self.expect, self.limits, self.given = name, test, expect, limits, given
-        self.calls = calls if calls is not None else [ExpectedCall(c) for c in expect.get("calls") or []]
+        self.calls = calls if calls is not None else [ExpectedCall(c) for c in listed_calls(expect)[0]]
 
 
 class TickGuard(RunObserver):
@@ -182,7 +199,7 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
     inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value", out)
     mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
     expect = _expectations(sc, at, out)
-    calls = _expected_calls(expect, at, defs, out)
+    calls = expected_calls(expect, at, defs, out.add)
     limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
               "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
               "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
@@ -241,21 +258,6 @@ def _stored(sc: LMap, at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems
     return found
 
 
-def _function(defs: Dict[str, ModuleDefinition], target: Any) -> Tuple[Any, str]:
-    """The definition of ``module.function``, or None and why there is none (with a did-you-mean)."""
-    mod, dot, name = str(target).partition(".") if isinstance(target, str) else ("", "", "")
-    if not dot or not mod or not name:
-        return None, "%r is not a module.function" % (target,)
-    definition = defs.get(mod)
-    if definition is None:
-        return None, "no module %r in the definitions%s" % (mod, did_you_mean(mod, defs) or " (known: %s)" % (
-            ", ".join(sorted(defs)) or "none"))
-    try:
-        return definition.function(name), ""
-    except ProtocolError as exc:
-        return None, str(exc)
-
-
 def _event(mocked: Mocks, ev: Any, ev_at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> None:
     """Check one event of ``events`` and schedule it (its problems to ``out``, each where it is written)."""
     if not isinstance(ev, LMap) or "event" not in ev:
@@ -291,37 +293,6 @@ def _event(mocked: Mocks, ev: Any, ev_at: Pos, defs: Dict[str, ModuleDefinition]
         out.add(pos_of(ev, "event", ev_at) if event is None else ev_at, str(exc))
 
 
-def _expected_calls(expect: Any, at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> List[ExpectedCall]:
-    """``expect: calls`` checked against the definitions (problems to ``out``, each where it is
-    written): each a function of a module, each input one it has, of a value that fits its type."""
-    calls = expect.get("calls") or []
-    if not isinstance(calls, list) or not all(want_form(c) for c in calls):
-        return []  # said by _expectations
-    found = []
-    for j, c in enumerate(calls):
-        c_at = calls.item_pos[j] if isinstance(calls, LList) else pos_of(expect, "calls", at)
-        want = ExpectedCall(c)
-        found.append(want)
-        fn, why = _function(defs, want.target)
-        if fn is None:
-            out.add(c.key_pos.get(want.target, c_at) if isinstance(c, LMap) else c_at, "expected call: %s" % why)
-            continue
-        inputs = c[want.target] if isinstance(c, dict) else None
-        params = {q.name: q for q in fn.inputs}
-        for name, value in want.inputs.items():
-            q = params.get(name)
-            if q is None:
-                out.add(inputs.key_pos[name] if isinstance(inputs, LMap) else c_at, "%s has no input %r%s" % (
-                    fn.qualified, name, did_you_mean(name, params) or " (its inputs: %s)" % (", ".join(params) or "none")))
-                continue
-            try:
-                want.built[name] = expected_message(q.rostype, value)
-            except ProtocolError as exc:
-                out.add(inputs.val_pos[name] if isinstance(inputs, LMap) else c_at,
-                        said_of("%s input %r" % (fn.qualified, name), exc))
-    return found
-
-
 def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> None:
     """A scenario's ``inputs`` against the tree's: each declared, every required one given."""
     declared = tree.inputs
@@ -337,7 +308,7 @@ def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> 
 
 def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
     """A scenario's ``expect``, checked (its problems to ``out``)."""
-    expect = _mapping(sc, "expect", at, "expect is a mapping with %s" % ", ".join(_EXPECT_KEYS), out)
+    expect = _mapping(sc, "expect", at, "expect is a mapping with " + ", ".join(_EXPECT_KEYS), out)
     if not expect:
         return expect
     _check_keys(expect, _EXPECT_KEYS, "expect", out)
@@ -345,9 +316,8 @@ def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
     if status.lower() not in ("success", "failure"):
         out.add(pos_of(expect, "status", at), "status is success or failure, got %r%s" % (
             status, did_you_mean(status.lower(), ("success", "failure"))))
-    calls = expect.get("calls") or []
-    if not isinstance(calls, list) or not all(want_form(c) for c in calls):
-        out.add(pos_of(expect, "calls", at), "calls is a list of module.function or {module.function: {input: value}}")
+    check_calls(expect, at, out.add)
+    check_duration(expect, at, out.add)
     _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
     if "reason" in expect and not isinstance(expect["reason"], str):
         out.add(pos_of(expect, "reason", at), "reason is text that the run's reason must contain, got %r" % (
@@ -430,19 +400,26 @@ def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
             out.add(outputs.val_pos[name], said_of("%s output %r" % (fn.qualified, name), exc))
 
 
-def load_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
+def load_scenario_file(path: str, definitions: Definitions = None,
                        coverage: Optional[Coverage] = None) -> List[_Scenario]:
     """Every scenario of a file, checked before any runs; TreeErrors lists every problem of the file.
+    ``definitions``: given ones (the file's ``modules`` is then only checked), or None for the
+    defaults with the file's ``modules`` (a ScenarioDefinitions: the same, loaded once for many files).
     ``coverage``: record which nodes of the trees ran (``bmtree test --coverage``)."""
     top = Pos(path, 1, 1)
     data = load_file(path)  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
     found = _Problems()
-    _check_keys(data, ("tree", "scenarios"), "top-level", found)
+    _check_keys(data, _TOP_KEYS, "top-level", found)
     errors = found.errors   # the scenario file's own
     tree_errors: List[TreeError] = []   # its tree's (and its warnings): said first
-    defs = definitions if definitions is not None else default_definitions()
+    before = len(errors)
+    named = modules_key(data, path, top, found.add)
+    source = definitions if isinstance(definitions, ScenarioDefinitions) else ScenarioDefinitions(definitions)
+    defs = source.of(named, found.add)
+    if defs is None or len(errors) > before:   # without its definitions the rest cannot be checked
+        raise _FileErrors([], errors)
     loaded: Optional[TreeFile] = None
     tree = data["tree"]
     tree_path = os.path.join(os.path.dirname(os.path.abspath(path)), str(tree))
@@ -502,7 +479,9 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
             problems.append("the run reached the scenario's max_duration (%g s of simulated time); raise it if "
                             "the tree needs longer" % limits["max_duration"])
     if "calls" in expect:
-        problems.extend(expect_calls(run, s.calls))
+        in_order = isinstance(expect["calls"], dict)
+        problems.extend(expect_calls_in_order(run, s.calls) if in_order else expect_calls(run, s.calls))
+    problems.extend(expect_duration(run.duration, duration_of(expect)))
     if "reason" in expect and str(expect["reason"]) not in run.reason:
         problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
                         else "no reason (the run %s), expected one containing %r" % (
@@ -520,7 +499,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     return run, problems
 
 
-def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinition]] = None,
+def run_scenario_file(path: str, definitions: Definitions = None,
                       out: Optional[TextIO] = None, coverage: Optional[Coverage] = None) -> List[bool]:
     """Run every scenario of a file (all checked first); one PASS/FAIL line each. TreeErrors for a bad file."""
     out = out or sys.stdout
@@ -540,9 +519,10 @@ def run_scenario_file(path: str, definitions: Optional[Dict[str, ModuleDefinitio
 def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None,
                   coverage: bool = False) -> int:
     """``bmtree test``: exit 0 if every scenario passed, 1 if one failed, 2 for an invalid file;
+    ``modules`` (``--modules``) given, every file runs with them and its own ``modules`` is not loaded;
     ``coverage``: then which nodes of the trees ran and which outcomes they reached."""
     out = out or sys.stdout
-    defs = default_definitions(modules or ())
+    defs = ScenarioDefinitions(default_definitions(modules) if modules else None)
     cov = Coverage() if coverage else None
     results: List[bool] = []
     invalid = 0  # files

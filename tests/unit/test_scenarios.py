@@ -189,7 +189,7 @@ def test_every_scenario_is_checked_before_the_first_runs(tmp_path, capsys):
     assert "PASS" not in captured.out and "FAIL" not in captured.out
     assert captured.err.splitlines() == [
         "%s:5:14: the tree declares no input 'objet' (did you mean 'object'?) (its inputs: object, rooms)" % f,
-        "%s:7:13: expect is a mapping with status, calls, blackboard, reason" % f,
+        "%s:7:13: expect is a mapping with status, calls, blackboard, reason, duration" % f,
         "%s:9:22: status is success or failure, got 'sucess' (did you mean 'success'?)" % f,
         "%s:11:21: calls is a list of module.function or {module.function: {input: value}}" % f,
         "%s:13:16: max_ticks must be a whole number >= 1, got 0" % f]
