@@ -514,10 +514,30 @@ def _static(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tu
     a, b = _static(node[2], key_kind, errors), _static(node[3], key_kind, errors)
     if node[1] in _ORDER and a is not None and b is not None and a != b:
         errors.append((node[4], "cannot compare a %s %s a %s" % (a, node[1], b)))
-    elif node[1] in ("==", "!=") and {a, b} == {"number", "string"}:
+    elif node[1] in ("==", "!=") and ({a, b} == {"number", "string"} or {a, b} == {"bool", "string"}):
+        fix = _as_truth(node) if "bool" in (a, b) else ""
         errors.append((node[4], "a %s %s a %s is always %s%s" % (
-            a, node[1], b, "false" if node[1] == "==" else "true", _as_other(node[2]) or _as_other(node[3]))))
+            a, node[1], b, "false" if node[1] == "==" else "true",
+            fix or _as_other(node[2]) or _as_other(node[3]))))
     return "bool"
+
+
+def _as_truth(node: Any) -> str:
+    """`` (write door_open, or door_open == true)``: the fix for a true/false value compared with text that
+    is not a literal ``true``/``false`` of its own ('' when the text side is not written in the expression)."""
+    op, left, right = node[1], node[2], node[3]
+    text, other = (left, right) if left[0] == "lit" and isinstance(left[1], str) else (right, left)
+    if text[0] != "lit" or not isinstance(text[1], str):
+        return ""
+    name = str(other[1])[1:] if other[0] == "ref" else ""
+    word = text[1].strip().lower()
+    if word not in ("true", "false"):
+        return " (a true/false value is not text: %scompare it with true or false, unquoted)" % (
+            "write %s or not %s, or " % (name, name) if name else "")
+    if not name:
+        return " (compare with %s, unquoted)" % word
+    holds = (word == "true") == (op == "==")
+    return " (write %s%s, or %s %s %s, unquoted)" % ("" if holds else "not ", name, name, op, word)
 
 
 _NUMBER_TEXT = re.compile(r"-?(?:\d+\.\d*|\d*\.\d+|\d+)(?:[eE][-+]?\d+)?$")

@@ -15,6 +15,7 @@ from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
+from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, takes
 from coordinator.refs import RefError
 from coordinator.treeast import (
     REQUIRED,
@@ -81,13 +82,12 @@ def _nearby(raw: LMap, kind: str) -> List[Tuple[str, LMap]]:
 def _misplaced(option: str, kind: str, allowed: Tuple[str, ...], nearby: List[Tuple[str, LMap]]) -> str:
     """The hint for a leaf's option given to a decorator or composite: what it takes, and which node inside
     it the option belongs to (indented one level too little)."""
-    takes = " (%s takes %s)" % (kind, ", ".join(sorted(allowed)))
     for leaf, node in nearby:
         if option in _OPTION_NAMES[leaf]:
             return "%s: %r is an option of the %s at line %d: indent it under that %s" % (
-                takes, option, leaf, node.pos.line, leaf)
+                takes(kind, allowed), option, leaf, node.pos.line, leaf)
     return "%s: %r is an option of %s: indent it under the node it is for" % (
-        takes, option, " or ".join(_LEAF_OPTIONS[option]))
+        takes(kind, allowed), option, " or ".join(_LEAF_OPTIONS[option]))
 
 
 _HOLE = re.compile(r"\$?([^\W\d][\w.\[\]]*)$")
@@ -321,6 +321,9 @@ class Parser:
         if inline and isinstance(value, LMap):
             raw = self._inline(raw, kind, allowed)
             value = raw[kind]
+        elif value.__class__ is LMap and nk.family == "decorator":   # retry: {attempts: 3, child: …}
+            raw = decorator_mapping(self, raw, kind, nk, allowed) or raw
+            value = raw[kind]
         meant: Set[str] = set()   # options that unknown keys look like misspellings of
         if not keys.issuperset(raw):
             for k in raw:
@@ -333,6 +336,8 @@ class Parser:
                         meant.add(hint[len(" (did you mean '"):-len("'?)")])
                     elif k in _LEAF_OPTIONS and nk.family != "leaf":
                         hint = _misplaced(k, kind, allowed, _nearby(raw, kind))
+                    else:
+                        hint = option_hint(k, kind, allowed)
                     self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
         for o in required:
             if o not in raw and o not in meant:   # a misspelt option is one error, not two
@@ -373,7 +378,8 @@ class Parser:
         unknown = [k for k in raw if k not in _COMMON]
         first = unknown[0] if unknown else None
         if first is not None:
-            self.err(raw.key_pos[first], "unknown node kind %r%s" % (first, did_you_mean(first, REGISTRY)))
+            self.err(raw.key_pos[first], "unknown node kind %r%s" % (
+                first, kind_hint(first) or did_you_mean(first, REGISTRY)))
         else:
             self.err(raw.pos, "node has no kind (one of: %s)" % ", ".join(REGISTRY))
 
@@ -397,6 +403,8 @@ class Parser:
                     misspelt = misspelt or hint == " (did you mean 'children'?)"
                     if not hint and k in _LEAF_OPTIONS:
                         hint = _misplaced(k, kind, allowed, _nearby(inner, "children"))
+                    elif not hint:
+                        hint = option_hint(k, kind, allowed)
                     self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
                     continue
                 merged[k] = v
@@ -412,6 +420,9 @@ class Parser:
 
     # helpers for the kinds -------------------------------------------------------------
     def child(self, node: TreeNode, raw: Any, at: Pos) -> None:
+        if raw.__class__ is LList:   # child: [a, b]
+            self.err(at, one_child(node.kind, "child" in _OPTION_NAMES[node.kind], len(raw)))
+            return
         c = self.node(raw, at)
         if c is not None:
             node.children.append(c)

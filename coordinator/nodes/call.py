@@ -1,11 +1,16 @@
-"""``call``: call a module function, its inputs checked and converted once, when the tree loads."""
+"""``call``: call a module function, its inputs checked and converted once, when the tree loads.
+
+Its ``status`` and ``error`` options write how the call ended (succeeded or not) to tree keys, for a
+``switch`` to route on; ``timeout: none`` waits as long as it takes."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterable, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
 import py_trees
 from py_trees.common import Status
+from std_msgs.msg import String
 
 from comm.errors import ProtocolError, did_you_mean
 from comm.messages import FunctionCall, new_id
@@ -14,12 +19,15 @@ from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import (
+    TYPES,
+    Flow,
     NodeKind,
     Option,
     param_keys,
     param_type_errors,
     repeated_outputs,
     run_param,
+    where,
 )
 from coordinator.nodes.leafbase import Leaf
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
@@ -27,7 +35,16 @@ from coordinator.treeast import TreeNode
 from coordinator.values import read_at, ref_type, value_type_errors
 from modules.definition import FunctionDefinition
 
-__all__ = ["Call", "CallSpec", "KINDS"]
+__all__ = ["Call", "CallSpec", "KINDS", "NOT_SENT", "NO_TIMEOUT", "STATUS_TEXTS"]
+
+NO_TIMEOUT = "none"
+"""``timeout: none``, as the spec holds it: no limit (the only text a call's timeout may be)."""
+NOT_SENT = "not_sent"
+"""The status of a call that could not be built (an input's reference unset, a bad value): never sent."""
+STATUS_TEXTS: Tuple[str, ...] = tuple(s.value for s in RecordStatus if s not in (
+    RecordStatus.RUNNING, RecordStatus.HALTED)) + (NOT_SENT,)
+"""What a call's ``status`` key may hold: how it ended (a halted call writes nothing)."""
+TEXT = "std_msgs/String"   # the type of the status and error keys, as the checks see it
 
 
 @dataclass
@@ -37,7 +54,9 @@ class CallSpec:
     inputs: Dict[str, Any] = field(default_factory=dict)        # input name -> literal (with Refs)
     static: Dict[str, Any] = field(default_factory=dict)        # input name -> message, for inputs without Refs
     outputs: Dict[str, str] = field(default_factory=dict)       # output name -> tree key
-    timeout: Optional[float] = None
+    timeout: Any = None          # seconds, a Ref/Computed, NO_TIMEOUT, or None: the run's --call-timeout
+    status: Optional[str] = None  # tree key: how the call ended (STATUS_TEXTS), on success and failure
+    error: Optional[str] = None   # tree key: the error text ('' on success)
     check_success: bool = True
     input_pos: Dict[str, Pos] = field(default_factory=dict)
     timeout_pos: Optional[Pos] = None
@@ -51,10 +70,14 @@ class Call(Leaf):
         self.feedback_message = ""
         self.record: Optional[CallRecord] = None
         spec: CallSpec = self.node.spec
-        self.timeout, self.reason = run_param(spec.timeout, self.ctx.lookup, "seconds", "timeout of call")
-        if self.reason:
-            return
-        self.timeout = self.timeout or self.ctx.default_timeout
+        self.deadline: Optional[float] = None
+        if _unlimited(spec.timeout):
+            self.timeout = None
+        else:
+            self.timeout, self.reason = run_param(spec.timeout, self.ctx.lookup, "seconds", "timeout of call")
+            if self.reason:
+                return
+            self.timeout = self.timeout or self.ctx.default_timeout
         fn = spec.function
         assert fn is not None
         msgs = []
@@ -73,6 +96,9 @@ class Call(Leaf):
                 return
         call = FunctionCall(fn.module, fn.name, msgs, [p.name for p in fn.inputs], new_id())
         self.record = self.ctx.start_call(fn, call, owner=self)
+        if self.timeout is None:
+            self.feedback_message = "waiting for %s (no time limit)" % fn.qualified
+            return
         self.deadline = self.ctx.clock.now() + self.timeout
         self.ctx.wake_after(self.timeout)
         self.feedback_message = "waiting for %s" % fn.qualified
@@ -80,41 +106,64 @@ class Call(Leaf):
     def update(self) -> Status:
         rec = self.record
         if rec is None:
-            return self._fail(self.reason)
+            return self._ended(NOT_SENT, self.reason, self.reason)
         result = rec.result
         if result is None:
             if rec.ended is not None:  # ended without an answer (its module was lost): say which call
-                return self._fail("%s %s: %s" % (rec.target, rec.status, rec.error) if rec.error
-                                  else "%s %s" % (rec.target, rec.status))
-            if self.ctx.clock.now() >= self.deadline:
-                self.ctx.cancel(rec, RecordStatus.TIMEOUT, "no answer within %gs" % self.timeout)
-                return self._fail("%s: no answer within %gs" % (rec.target, self.timeout))
+                return self._ended(rec.status, rec.error, "%s %s: %s" % (rec.target, rec.status, rec.error)
+                                   if rec.error else "%s %s" % (rec.target, rec.status))
+            if self.deadline is not None and self.ctx.clock.now() >= self.deadline:
+                error = "no answer within %gs" % self.timeout
+                self.ctx.cancel(rec, RecordStatus.TIMEOUT, error)
+                return self._ended(RecordStatus.TIMEOUT, error, "%s: %s" % (rec.target, error))
             return Status.RUNNING
         fn = rec.function
         assert fn is not None
         if result.status != "succeeded":
             self.ctx.finish(rec, result.status, result.error)
-            return self._fail("%s %s: %s" % (rec.target, result.status, result.error))
+            return self._ended(result.status, result.error, "%s %s: %s" % (rec.target, result.status, result.error))
         try:
             fn.check_result(result)
         except ProtocolError as exc:
             self.ctx.finish(rec, RecordStatus.FAILED, str(exc))
-            return self._fail("%s answered outputs that break its definition: %s" % (rec.target, exc))
+            return self._ended(RecordStatus.FAILED, str(exc),
+                               "%s answered outputs that break its definition: %s" % (rec.target, exc))
         values = result.values
         rec.outputs = dict(values)
         if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:
             self.ctx.finish(rec, RecordStatus.FAILED, "answered success: false")
-            return self._fail("%s answered success: false" % rec.target)
+            return self._ended(RecordStatus.FAILED, "answered success: false", "%s answered success: false" % rec.target)
         self.ctx.finish(rec, RecordStatus.SUCCEEDED)
         self.feedback_message = "succeeded in %.3fs" % (rec.duration or 0.0)
-        for out, key in self.node.spec.outputs.items():
+        spec: CallSpec = self.node.spec
+        for out, key in spec.outputs.items():
             self.ctx.write(key, values[out])
+        self._say(RecordStatus.SUCCEEDED, "")
         return Status.SUCCESS
 
+    def _ended(self, status: str, error: str, reason: str) -> Status:
+        """FAILURE with ``reason``, after writing the ``status`` and ``error`` keys."""
+        self._say(status, error)
+        return self._fail(reason)
+
+    def _say(self, status: str, error: str) -> None:
+        """Write how the call ended to the ``status`` and ``error`` keys the tree gave (as text)."""
+        spec: CallSpec = self.node.spec
+        if spec.status is not None:
+            self.ctx.write(spec.status, String(data=str(status)))
+        if spec.error is not None:
+            self.ctx.write(spec.error, String(data=error or ""))
+
     def terminate(self, new_status: Status) -> None:
+        """Halted (the tree moved on): the call is cancelled, and its status and error keys not written."""
         rec = getattr(self, "record", None)
         if new_status == Status.INVALID and rec is not None and rec.ended is None:
             self.ctx.cancel(rec, RecordStatus.HALTED, "halted by the tree")
+
+
+def _unlimited(timeout: Any) -> bool:
+    """Whether a spec's timeout is ``none`` (the only text it may be)."""
+    return isinstance(timeout, str) and timeout == NO_TIMEOUT
 
 
 class _Unknown(Exception):
@@ -139,13 +188,22 @@ class CallKind(NodeKind):
     summary = ("send the call; RUNNING until the answer, SUCCESS when it succeeds (and its `success` output, "
                "if any, is not false)")
     options = (Option("inputs", "inputs", "input name → value (YAML literal, `$reference`, `$( … )`, `{…}` text)"),
-               Option("outputs", "outputs", "output name → tree key"),
-               Option("timeout", "seconds", "seconds", shown="`--call-timeout` (30)"),
+               Option("outputs", "outputs", "output name → tree key (written only when the call succeeds)"),
+               Option("status", "key", "a tree key given how the call ended, whether it succeeded or not: "
+                                       "`succeeded`, `failed` (also an answered `success: false`), `rejected`, "
+                                       "`cancelled`, `timeout`, `module_lost`, `not_sent` (it could not be built); "
+                                       "not written when the call is halted"),
+               Option("error", "key", "a tree key given why the call did not succeed (the module's error, "
+                                      "`answered success: false`, …), `\"\"` when it succeeded; written like "
+                                      "`status`"),
+               Option("timeout", "seconds", "seconds, or `none`: no limit (it still ends when its module is "
+                                            "lost, or when halted)", shown="`--call-timeout` (30)"),
                Option("check_success", "bool", "`false`: a `success: false` output is not a failure", default=True))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> CallSpec:
-        spec = CallSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
-                        check_success=p.opt(node, raw, self.option("check_success")))
+        spec = CallSpec(target=value, timeout=_timeout(p, node, raw, self.option("timeout")),
+                        check_success=p.opt(node, raw, self.option("check_success")),
+                        status=p.opt(node, raw, self.option("status")), error=p.opt(node, raw, self.option("error")))
         if "timeout" in raw:
             spec.timeout_pos = raw.val_pos["timeout"]
         found = p.target(node, value, at, "function")
@@ -162,6 +220,7 @@ class CallKind(NodeKind):
         if fn is None:  # its outputs still write their keys: no knock-on errors where they are read
             spec.outputs = p.key_map(node, raw, "outputs", None, "output")
             repeated_outputs(p, raw, spec.outputs)
+            _clashing_keys(p, raw, spec)
             return spec
         spec.function = fn
         params = {q.name: q for q in fn.inputs}
@@ -182,6 +241,7 @@ class CallKind(NodeKind):
                     p.err(inputs_raw.val_pos[q.name], said_of("input %r" % q.name, exc))
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
         repeated_outputs(p, raw, spec.outputs)
+        _clashing_keys(p, raw, spec)
         return spec
 
     def default_name(self, node: TreeNode) -> str:
@@ -196,9 +256,43 @@ class CallKind(NodeKind):
                      if p is not None), None)
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
-        fn = node.spec.function
+        spec = node.spec
+        fn = spec.function
         types = {q.name: q.rostype for q in fn.outputs} if fn is not None else {}
-        return {key: types.get(out) for out, key in node.spec.outputs.items()}
+        out = {key: types.get(name) for name, key in spec.outputs.items()}
+        for key in _ending_keys(spec):
+            out[key] = TEXT
+        return out
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Its outputs (with its status and error keys) when it succeeds; its status and error keys when
+        it fails: a later child of a selector, or a node after ``force_success``, may read them."""
+        read = self.reads(node)
+        if read:
+            f.need(node, read, avail)
+        ended = frozenset(_ending_keys(node.spec))
+        return frozenset(self.writes(node)), ended
+
+    def never_matches(self, node: TreeNode, key: str, label: Any, contains: bool, seen_from: Pos) -> Optional[str]:
+        """For a ``switch`` on ``$key``: why its case ``label`` can never match what this node writes to
+        ``key`` ('' when it may; None when the node may write any value there)."""
+        if key != node.spec.status:
+            return None
+        text = str(label).lower() if contains else label
+        if (any(text in s for s in STATUS_TEXTS) if contains else text in STATUS_TEXTS):
+            return ""
+        said = "the status of the call to %s at %s" % (node.spec.target, where(node.pos, seen_from))
+        if text in (RecordStatus.HALTED.value, RecordStatus.RUNNING.value):
+            return "case %r never matches: $%s is %s, written when the call has ended, never when it is halted " \
+                   "(its parent moved on, and a halted call writes no status)" % (label, key, said)
+        return "case %r never matches: $%s is %s, one of %s%s" % (
+            label, key, said, ", ".join(repr(s) for s in STATUS_TEXTS), did_you_mean(label, STATUS_TEXTS))
+
+    def schema(self) -> Dict[str, Any]:
+        s = super().schema()
+        t = s["properties"]["timeout"]
+        t["anyOf"] = list(t["anyOf"]) + [{"const": NO_TIMEOUT}]
+        return s
 
     def modules(self, node: TreeNode) -> Iterable[str]:
         t = node.spec.target
@@ -208,7 +302,8 @@ class CallKind(NodeKind):
         return [node.spec.function] if node.spec.function is not None else []
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of call", errors)
+        if not _unlimited(node.spec.timeout):
+            param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of call", errors)
         fn = node.spec.function
         if fn is None:
             return
@@ -231,6 +326,51 @@ class CallKind(NodeKind):
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Call(node, ctx)
+
+
+def _timeout(p: Any, node: TreeNode, raw: Any, option: Option) -> Any:
+    """The ``timeout`` option: seconds, a reference or an expression (``p.opt``), or ``none``; a YAML null,
+    a bool, zero, infinity or other text (``None``, ``never``) is an error saying how to write it."""
+    if "timeout" not in raw:
+        return None
+    v = raw["timeout"]
+    if isinstance(v, str) and v == NO_TIMEOUT:
+        return NO_TIMEOUT
+    how = "for no time limit write 'timeout: none'; else give seconds (> 0), or leave it out for --call-timeout"
+    if v is None:
+        p.err(raw.val_pos["timeout"], "timeout of call is null (written null, ~ or left empty), which is not read "
+                                      "as no limit: %s" % how)
+    elif isinstance(v, bool):
+        p.err(raw.val_pos["timeout"], "timeout of call is %s (YAML reads an unquoted yes/no/on/off as true or "
+                                      "false): %s" % (str(v).lower(), how))
+    elif isinstance(v, (int, float)) and not (math.isfinite(v) and v > 0):
+        p.err(raw.val_pos["timeout"], "timeout of call must be %s, got %r: %s" % (TYPES["seconds"].expect, v, how))
+    elif isinstance(v, str) and (not v.startswith("$") or v.startswith("$$")):   # 'None', 'never', '5s'…
+        p.err(raw.val_pos["timeout"], "timeout of call must be %s or 'none', got %r: %s" % (
+            TYPES["seconds"].expect, v, how))
+    else:
+        return p.opt(node, raw, option)
+    return None
+
+
+def _ending_keys(spec: CallSpec) -> List[str]:
+    """The tree keys a call writes however it ends (not halted): its ``status`` and ``error``."""
+    return [k for k in (spec.status, spec.error) if k is not None]
+
+
+def _clashing_keys(p: Any, raw: Any, spec: CallSpec) -> None:
+    """An error where ``status`` or ``error`` writes the key of an output, or of each other: one value
+    would replace the other."""
+    taken = {key: "output %r" % name for name, key in spec.outputs.items()}
+    for option in ("status", "error"):
+        key = getattr(spec, option)
+        if key is None:
+            continue
+        if key in taken:
+            p.err(raw.val_pos[option], "%s and %s both write tree key %r: one value would replace the other; give "
+                                       "%s its own key" % (taken[key], option, key, option))
+        else:
+            taken[key] = option
 
 
 def _cannot_take(name: str, rostype: str, value: Any, sample: Any, types: Dict[str, set], exc: Exception) -> str:

@@ -8,11 +8,11 @@ import py_trees
 from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
-from coordinator.expr import text_of
+from coordinator.expr import kind_of, text_of
 from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, fixed, meet
-from coordinator.refs import RefError, refs_in, resolve, unwrap
+from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import at_value_errors, read_at
+from coordinator.values import at_value_errors, read_at, value_kind
 
 __all__ = ["KINDS", "Switch", "SwitchSpec"]
 
@@ -23,14 +23,22 @@ class SwitchSpec:
     labels: List[Any] = field(default_factory=list)      # case values, one per child (the default is last)
     has_default: bool = False
     match: str = "equals"
+    label_pos: List[Pos] = field(default_factory=list, compare=False, repr=False)   # where each case is written
+    match_pos: Optional[Pos] = field(default=None, compare=False, repr=False)
 
 
 def matches(value: Any, label: Any, how: str) -> bool:
-    """Whether a case label matches the value (``contains``: the label's text, in any case, is in the value)."""
+    """Whether a case label matches the value (``contains``: the label's text, in any case, is in the value).
+
+    ``equals``: a value of the case's own kind (text, a number, true/false) matches when equal (3 and 3.0);
+    of another kind, when the value written as text (as a template or ``str()`` writes it: ``3``, ``true``)
+    is the case's text: ``3:`` matches the text "3", ``"true":`` a true. This is ``str(value) == "case"``
+    in an expression; ``==`` itself does not convert (``bmtree check`` reports ``door_open == "true"``).
+    """
     value = unwrap(value)
     if how == "contains":
         return isinstance(value, str) and text_of(label).lower() in value.lower()
-    if isinstance(label, str) != isinstance(value, str):
+    if kind_of(label) != kind_of(value):   # (a true/false value is no number here: true is not 1)
         return text_of(value) == text_of(label)
     return bool(value == label)
 
@@ -90,15 +98,16 @@ class SwitchKind(NodeKind):
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> SwitchSpec:
         spec = SwitchSpec(value=p.literal_at(raw, self.name, at),
-                          match=check_choice(p, raw, "match", ("equals", "contains"), "equals"))
+                          match=check_choice(p, raw, "match", ("equals", "contains"), "equals"),
+                          match_pos=raw.val_pos["match"] if "match" in raw else None)
         cases = raw.get("cases")
         if "cases" in raw and (not isinstance(cases, dict) or not cases):
             p.err(raw.val_pos["cases"], "'cases' must be a non-empty mapping of case value: node")
             cases = {}
         for label, sub in (cases or {}).items():
-            if isinstance(label, bool) or label is None:
-                p.err(cases.key_pos[label], "this case is read by YAML as %s (unquoted yes/no/on/off/null): quote "
-                                            "it, e.g. \"yes\": or \"no\":" % text_of(label))
+            if label is None:
+                p.err(cases.key_pos[label], "this case is read by YAML as null (unquoted null or ~): quote it, "
+                                            "e.g. \"null\":")
                 continue
             if not isinstance(label, (str, int, float)):
                 p.err(cases.key_pos[label], "a case is a string or a number, got %r" % (label,))
@@ -107,6 +116,7 @@ class SwitchKind(NodeKind):
             p.child(node, sub, cases.val_pos[label])
             if len(node.children) > before:
                 spec.labels.append(label)
+                spec.label_pos.append(cases.key_pos[label])
         if "default" in raw:
             before = len(node.children)
             p.child(node, raw["default"], raw.val_pos["default"])
@@ -124,6 +134,7 @@ class SwitchKind(NodeKind):
         way for the switch to succeed. It also fails with no child run, when nothing matches and there
         is no default, or when its value cannot be worked out."""
         f.need(node, self.reads(node), avail)
+        _cases_never_matching(node, f)
         outs = [f.outcome(c, avail) for c in node.children]
         ok = meet(cs for cs, _ in outs)
         failed = meet(cf for _, cf in outs)
@@ -132,13 +143,92 @@ class SwitchKind(NodeKind):
         return ok, failed
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        before = len(errors)
         at_value_errors(node.spec.value, node.value_pos or node.pos, types, errors)
+        if len(errors) == before:   # (a value of the wrong kind inside: its kind says nothing of the cases)
+            _cases_of_another_kind(node, types, errors)
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         return read_at(node.spec.value, node.value_pos, key) if node.value_pos is not None else None
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Switch(node.name, [child(c) for c in node.children], node.spec, ctx)
+
+
+def _cases_never_matching(node: TreeNode, f: Flow) -> None:
+    """An error at each case that can never match ``$key`` when every node that writes the key says
+    which values it writes (a call's ``status``: how it ended, ``never_matches``): a misspelt status
+    (``timed_out``) would silently never run its case."""
+    spec: SwitchSpec = node.spec
+    value = spec.value
+    if not isinstance(value, Ref) or value.path or not spec.label_pos:
+        return
+    key = value.key
+    if any(key in t.inputs for t in f.files):   # a tree input: any value may be given
+        return
+    writers = f.writers(key)
+    if not writers or not all(hasattr(w.nodekind, "never_matches") for w in writers):
+        return
+    contains = spec.match == "contains"
+    for label, at in zip(spec.labels, spec.label_pos):
+        why = [w.nodekind.never_matches(w, key, label, contains, at) for w in writers]
+        if all(why):   # (None, any value: no error; '': it may match)
+            f.errors.append(TreeError(at, why[0]))
+
+
+_YAML_BOOL = "this case is read by YAML as %s (unquoted yes/no/on/off/null)"
+_KINDS_SAID = {"bool": "true or false", "number": "a number", "string": "text", "list": "a list", "message": "a message"}
+
+
+def _cases_of_another_kind(node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+    """What the value's kind, when the definitions give it, says of the cases (see :func:`matches`): an
+    error at each case that can never match it (``ok:`` for a ``std_msgs/Int32``, ``"yes":`` for a
+    ``std_msgs/Bool``), at ``match: contains`` of a value that is not text, and at a case YAML read as
+    true/false (``yes:`` unquoted) unless the value is true or false itself."""
+    spec: SwitchSpec = node.spec
+    kind, said = value_kind(types, spec.value)
+    if kind == "string":
+        said = ""   # a text value: every case may match (a number case matches its text)
+    elif kind is not None and spec.match == "contains" and spec.match_pos is not None:
+        errors.append(TreeError(spec.match_pos, "match: contains looks for the case's text in the value, but %s: "
+                                                "use match: equals" % said))
+        return
+    elif kind in ("list", "message") and spec.labels:
+        errors.append(TreeError(node.value_pos or node.pos, "no case can match: %s, and a case is text or a "
+                                                            "number: switch on one of its fields" % said))
+        return
+    for label, at in zip(spec.labels, spec.label_pos):
+        why = ""
+        if isinstance(label, bool) and kind != "bool":
+            why = _YAML_BOOL % text_of(label) + (
+                ": quote it, e.g. \"yes\": or \"no\":" if not said else ", and %s: it never matches" % said)
+            if kind is None:
+                why += ' (a value that is true or false is matched by "true": and "false": too)'
+        elif kind == "bool" and not isinstance(label, bool) and text_of(label) not in ("true", "false"):
+            why = "case %r never matches: %s: its cases are true: and false:" % (label, said)
+        elif kind == "number" and isinstance(label, str) and not _number_text(label):
+            fix = _write_number(label)
+            why = "case %r never matches: %s, %s" % (label, said, "whose text is never %r%s" % (label, fix)
+                                                          if fix else "not text")
+        if why:
+            errors.append(TreeError(at, why))
+
+
+def _number_text(text: str) -> bool:
+    """Whether a number's text (as :func:`text_of` writes it) can be ``text``: ``3``, ``-2.5``; not ``3.0``."""
+    try:
+        return text_of(int(text)) == text if text.strip().lstrip("-").isdigit() else text_of(float(text)) == text
+    except ValueError:
+        return False
+
+
+def _write_number(text: str) -> str:
+    """`` (write 3:)`` for a case ``"3.0"`` or ``"03"``: the case that matches the number it spells."""
+    try:
+        num = float(text)
+    except ValueError:
+        return ""
+    return " (write %s:)" % text_of(num) if num == num and abs(num) != float("inf") else ""
 
 
 KINDS = (SwitchKind(),)

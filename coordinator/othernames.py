@@ -1,0 +1,196 @@
+"""Hints for trees written as another tool writes them: BehaviorTree.CPP, py_trees and SMACH names of
+node kinds and options, the bmtree kind (or idiom) each is, and the forms a decorator is written in.
+
+``bmtree check`` puts these in its errors: ``unknown node kind 'Fallback' (BehaviorTree.CPP's
+Fallback is bmtree's selector)``. Only kinds of the registry are named (a test holds the table to it).
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Dict, Optional, Tuple
+
+from coordinator.yamlsrc import LMap
+
+__all__ = ["OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "kind_hint", "one_child", "option_hint", "takes"]
+
+_BT, _PT, _SM = "BehaviorTree.CPP", "py_trees", "SMACH"
+_MEMORY = "sequence, whose memory: true (its default) does not tick again a child that succeeded"
+
+# (name there, tools, the bmtree kinds it becomes, what it is in bmtree): with a kind it is that kind
+# ("bmtree's …"); without one, bmtree writes it with other kinds (the text says how)
+_TABLE: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
+    ("Fallback", (_BT,), ("selector",), "selector"),
+    ("Selector", (_PT,), ("selector",), "selector"),
+    ("ReactiveFallback", (_BT,), ("selector",),
+     "selector with memory: false (the earlier children are checked again on every tick)"),
+    ("Sequence", (_BT, _PT, _SM), ("sequence",), "sequence"),
+    ("ReactiveSequence", (_BT,), ("sequence",),
+     "sequence with memory: false (the earlier children are checked again on every tick)"),
+    ("SequenceStar", (_BT,), ("sequence",), _MEMORY),
+    ("SequenceWithMemory", (_BT,), ("sequence",), _MEMORY),
+    ("Parallel", (_BT, _PT), ("parallel",), "parallel, with policy: all or one"),
+    ("ParallelAll", (_BT,), ("parallel",), "parallel"),
+    ("Concurrence", (_SM,), ("parallel",), "parallel, with policy: all or one"),
+    ("Inverter", (_BT, _PT), ("inverter",), "inverter"),
+    ("ForceSuccess", (_BT,), ("force_success",), "force_success"),
+    ("FailureIsSuccess", (_PT,), ("force_success",), "force_success"),
+    ("ForceFailure", (_BT,), ("force_failure",), "force_failure"),
+    ("SuccessIsFailure", (_PT,), ("force_failure",), "force_failure"),
+    ("RetryUntilSuccessful", (_BT,), ("retry",), "retry: N (attempts in all), with child: beside it"),
+    ("RetryUntilSuccesful", (_BT,), ("retry",), "retry: N (attempts in all), with child: beside it"),
+    ("Retry", (_PT,), ("retry",), "retry: N (attempts in all), with child: beside it"),
+    ("Repeat", (_BT, _PT), ("repeat",), "repeat: N, with child: beside it"),
+    ("Timeout", (_BT, _PT), ("timeout",), "timeout: SECONDS (not msec), with child: beside it"),
+    ("SubTree", (_BT,), ("include",), "include: file.yaml, with args: for its inputs"),
+    ("SubTreePlus", (_BT,), ("include",), "include: file.yaml, with args: for its inputs"),
+    ("Iterator", (_SM,), ("for_each",), "for_each: LIST, with as: KEY and child: beside it"),
+    ("SimpleActionState", (_SM,), ("call",), "call: module.function"),
+    ("ServiceState", (_SM,), ("call",), "call: module.function"),
+    ("MonitorState", (_SM,), ("wait_event",), "wait_event: module.event"),
+    ("Sleep", (_BT,), ("wait",), "wait: SECONDS"),
+    ("SetBlackboard", (_BT,), ("set",), "set: {key: value}"),
+    ("ScriptCondition", (_BT,), ("check",), "check: 'expression'"),
+) + tuple(("Switch%d" % n, (_BT,), ("switch",), "switch: $key, with cases: {case: node} and default:")
+          for n in range(2, 7))
+
+# names with no kind of their own: how bmtree writes them
+_IDIOMS: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
+    ("Delay", (_BT,), ("sequence", "wait", "retry"), "a wait before the node, in a sequence: [{wait: SECONDS}, "
+                                                     "node] (or retry's delay: between attempts)"),
+    ("KeepRunningUntilFailure", (_BT,), ("repeat",), "repeat: N runs the child again while it succeeds, at "
+                                                     "most N times (every bmtree loop is bounded)"),
+    ("EternalGuard", (_PT,), ("sequence", "check"), "a sequence with memory: false whose first child is the "
+                                                    "check: the condition is checked again on every tick"),
+    ("Precondition", (_BT,), ("sequence", "check"), "a sequence of a check and the node"),
+    ("IfThenElse", (_BT,), ("selector", "sequence", "check"),
+     "a selector of a sequence [check, then-node] and the else-node"),
+    ("StateMachine", (_SM,), ("sequence", "switch", "selector"),
+     "a sequence of the states, in order; a state's outcome is the status key of its call (its status "
+     "option), a transition on it a switch on that key, a fallback state a selector"),
+    ("CBState", (_SM,), ("check", "set"), "write the callback in the tree, as check: 'expression' for a "
+                                          "condition or set: {key: \"$( … )\"} for a value"),
+)
+
+
+def _norm(name: Any) -> str:
+    """``ReactiveFallback``, ``reactive_fallback``, ``py_trees.composites.Selector``: one spelling."""
+    return str(name).rsplit(".", 1)[-1].replace("_", "").replace("-", "").lower()
+
+
+def _whose(tools: Tuple[str, ...]) -> str:
+    owners = ["%s'%s" % (t, "" if t.endswith("s") else "s") for t in tools]
+    return owners[0] if len(owners) == 1 else "%s and %s" % (", ".join(owners[:-1]), owners[-1])
+
+
+OTHER_KINDS: Dict[str, Tuple[Tuple[str, ...], str]] = {}
+"""By name (lower case, without ``_``): the bmtree kinds it is written with, and the hint."""
+for _name, _tools, _kinds, _text in _TABLE:
+    OTHER_KINDS[_norm(_name)] = (_kinds, "%s %s is bmtree's %s" % (_whose(_tools), _name, _text))
+for _name, _tools, _kinds, _text in _IDIOMS:
+    OTHER_KINDS[_norm(_name)] = (_kinds, "%s %s has no kind of its own in bmtree: %s" % (_whose(_tools), _name,
+                                                                                          _text))
+
+# options of other tools: (the bmtree options it is written with, the kinds that take those, the hint)
+OTHER_OPTIONS: Dict[str, Tuple[Tuple[str, ...], str]] = {
+    "remapping": (("inputs", "outputs"), "SMACH's remapping is inputs: (input name: $key) and outputs: "
+                                         "(output name: key)"),
+    "num_attempts": (("child",), "BehaviorTree.CPP's num_attempts is retry's value: retry: N"),
+    "num_cycles": (("child",), "BehaviorTree.CPP's num_cycles is repeat's value: repeat: N"),
+    "msec": (("child",), "BehaviorTree.CPP's msec is timeout's value, in seconds: timeout: SECONDS"),
+}
+
+
+def kind_hint(name: Any) -> str:
+    """`` (BehaviorTree.CPP's Fallback is bmtree's selector)`` for a kind of another tool, `` (did you mean
+    'for_each'?)`` for a kind written otherwise (``ForEach``), else ''."""
+    from coordinator.nodes import REGISTRY
+
+    found = OTHER_KINDS.get(_norm(name))
+    if found:
+        return " (%s)" % found[1]
+    same = [k for k in REGISTRY if _norm(k) == _norm(name)]   # ForEach, WAIT
+    return " (did you mean %r?)" % same[0] if same else ""
+
+
+def takes(kind: str, allowed: Tuple[str, ...]) -> str:
+    """`` (retry takes child, delay, name)``: the options a kind has, from its option table."""
+    return " (%s takes %s)" % (kind, ", ".join(sorted(allowed)))
+
+
+def option_hint(option: Any, kind: str, allowed: Tuple[str, ...]) -> str:
+    """The hint for an option the kind does not take: the options it takes and, for another tool's option
+    that this kind writes otherwise, how."""
+    other = OTHER_OPTIONS.get(str(option).lower())
+    return takes(kind, allowed) + (": %s" % other[1] if other and set(other[0]) & set(allowed) else "")
+
+
+def one_child(kind: str, under_child: bool, items: int) -> str:
+    """The error for a list where one node goes: a decorator's child (``under_child``: its ``child:``
+    option, else its value), a case of a switch."""
+    if kind == "switch":
+        whose, where = "a case of switch runs", '"case": {sequence: [...]}'
+    else:
+        whose, where = "a decorator (%s) has" % kind, "%s: {sequence: [...]}" % ("child" if under_child else kind)
+    return "%s one child, not a list: %s" % (whose, "write the node without [ ]" if items == 1 else
+                                             "wrap several nodes in a sequence, %s" % where)
+
+
+_STAND_INS: Dict[str, Any] = {"count": 1, "seconds": 1.0, "seconds0": 0.0, "list": []}
+"""A value that a kind's parse takes without an error, for a decorator whose value is missing (reported)."""
+_PLACEHOLDERS = {"count": "N", "seconds": "SECONDS", "seconds0": "SECONDS", "list": "LIST"}
+
+
+def _shown(value: Any) -> str:
+    if isinstance(value, (dict, list)):
+        return "…"
+    return "%s" % (value,) if not isinstance(value, str) or re.match(r"[\w.$]+$", value) else repr(value)
+
+
+def decorator_mapping(p: Any, outer: LMap, kind: str, nk: Any, allowed: Tuple[str, ...]) -> Optional[LMap]:
+    """``retry: {attempts: 3, child: …}``: a decorator written with a mapping where its value goes (as a
+    composite's inline form). One error says the form; the node is then read as if written so (``retry: 3``
+    with the options beside it; the one key of the mapping that is no option, if any, taken as the value;
+    a node there as the child), so that its child is checked too. ``inverter: {child: node}``: the child
+    is the value itself. None when the mapping is as it should be (an inverter's child node)."""
+    from coordinator.nodes import REGISTRY
+
+    inner: LMap = outer[kind]
+    node_valued = nk.value[0] == "node"
+    if node_valued and ("child" not in inner or not set(inner) <= set(allowed) | {"child"}):
+        return None
+    merged = LMap()
+    merged.pos, merged.key_pos, merged.val_pos = outer.pos, {}, {}
+    for k, v in outer.items():
+        if k != kind:
+            merged[k], merged.key_pos[k], merged.val_pos[k] = v, outer.key_pos[k], outer.val_pos[k]
+    value, at = _STAND_INS.get(nk.value[0]), inner.pos
+    if node_valued:
+        value, at = inner["child"], inner.val_pos["child"]
+        p.err(inner.pos, "%s takes its child node as its value, not under 'child:': %s: {…the node…}" % (kind, kind))
+    elif any(k in REGISTRY for k in inner):   # retry: {call: …}: the child given as the value
+        if "child" not in merged:
+            merged["child"], merged.key_pos["child"], merged.val_pos["child"] = inner, outer.key_pos[kind], inner.pos
+        p.err(inner.pos, "%s takes its %s as its value and the node under 'child:', beside it: {%s: %s, child: …}"
+              % (kind, nk.label or nk.value[0], kind, _PLACEHOLDERS.get(nk.value[0], "…")))
+    else:
+        others = [k for k in inner if k not in allowed]
+        if len(others) == 1 and isinstance(inner[others[0]], (int, float, str, list)):
+            value, at = inner[others[0]], inner.val_pos[others[0]]   # attempts: 3
+            shown = _shown(value)
+        else:
+            shown = _PLACEHOLDERS.get(nk.value[0], "…")
+        for k, v in inner.items():
+            if k not in allowed:
+                continue
+            if k in merged:
+                p.err(inner.key_pos[k], "option %r given twice" % k)
+            else:
+                merged[k], merged.key_pos[k], merged.val_pos[k] = v, inner.key_pos[k], inner.val_pos[k]
+        options = [k for k in inner if k in allowed]
+        p.err(inner.pos, "%s takes its %s as its value and its options beside it, not in a mapping: {%s: %s%s}%s" % (
+            kind, nk.label or nk.value[0], kind, shown, "".join(", %s: %s" % (k, _shown(inner[k])) for k in options),
+            " (in block form, %s %s below %s:, at its indentation)" % (
+                " and ".join("%s:" % k for k in options), "on a line of its own" if len(options) == 1
+                else "each on a line of its own", kind) if options else ""))
+    merged[kind], merged.key_pos[kind], merged.val_pos[kind] = value, outer.key_pos[kind], at
+    return merged
