@@ -171,6 +171,8 @@ def _cases_never_matching(node: TreeNode, f: Flow) -> None:
         return
     contains = spec.match == "contains"
     for label, at in zip(spec.labels, spec.label_pos):
+        if label is None or isinstance(label, bool):   # an unquoted yes/no/null: the type check says so
+            continue
         why = [w.nodekind.never_matches(w, key, label, contains, at) for w in writers]
         if all(why):   # (None, any value: no error; '': it may match)
             f.errors.append(TreeError(at, why[0]))

@@ -182,6 +182,11 @@ def test_a_switch_case_that_is_no_status_is_an_error(tmp_path):
     load_tree(str(path), DEFS)
 
 
+def test_an_unquoted_yes_case_on_a_status_is_one_error_not_two(tmp_path):
+    errors = errors_of(tmp_path, GRASP.replace("        timeout: {call", "        yes: {call"))
+    assert len(errors) == 1 and errors[0].startswith("bad.yaml:17:9: this case is read by YAML as true"), errors
+
+
 def test_timeout_none_waits_as_long_as_it_takes(tree):
     follow = "  call: arm.follow\n  inputs: {person: Ana}\n  status: st\n"
     t = tree(follow + "  timeout: none\n")
