@@ -168,8 +168,14 @@ def cmd_modules(args: argparse.Namespace) -> int:
         return EXIT_OK
     defs = load_definitions(args.paths) if args.paths else definitions_from(None)
     for d in defs.values():
-        _print_module(d, os.path.relpath(d.source) if d.source else "?")
+        _print_module(d, _shown_path(d.source) if d.source else "?")
     return EXIT_OK
+
+
+def _shown_path(path: str) -> str:
+    """A path as short as it can be said: relative below the working directory, else absolute."""
+    rel = os.path.relpath(path)
+    return os.path.abspath(path) if rel.startswith(os.pardir) else rel
 
 
 # blackboard ------------------------------------------------------------------------------

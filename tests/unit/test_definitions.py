@@ -99,3 +99,17 @@ def test_a_key_written_twice_in_a_definition_is_an_error_not_the_last_one_silent
     with pytest.raises(DefinitionError) as info:
         load_definition(str(path))
     assert str(info.value) == "%s: invalid JSON: key 'Name' appears twice in one object" % path
+
+
+def test_bmtree_modules_says_a_path_outside_the_working_directory_absolutely(tmp_path, capsys, monkeypatch):
+    """A folder elsewhere was shown as ``../../tmp/…/arm.json``."""
+    (tmp_path / "defs").mkdir()
+    with open(os.path.join(REFERENCE, sorted(os.listdir(REFERENCE))[0])) as f:
+        (tmp_path / "defs" / "m.json").write_text(f.read())
+    (tmp_path / "work").mkdir()
+    monkeypatch.chdir(tmp_path / "work")
+    assert bmtree(["modules", str(tmp_path / "defs")]) == 0
+    assert "(%s)" % (tmp_path / "defs" / "m.json") in capsys.readouterr().out
+    monkeypatch.chdir(tmp_path)
+    assert bmtree(["modules", "defs"]) == 0
+    assert "(defs/m.json)" in capsys.readouterr().out
