@@ -79,6 +79,11 @@ def _nearby(raw: LMap, kind: str) -> List[Tuple[str, LMap]]:
     return found
 
 
+def _either(names: Tuple[str, ...]) -> str:
+    """``call, wait_event or include``."""
+    return names[0] if len(names) == 1 else "%s or %s" % (", ".join(names[:-1]), names[-1])
+
+
 def _misplaced(option: str, kind: str, allowed: Tuple[str, ...], nearby: List[Tuple[str, LMap]]) -> str:
     """The hint for a leaf's option given to a decorator or composite: what it takes, and which node inside
     it the option belongs to (indented one level too little)."""
@@ -87,7 +92,7 @@ def _misplaced(option: str, kind: str, allowed: Tuple[str, ...], nearby: List[Tu
             return "%s: %r is an option of the %s at line %d: indent it under that %s" % (
                 takes(kind, allowed), option, leaf, node.pos.line, leaf)
     return "%s: %r is an option of %s: indent it under the node it is for" % (
-        takes(kind, allowed), option, " or ".join(_LEAF_OPTIONS[option]))
+        takes(kind, allowed), option, _either(_LEAF_OPTIONS[option]))
 
 
 _HOLE = re.compile(r"\$?([^\W\d][\w.\[\]]*)$")

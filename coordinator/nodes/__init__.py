@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from typing import Dict
 
-from coordinator.nodes import call, composites, decorators, include, leaves, loops, switch
+from coordinator.nodes import call, composites, decorators, ending, include, leaves, loops, switch
 from coordinator.nodes.base import NodeKind
 
 __all__ = ["REGISTRY", "NodeKind"]
 
-REGISTRY: Dict[str, NodeKind] = {k.name: k for family in (composites, switch, decorators, loops, call, leaves, include)
+REGISTRY: Dict[str, NodeKind] = {k.name: k for family in (composites, switch, decorators, loops, call, leaves,
+                                                           ending, include)
                                  for k in family.KINDS}

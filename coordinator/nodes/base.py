@@ -147,7 +147,7 @@ _PARAM_KINDS = {"count": "number", "seconds": "number", "seconds0": "number", "l
 
 
 def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: str, label: str,
-                      errors: List[TreeError]) -> None:
+                      errors: List[TreeError], limit: Optional[int] = None) -> None:
     """A count, a duration or ``for_each``'s list that cannot be one, found before running: operands of
     the wrong kind and references into fields their keys' types do not have, in its expressions; a
     reference or an expression whose type the definitions give (``$answer`` after ``speech.listen``
@@ -156,8 +156,8 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
     arguments writes is checked with those literals (``tries: {default: three}``: not a count); another
     value whose type is not known (a key a ``set`` of a literal writes) is left to :func:`run_param`.
 
-    ``where``: the value's position, or a function that makes it (read only when there is an error).
-    """
+    ``where``: the value's position, or a function that makes it (read only when there is an error);
+    ``limit``: the most elements a tree input's literal list may have (``for_each``'s ``max``)."""
     if value is None:
         return
     from coordinator.values import value_kind, value_type_errors
@@ -173,7 +173,7 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
             elif kind is None and isinstance(value, Ref) and not value.path and value.key in getattr(
                     types, "bound", ()):
                 at = where() if callable(where) else where   # a tree input: the literals it is given
-                found = _bound_errors(value, at, types, type_name, label) if at is not None else []
+                found = _bound_errors(value, at, types, type_name, label, limit) if at is not None else []
     elif isinstance(value, list):   # a literal list: its elements may hold references
         found = value_type_errors(value, types)
     elif type_name == "list":
@@ -193,29 +193,34 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
         errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
 
 
-def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str) -> List[Tuple[int, str]]:
+def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str,
+                  limit: Optional[int] = None) -> List[Tuple[int, str]]:
     """The literals a tree input ``$key`` is given (``types.bound``: the default, an include's argument;
-    only where nothing else writes its key) that cannot be this count, duration or list: errors, but a
-    warning for a default of the tree checked (whoever runs it may set the input)."""
+    only where nothing else writes its key) that cannot be this count, duration or list (or one of more
+    than ``limit`` elements): errors, but a warning for a tree's own default (its caller may set it)."""
     from coordinator.expr import brief
 
     t = TYPES[type_name]
     out: List[Tuple[int, str]] = []
     for value, arg, include in types.bound[ref.key].get(at.file, ()):
         v = int(value) if type_name == "count" and isinstance(value, float) and value.is_integer() else value
-        if isinstance(v, list) if t.ok is None else t.ok(v):
+        long = isinstance(v, list) and limit is not None and len(v) > limit
+        if not long and (isinstance(v, list) if t.ok is None else t.ok(v)):
             continue
-        warn, fix = "", "give the input a default that is one"
+        one = "a shorter list" if long else "one"
+        warn, risk, fix = "", "", "give the input a %s" % ("shorter default" if long else "default that is one")
         if arg:
-            origin, fix = "argument %r of the include at %s" % (arg, where(include, at)), "pass one there"
+            origin, fix = "argument %r of the include at %s" % (arg, where(include, at)), "pass %s there" % one
         elif include is not None:
             origin = "the default of input %r; the include at %s passes no argument" % (ref.key, where(include, at))
-            fix += ", or pass one"
+            fix += ", or pass %s" % one
         else:   # the tree's own: its caller may set it
             warn, origin = "warning: ", "the default of input %r" % ref.key
-            fix = "a run that does not set the input fails here; " + fix.replace("the input", "it")
-        out.append((0, "%s%s %s is %s (%s), not %s: %s" % (warn, label, ref, brief(value), origin,
-                                                           t.expect or "a list", fix)))
+            risk, fix = "a run that does not set the input fails here; ", fix.replace("the input", "it")
+        said = ("has %d elements (%s), more than max %d: %sraise max: to %d, or %s" % (
+            len(v), origin, limit, risk, len(v), fix) if long else
+            "is %s (%s), not %s: %s%s" % (brief(value), origin, t.expect or "a list", risk, fix))
+        out.append((0, "%s%s %s %s" % (warn, label, ref, said)))
     return out
 
 

@@ -6,8 +6,20 @@ from typing import Any, Dict, FrozenSet, List, Tuple
 
 import py_trees
 
+from comm.errors import did_you_mean
 from coordinator.errors import TreeError
-from coordinator.nodes.base import NEVER, TYPES, Flow, NodeKind, Option, check_choice, join, meet, where
+from coordinator.nodes.base import (
+    NEVER,
+    TYPES,
+    Flow,
+    NodeKind,
+    Option,
+    ValueType,
+    check_choice,
+    join,
+    meet,
+    where,
+)
 from coordinator.treeast import TreeNode, walk
 
 __all__ = ["KINDS", "MemorySpec", "ParallelSpec"]
@@ -22,6 +34,12 @@ class MemorySpec:
 class ParallelSpec:
     policy: str = "all"
     synchronise: bool = True
+    succeed_on: Tuple[int, ...] = ()   # the positions of the children named by ``succeed_on`` (none: ``policy``)
+
+
+# ``succeed_on``'s type, for the JSON Schema (registered here: only the parallel takes it)
+TYPES.setdefault("names", ValueType("names", "list of child names", {
+    "type": "array", "minItems": 1, "uniqueItems": True, "items": {"type": "string", "minLength": 1}}))
 
 
 class _Composite(NodeKind):
@@ -100,27 +118,45 @@ class Selector(_Composite):
 
 class Parallel(_Composite):
     name = "parallel"
-    summary = "children ticked together; under either policy it fails as soon as one child fails, halting the others"
+    summary = ("children ticked together; under every policy it fails as soon as one child fails, halting the "
+               "others")
     options = (Option("policy", "policy", "`all`: succeed when all do; `one`: succeed when one does, halting the "
                                           "others (a child that fails first still fails the parallel: wrap it in "
                                           "`force_success` to let the others go on)", default="all"),
-               Option("synchronise", "bool", "with `all`, a child that succeeded is not ticked again",
-                      default=True))
+               Option("succeed_on", "names", "instead of `policy`: succeed when the children of these names "
+                                             "(their `name:`) have succeeded, halting the others (SMACH's "
+                                             "Concurrence outcome map); any child failing still fails it"),
+               Option("synchronise", "bool", "with `all` or `succeed_on`, a child that succeeded is not ticked "
+                                             "again", default=True))
 
-    def spec(self, p: Any, node: TreeNode, raw: Any) -> Any:
-        return ParallelSpec(policy=check_choice(p, raw, "policy", ("all", "one"), "all"),
-                            synchronise=p.opt(node, raw, self.option("synchronise")))
+    def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
+        policy = check_choice(p, raw, "policy", ("all", "one"), "all")
+        synchronise = p.opt(node, raw, self.option("synchronise"))
+        if "succeed_on" in raw and "policy" in raw:
+            p.err(raw.key_pos["succeed_on"], "parallel takes 'succeed_on' or 'policy', not both: succeed_on (these "
+                                             "children succeed) replaces policy (all or one)")
+        p.children(node, value, at)
+        selected: Tuple[int, ...] = ()
+        if "succeed_on" in raw:   # the children's names are known now
+            selected = _selected(p, node, raw["succeed_on"], raw.val_pos["succeed_on"])
+        return ParallelSpec(policy=policy, synchronise=synchronise, succeed_on=selected)
 
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """py_trees' parallel fails as soon as any child fails (the others halted: only the failed one's
-        writes are sure), under either policy. ``all`` succeeds when every child has; ``one`` when a child
-        has and none failed (the others halted): what any child that can succeed writes."""
+        writes are sure), under every policy. ``all`` succeeds when every child has; ``one`` when a child
+        has and none failed (the others halted): what any child that can succeed writes; ``succeed_on``
+        when the children it names have (the others halted): what those write."""
         outs = [f.outcome(c, avail) for c in node.children]   # together: none reads what another writes
         if not outs:
             return frozenset(), NEVER
         failed = meet(cf for _, cf in outs)
-        if node.spec.policy == "all":
+        if node.spec.succeed_on:
             ok: FrozenSet[str] = frozenset()
+            for i in node.spec.succeed_on:
+                ok = join(ok, outs[i][0])
+            return ok, failed
+        if node.spec.policy == "all":
+            ok = frozenset()
             for cs, _ in outs:
                 ok = join(ok, cs)
             return ok, failed
@@ -146,11 +182,56 @@ class Parallel(_Composite):
         return out
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        if node.spec.policy == "all":
-            policy = py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=node.spec.synchronise)
+        children = [child(c) for c in node.children]
+        spec = node.spec
+        if spec.succeed_on:
+            policy: py_trees.common.ParallelPolicy.Base = py_trees.common.ParallelPolicy.SuccessOnSelected(
+                [children[i] for i in spec.succeed_on], synchronise=spec.synchronise)
+        elif spec.policy == "all":
+            policy = py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=spec.synchronise)
         else:
             policy = py_trees.common.ParallelPolicy.SuccessOnOne()
-        return py_trees.composites.Parallel(node.name, policy=policy, children=[child(c) for c in node.children])
+        return py_trees.composites.Parallel(node.name, policy=policy, children=children)
+
+
+def _selected(p: Any, node: TreeNode, names: Any, at: Any) -> Tuple[int, ...]:
+    """The positions of the children ``succeed_on`` names (by their ``name:``), after reporting each name
+    that is not one child's (at the name)."""
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
+        p.err(at, "succeed_on takes a non-empty list of the names of children (their 'name:'), e.g. "
+                  "succeed_on: [follow]; got %r" % (names,))
+        return ()
+    named: Dict[str, List[TreeNode]] = {}
+    for c in node.children:
+        named.setdefault(c.name, []).append(c)
+    given = {c.name for c in node.children if c.name != c.nodekind.default_name(c)}   # written with name:
+    out: List[int] = []
+    for i, name in enumerate(names):
+        where_ = names.item_pos[i] if hasattr(names, "item_pos") else at
+        found = named.get(name, [])
+        if names.index(name) < i:
+            p.err(where_, "succeed_on names %r twice: list it once" % name)
+        elif len(found) > 1:
+            p.err(where_, "succeed_on: %d children of this parallel are named %r (%s): give the one to wait "
+                          "for a name of its own" % (len(found), name, ", ".join(where(c.pos, where_)
+                                                                                  for c in found)))
+        elif not found:
+            p.err(where_, "succeed_on: no child of this parallel is named %r%s" % (name, _names_hint(name, given)))
+        else:
+            out.append(node.children.index(found[0]))
+    return tuple(out) if len(out) == len(names) else ()
+
+
+def _names_hint(name: str, given: Any) -> str:
+    """What a misspelt child name is likely meant to be, or how children get names."""
+    close = did_you_mean(name, given)
+    if close:
+        return close
+    if not given:
+        return " (no child has a name: succeed_on picks children by their 'name:'; give the one to wait for " \
+               "name: %s)" % name
+    return " (children are picked by their 'name:'; named here: %s)" % ", ".join(
+        "%r" % n for n in sorted(given))
 
 
 KINDS = (Sequence(), Selector(), Parallel())

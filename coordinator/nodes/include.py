@@ -9,7 +9,7 @@ import py_trees
 
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import Flow, NodeKind, Option, fixed, join, meet, where
+from coordinator.nodes.base import NEVER, Flow, NodeKind, Option, fixed, join, meet, repeated_outputs, where
 from coordinator.nodes.leaves import SetKeys
 from coordinator.refs import Ref, refs_in
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode
@@ -24,6 +24,8 @@ class IncludeSpec:
     args: Dict[str, Any] = field(default_factory=dict)
     tree: Optional[TreeFile] = None
     arg_pos: Dict[str, Pos] = field(default_factory=dict)   # where each argument's value is written
+    outputs: Dict[str, str] = field(default_factory=dict)   # subtree key -> caller key, copied on success
+    output_pos: Dict[str, Pos] = field(default_factory=dict)   # where each subtree key is written
     # the keys of the caller it replaces, found by the data-flow walk (which runs before the warnings)
     clashes: Set[TreeError] = field(default_factory=set, compare=False, repr=False)
     clashes_of: Any = field(default=None, compare=False, repr=False)   # the walk that found them: a new one starts afresh
@@ -40,12 +42,16 @@ class IncludeKind(NodeKind):
     family = "leaf"
     value = ("path", "a tree file (relative to this file)")
     summary = "the subtree, run as a sequence after setting its inputs"
-    options = (Option("args", "inputs", "input name → value"),)
+    options = (Option("args", "inputs", "input name → value"),
+               Option("outputs", "outputs", "subtree key → caller key: after the subtree succeeds, each key it "
+                                            "surely wrote is copied to the caller's key (its own keys stay "
+                                            "on the shared blackboard too)"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> IncludeSpec:
         args_raw = p.mapping(raw, "args", at, "'args' must be a mapping of input name: value")
         spec = IncludeSpec(path=value, args={k: p.literal_at(args_raw, k, at) for k in args_raw},
                            arg_pos={k: args_raw.val_pos[k] for k in args_raw})
+        _parse_outputs(p, raw, at, spec)
         if not isinstance(value, str) or not value:
             p.err(at, "include takes a file path")
             return spec
@@ -73,11 +79,15 @@ class IncludeKind(NodeKind):
         return [r.key for r in refs_in(node.spec.args)]
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
-        return dict.fromkeys(node.spec.bound())
+        out: Dict[str, Optional[str]] = dict.fromkeys(node.spec.bound())
+        out.update(dict.fromkeys(node.spec.outputs.values()))
+        return out
 
     def copies(self, node: TreeNode) -> Dict[str, Ref]:
-        """An argument ``$pose`` gives the input what it holds."""
-        return {k: v for k, v in node.spec.args.items() if isinstance(v, Ref)}
+        """An argument ``$pose`` gives the input what it holds; an output, what the subtree's key holds."""
+        out = {k: v for k, v in node.spec.args.items() if isinstance(v, Ref)}
+        out.update((caller, Ref(key)) for key, caller in node.spec.outputs.items())
+        return out
 
     def binds(self, node: TreeNode) -> Optional[Tuple[TreeFile, Dict[str, Any]]]:
         return (node.spec.tree, node.spec.args) if node.spec.tree is not None else None
@@ -93,8 +103,9 @@ class IncludeKind(NodeKind):
                      if p is not None), None)
 
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
-        """A sequence: its inputs set (failing when an argument's reference cannot be read), then the
-        subtree. Inside, an input without its argument counts as given: that is reported by itself."""
+        """A sequence: its inputs set (failing when an argument's reference cannot be read), the subtree,
+        then its ``outputs`` copied (each a key the subtree surely wrote: else an error at the key). Inside,
+        an input without its argument counts as given: that is reported by itself."""
         f.need(node, self.reads(node), avail)
         spec = node.spec
         sub = spec.tree
@@ -109,6 +120,11 @@ class IncludeKind(NodeKind):
             ok, failed = f.outcome(sub.root, avail | bound | sub.required_inputs)
         finally:
             f.files.pop()
+        if spec.outputs and ok is not NEVER:   # (a subtree that never succeeds copies nothing)
+            for e in _output_errors(node, sub, ok, bound, f):
+                if e not in f.errors:   # (a subtree is walked once per include of it)
+                    f.errors.append(e)
+            ok = ok | frozenset(spec.outputs.values())
         failed = join(bound, failed)
         return join(bound, ok), failed if fixed(spec.bound()) else meet((failed, frozenset()))
 
@@ -126,7 +142,51 @@ class IncludeKind(NodeKind):
             setter = TreeNode("set", "arguments of %s" % sub.name, node.pos, spec=values)
             kids.append(SetKeys(setter, ctx))
         kids.append(child(sub.root))
+        if node.spec.outputs:
+            copier = TreeNode("set", "outputs of %s" % sub.name, node.pos,
+                              spec={caller: Ref(key) for key, caller in node.spec.outputs.items()})
+            kids.append(SetKeys(copier, ctx))
         return py_trees.composites.Sequence(name=node.name, memory=True, children=kids)
+
+
+def _parse_outputs(p: Any, raw: Any, at: Pos, spec: IncludeSpec) -> None:
+    """``outputs: {subtree key: caller key}``, both tree keys (whether the subtree writes its keys is
+    known after the data-flow walk: see ``_output_errors``)."""
+    m = p.mapping(raw, "outputs", at, "'outputs' must be a mapping of subtree key: caller key, e.g. "
+                                      "outputs: {answer: guest_answer}")
+    for k, v in m.items():
+        if not isinstance(k, str) or not k.isidentifier():
+            p.err(m.key_pos[k], "subtree key %r is not a tree key (an identifier)" % (k,))
+        elif not isinstance(v, str) or not v.isidentifier():
+            p.err(m.val_pos[k], "caller key %r is not a tree key (an identifier)" % (v,))
+        else:
+            spec.outputs[k] = v
+            spec.output_pos[k] = m.key_pos[k]
+    repeated_outputs(p, raw, spec.outputs)
+
+
+def _output_errors(node: TreeNode, sub: TreeFile, written: FrozenSet[str], inputs: FrozenSet[str],
+                   f: Flow) -> List[TreeError]:
+    """An error at each subtree key of ``outputs`` that the subtree does not surely hold when it succeeds
+    (``written``: the keys it surely writes then; ``inputs``: those the include sets)."""
+    name = os.path.basename(sub.path)
+    sure = written | inputs
+    out = []
+    for key in node.spec.outputs:
+        if key in sure:
+            continue
+        at = node.spec.output_pos.get(key, node.pos)
+        writer = f.file_writes(sub).get(key)
+        shown = ", ".join(sorted(written)[:8]) + (", …" if len(written) > 8 else "")
+        listed = "it surely writes %s" % shown if written else "it surely writes no key when it succeeds"
+        if writer is not None:
+            message = ("%s writes %r (%s), but not on every path by which it succeeds: write it on every path "
+                       "(%s)" % (name, key, where(writer.pos, at), listed))
+        else:
+            message = "%s does not write %r%s" % (name, key, did_you_mean(key, sure | set(f.file_writes(sub)))
+                                                  or " (%s)" % listed)
+        out.append(TreeError(at, "outputs: " + message))
+    return out
 
 
 def _clashes(node: TreeNode, sub: TreeFile, held: FrozenSet[str], f: Flow) -> List[TreeError]:

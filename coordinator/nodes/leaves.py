@@ -19,6 +19,7 @@ from coordinator.nodes.base import (
     run_param,
 )
 from coordinator.nodes.leafbase import Leaf
+from coordinator.nodes.loops import expr_option, expr_type_errors
 from coordinator.refs import Ref, RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at, value_type_errors
@@ -220,10 +221,13 @@ class WaitEventSpec:
     outputs: Dict[str, str] = field(default_factory=dict)
     timeout: Optional[float] = None
     timeout_pos: Optional[Pos] = None
+    where: Optional[Expr] = None      # over the event's params, by their names
+    where_pos: Optional[Pos] = None
 
 
 class WaitEvent(Leaf):
-    """SUCCESS at the first ``module.event`` that arrives after the leaf starts.
+    """SUCCESS at the first ``module.event`` that arrives after the leaf starts (and satisfies ``where``:
+    the others are skipped).
 
     Events that arrive together (between two ticks) are one moment for the tree: started again
     (by a loop) after taking one of them, the leaf first takes the others of that moment, in their
@@ -239,13 +243,14 @@ class WaitEvent(Leaf):
         self.timeout, self.reason = run_param(self.node.spec.timeout, self.ctx.lookup, "seconds",
                                               "timeout of wait_event")
         self.deadline = None if self.timeout is None else self.ctx.clock.now() + self.timeout
+        self.skipped = 0
         if self.timeout is not None:
             self.ctx.wake_after(self.timeout)
 
     def update(self) -> Status:
         if self.reason:
             return self._fail(self.reason)
-        ev_def = self.node.spec.event
+        ev_def, where = self.node.spec.event, self.node.spec.where
         events = self.ctx.events
         while self.together or self.seen < len(events):
             if self.together:
@@ -256,13 +261,23 @@ class WaitEvent(Leaf):
             ev = events[index]
             if ev.basic_mod == ev_def.module and ev.event == ev_def.name:
                 values = ev.values
+                if where is not None:   # over its params (a later event may satisfy it)
+                    try:
+                        if not where.evaluate(values.__getitem__):
+                            self.skipped += 1
+                            continue
+                    except (KeyError, RefError) as exc:
+                        why = "the event has no param %s" % exc if isinstance(exc, KeyError) else exc.args[0]
+                        return self._fail("where %s: %s" % (where.text, why))
                 for param, key in self.node.spec.outputs.items():
                     if param in values:
                         self.ctx.write(key, values[param])
                 self.took = index
                 return Status.SUCCESS
         if self.deadline is not None and self.ctx.clock.now() >= self.deadline:
-            return self._fail("no %s.%s within %gs" % (ev_def.module, ev_def.name, self.timeout))
+            return self._fail("no %s.%s%s within %gs%s" % (
+                ev_def.module, ev_def.name, " where %s" % where.text if where is not None else "", self.timeout,
+                " (%d skipped)" % self.skipped if self.skipped else ""))
         return Status.RUNNING
 
 
@@ -272,11 +287,16 @@ class WaitEventKind(NodeKind):
     value = ("event", "`module.event`")
     summary = "SUCCESS at the first matching event that arrives after the leaf starts"
     options = (Option("outputs", "outputs", "event param → tree key"),
-               Option("timeout", "seconds", "seconds", shown="none"))
+               Option("timeout", "seconds", "seconds", shown="none"),
+               Option("where", "expr", "an expression over the event's params, by their names (`person == "
+                                       "\"Ana\"`): the first event for which it is true is taken, the others "
+                                       "skipped"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> WaitEventSpec:
         spec = WaitEventSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
                              timeout_pos=raw.val_pos["timeout"] if "timeout" in raw else None)
+        if "where" in raw:
+            spec.where, spec.where_pos = expr_option(p, raw, "where"), raw.val_pos["where"]
         found = p.target(node, value, at, "event")
         if found is None:
             return spec
@@ -289,6 +309,14 @@ class WaitEventKind(NodeKind):
         spec.event = ev
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in ev.params}, "event param")
         repeated_outputs(p, raw, spec.outputs)
+        if spec.where is not None and spec.where_pos is not None:   # its names are params, not tree keys
+            at = spec.where_pos
+            params = [q.name for q in ev.params]
+            for ref, off in zip(spec.where.refs, spec.where.ref_offsets):
+                if ref.key not in params:
+                    p.err(Pos(at.file, at.line, at.column + off), "where reads %r, which is no param of %s.%s%s" % (
+                        ref.key, mod.name, ename, did_you_mean(ref.key, params)
+                        or " (params: %s)" % (", ".join(params) or "none")))
         return spec
 
     def default_name(self, node: TreeNode) -> str:
@@ -302,7 +330,10 @@ class WaitEventKind(NodeKind):
         return param_keys(node.spec.timeout)
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
-        param_type_errors(node.spec.timeout, node.spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
+        spec = node.spec
+        param_type_errors(spec.timeout, spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
+        if spec.where is not None and spec.event is not None:   # the params' types, not the tree keys'
+            expr_type_errors(spec.where, spec.where_pos, {q.name: {q.rostype} for q in spec.event.params}, errors)
 
     def modules(self, node: TreeNode) -> Iterable[str]:
         t = node.spec.target

@@ -263,7 +263,8 @@ class ForEachKind(NodeKind):
                                        value.startswith("$$")):
             items = p.literal_at(raw, self.name, at)
             if isinstance(items, list) and isinstance(limit, int) and len(items) > limit:
-                p.err(at, "for_each over %d elements, more than max %d (raise 'max')" % (len(items), limit))
+                p.err(at, "for_each over %d elements, more than max %d (raise 'max'): write max: %d, or give a "
+                          "shorter list" % (len(items), limit, len(items)))
         else:
             p.err(at, "for_each takes a list: [a, b], a $reference or a $( … ) expression, got %r" % (value,))
         key = raw.get("as")
@@ -322,7 +323,8 @@ class ForEachKind(NodeKind):
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         spec = node.spec
-        param_type_errors(spec.items, lambda: node.value_pos or node.pos, types, "list", "for_each", errors)
+        param_type_errors(spec.items, lambda: node.value_pos or node.pos, types, "list", "for_each", errors,
+                          spec.max if isinstance(spec.max, int) else None)   # (a tree input's list: not too long)
         if spec.max_pos is not None:
             param_type_errors(spec.max, spec.max_pos, types, "count", "max of for_each", errors)
 

@@ -12,7 +12,7 @@ frames are hidden from pytest (``__tracebackhide__``).
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Set
+from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -24,6 +24,7 @@ from coordinator.clock import SimClock
 from coordinator.context import CallRecord, RunContext, plain
 from coordinator.errors import TreeErrors, UsageError
 from coordinator.language import load_tree
+from coordinator.nodes.base import NEVER, Flow
 from coordinator.runner import RunResult, TreeRunner
 from coordinator.testing.mocks import InProcessTransport, Mocks
 from coordinator.treeast import TreeFile, TreeNode, walk
@@ -93,13 +94,17 @@ class TreeRun:
 
 
 class Coverage:
-    """Which nodes of which trees were ever ticked, and the outcomes each reached."""
+    """Which nodes of which trees were ever ticked, and the outcomes each reached; an outcome a node
+    cannot have (the data-flow walk says ``NEVER``: a ``force_failure`` never succeeds) is not missing."""
 
     def __init__(self) -> None:
         self.trees: Dict[str, List[TreeNode]] = {}
         self.reached: Dict[Any, Set[str]] = defaultdict(set)
+        self._roots: Dict[str, TreeFile] = {}   # one tree per root file: its nodes' possible outcomes
+        self._possible: Dict[Any, Tuple[bool, bool]] = {}   # node position -> (can succeed, can fail)
 
     def add_tree(self, tree: TreeFile) -> None:
+        self._roots.setdefault(tree.root.pos.file, tree)
         seen: Dict[str, List[TreeNode]] = {}
         for node in walk(tree.root):
             seen.setdefault(node.pos.file, [])
@@ -115,6 +120,16 @@ class Coverage:
         """A py_trees visitor that records into this coverage on every tick of a run."""
         return _CoverageVisitor(self.reached)
 
+    def possible(self, node: TreeNode) -> Tuple[str, ...]:
+        """The outcomes ``node`` can reach, as the data-flow walk sees them: ``("SUCCESS", "FAILURE")``
+        but for a node that cannot end one way (a node it never walked: both)."""
+        if self._roots:   # walked when first asked: only a report needs it
+            for tree in self._roots.values():
+                _Endings(tree, self._possible).walk()
+            self._roots.clear()
+        ok, fails = self._possible.get(node.pos, (True, True))
+        return ("SUCCESS",) * ok + ("FAILURE",) * fails
+
     def report(self) -> str:
         lines = ["bmtree tree coverage"]
         for f in sorted(self.trees):
@@ -127,11 +142,30 @@ class Coverage:
                     lines.append("  %s:%d: %s '%s' never ran" % (f, n.pos.line, n.kind, n.name))
                 else:
                     outcomes = [s for s in ("SUCCESS", "FAILURE") if s in got]
-                    missing = [s for s in ("SUCCESS", "FAILURE") if s not in got]
+                    missing = [s for s in self.possible(n) if s not in got]
                     lines.append("  %s:%d: %s '%s' reached %s%s" % (
                         f, n.pos.line, n.kind, n.name, ", ".join(outcomes) or "RUNNING only",
                         "; never %s" % ", ".join(missing) if missing else ""))
         return "\n".join(lines)
+
+
+class _Endings(Flow):
+    """The data-flow walk of one tree, noting for each node whether it can succeed and fail (an ending
+    its kind says ``NEVER`` of it cannot have); its errors are the check's, already reported."""
+
+    def __init__(self, tree: TreeFile, possible: Dict[Any, Tuple[bool, bool]]):
+        super().__init__([], tree)
+        self.root = tree
+        self.possible = possible
+
+    def walk(self) -> None:
+        self.outcome(self.root.root, frozenset(self.root.inputs))
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        ok, failed = super().outcome(node, avail)
+        was = self.possible.get(node.pos, (False, False))   # a node walked again (an included file): either
+        self.possible[node.pos] = (was[0] or ok is not NEVER, was[1] or failed is not NEVER)
+        return ok, failed
 
 
 class _CoverageVisitor(py_trees.visitors.VisitorBase):

@@ -66,7 +66,7 @@ root:
     assert "t.yaml:7:7: unknown option 'inputs' for retry (retry takes child, delay, name): 'inputs' is an " \
            "option of the call at line 6: indent it under that call" in lines
     assert "t.yaml:9:7: unknown option 'outputs' for sequence (sequence takes memory, name): 'outputs' is an " \
-           "option of call or wait_event: indent it under the node it is for" in lines
+           "option of call, wait_event or include: indent it under the node it is for" in lines
 
 
 def test_a_call_beside_a_decorator_is_nested_under_its_child(tmp_path, capsys):

@@ -31,7 +31,7 @@ WARN = os.path.join(DATA, "trees_warn")
 def test_every_kind_knows_its_family_options_and_docs():
     assert set(REGISTRY) == {"sequence", "selector", "parallel", "retry", "repeat", "timeout", "inverter",
                              "force_success", "force_failure", "call", "recall", "check", "wait_event", "set",
-                             "wait", "include", "for_each", "switch"}
+                             "wait", "include", "for_each", "switch", "fail"}
     for name, kind in REGISTRY.items():
         assert kind.name == name and kind.family in ("composite", "decorator", "leaf")
         assert kind.summary and kind.value[1], name

@@ -135,7 +135,7 @@ def test_a_switch_on_text_takes_number_and_text_cases(tmp_path, capsys):
     ("retry_until_successful", "BehaviorTree.CPP's RetryUntilSuccessful is bmtree's retry: N (attempts in all), "
                                "with child: beside it"),
     ("Switch3", "BehaviorTree.CPP's Switch3 is bmtree's switch: $key, with cases: {case: node} and default:"),
-    ("Concurrence", "SMACH's Concurrence is bmtree's parallel, with policy: all or one"),
+    ("Concurrence", "SMACH's Concurrence is bmtree's parallel, with policy: all or one, or succeed_on: [child names] (its outcome map)"),
     ("Delay", "BehaviorTree.CPP's Delay has no kind of its own in bmtree: a wait before the node, in a sequence: "
               "[{wait: SECONDS}, node] (or retry's delay: between attempts)"),
     ("EternalGuard", "py_trees' EternalGuard has no kind of its own in bmtree: a sequence with memory: false whose "
@@ -165,7 +165,7 @@ NODES = {
     "repeat": "repeat: 2\n    child: {wait: 0}", "for_each": "for_each: [a]\n    as: x\n    child: {wait: 0}",
     "call": "call: speech.say\n    inputs: {text: hi}", "recall": "recall: {x: text}", "check": "check: 'true'",
     "wait_event": "wait_event: vision.personSeen", "set": "set: {x: 1}", "wait": "wait: 0",
-    "include": "include: sub.yaml",
+    "include": "include: sub.yaml", "fail": "fail: stop",
 }
 
 
@@ -185,7 +185,7 @@ def test_an_unknown_option_in_a_composites_mapping_form_lists_its_options_too(tm
     status, lines = check(tmp_path, capsys, "format: 1\nroot:\n  parallel: {children: [{wait: 0}], polcy_: one, "
                                             "x: 1}\n")
     assert lines == ["t.yaml:3:37: unknown option 'polcy_' for parallel (did you mean 'policy'?)",
-                     "t.yaml:3:50: unknown option 'x' for parallel (parallel takes name, policy, synchronise)"]
+                     "t.yaml:3:50: unknown option 'x' for parallel (parallel takes name, policy, succeed_on, synchronise)"]
 
 
 def test_smachs_remapping_says_inputs_and_outputs(tmp_path, capsys):
