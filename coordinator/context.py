@@ -77,7 +77,7 @@ class CallRecord:
     answered: Optional[float] = None  # when its answer came in (the tree may take it later: paused)
     status: RecordStatus = RecordStatus.RUNNING
     error: str = ""
-    outputs: Dict[str, Any] = field(default_factory=dict)
+    output_messages: Dict[str, Any] = field(default_factory=dict)   # the outputs as answered (ROS messages)
     function: Optional[FunctionDefinition] = None
     result: Optional[FunctionResult] = None
     owner: Any = None             # the behaviour that made the call
@@ -86,6 +86,11 @@ class CallRecord:
     def inputs(self) -> Dict[str, Any]:
         """The inputs as plain data (``{"place": "kitchen"}``), for reports and tests."""
         return {k: plain(v) for k, v in self.messages.items()}
+
+    @property
+    def outputs(self) -> Dict[str, Any]:
+        """The outputs of a call that succeeded as plain data, like ``inputs`` (``{"success": True}``)."""
+        return {k: plain(v) for k, v in self.output_messages.items()}
 
     @property
     def duration(self) -> Optional[float]:

@@ -129,7 +129,7 @@ class Call(Leaf):
             return self._ended(RecordStatus.FAILED, str(exc),
                                "%s answered outputs that break its definition: %s" % (rec.target, exc))
         values = result.values
-        rec.outputs = dict(values)
+        rec.output_messages = dict(values)
         if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:
             self.ctx.finish(rec, RecordStatus.FAILED, "answered success: false")
             return self._ended(RecordStatus.FAILED, "answered success: false", "%s answered success: false" % rec.target)

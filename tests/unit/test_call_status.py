@@ -213,3 +213,13 @@ def test_timeout_none_waits_as_long_as_it_takes(tree):
 ])
 def test_other_spellings_of_no_timeout_are_errors(tmp_path, written, message):
     assert errors_of(tmp_path, "  call: arm.follow\n  inputs: {person: Ana}\n  timeout: %s\n" % written) == [message]
+
+
+def test_a_calls_outputs_are_plain_data_like_its_inputs(tree):
+    """``run.calls(...)[i].inputs`` was plain data and ``.outputs`` ROS messages: one test, two styles."""
+    t = tree("  call: arm.grasp\n  inputs: {object: cup}\n")
+    run = t.run()
+    call = run.calls("arm.grasp")[0]
+    assert call.inputs == {"object": "cup"}
+    assert call.outputs["success"] is True and call.outputs["pose"]["position"] == {"x": 0.0, "y": 0.0, "z": 0.0}
+    assert call.output_messages["success"].data is True

@@ -391,7 +391,7 @@ def test_the_format_page_says_exactly_what_a_missing_succeed_output_gets(tmp_pat
     t.mocks["navigation.go_to"].succeed(room="kitchen")
     t.mocks["vision.find_object"].succeed(room="kitchen")   # no success given: true, and the apple is seen
     outputs = t.run().calls("navigation.go_to")[0].outputs
-    assert outputs["success"].data is True and outputs["position"].x == 0.0
+    assert outputs["success"] is True and outputs["position"] == {"x": 0.0, "y": 0.0, "z": 0.0}
 
 
 def test_bmtree_test_coverage_says_which_nodes_the_scenarios_reached(capsys):
