@@ -10,6 +10,11 @@ a run refuses every command unless it was started with ``--control``.
 Commands are applied in the ticking thread, between ticks (:meth:`Controller.may_tick`):
 while paused the runner does not tick, so no node starts, while messages are still
 taken in (pending calls finish; their timeouts keep counting and are seen at the next tick).
+An answer taken in while paused is told at once (``on_call_answer``: the run stream's
+``call_answer``), so viewers do not show an answered call as running until the next tick.
+
+A request may name the run it is for (``to``: the run's ROS node, as ``bmtree watch`` sends
+it): another run on the same master leaves it alone.
 """
 from __future__ import annotations
 
@@ -18,12 +23,13 @@ import json
 import queue
 import threading
 import time
-from typing import Any, Callable, Dict, List, Tuple
+from typing import Any, Callable, Dict, List, Set, Tuple
 
 import yaml
 from py_trees.common import Status
 
 from comm import settle_new_connection
+from comm.errors import did_you_mean
 from comm.nodelife import registering
 from coordinator.context import WAKE
 from coordinator.runevents import RunObserver, notify
@@ -88,6 +94,8 @@ class Controller(RunObserver):
         self.force: Dict[Any, Status] = {}
         self._held: Dict[Any, bool] = {}
         self._wrapped: Dict[Any, bool] = {}
+        self._flying: Dict[str, Any] = {}  # call_id -> CallRecord of the calls in flight
+        self._told: Set[str] = set()  # answers told while paused
 
     # from any thread ----------------------------------------------------------------------
     def submit(self, command: Dict[str, Any]) -> None:
@@ -98,6 +106,14 @@ class Controller(RunObserver):
     # in the ticking thread ----------------------------------------------------------------
     def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
         self.ctx, self.root = ctx, root
+
+    def on_call_start(self, record: Any) -> None:
+        if self.enabled and record.call_id:
+            self._flying[record.call_id] = record
+
+    def on_call_end(self, record: Any) -> None:
+        self._flying.pop(record.call_id, None)
+        self._told.discard(record.call_id)
 
     def may_tick(self) -> bool:
         """Apply the commands that came; True if the runner may tick now."""
@@ -111,10 +127,23 @@ class Controller(RunObserver):
             return True
         self._stepping = self._step
         self._step = False
+        if not self._stepping:
+            self._tell_answers()
         return self._stepping
 
+    def _tell_answers(self) -> None:
+        """While paused: the calls answered since, which their leaves take only at the next tick."""
+        if self.ctx is None:
+            return
+        for call_id, rec in list(self._flying.items()):
+            if rec.answered is not None and rec.ended is None and call_id not in self._told:
+                self._told.add(call_id)
+                for o in list(self.ctx.observers):  # an observer of an older kind may lack the method
+                    if hasattr(o, "on_call_answer"):
+                        notify([o], "on_call_answer", rec)
+
     def _answer(self, cmd: Dict[str, Any], ok: bool, answer: str) -> None:
-        args = {k: v for k, v in cmd.items() if k not in ("id", "command", "by")}
+        args = {k: v for k, v in cmd.items() if k not in ("id", "command", "by", "to")}
         record = {"command": str(cmd.get("command")), "args": args, "ok": ok, "answer": answer,
                   "by": str(cmd.get("by") or "?"), "paused": self.paused}
         if self.ctx is not None:
@@ -152,7 +181,10 @@ class Controller(RunObserver):
             return self._set(cmd.get("key"), cmd.get("value"))
         nodes = self._nodes(cmd.get("node"))
         if not nodes:
-            return False, "no node named %r in this tree" % (cmd.get("node"),)
+            from coordinator.runstream import preorder
+
+            names = {b.name for b in preorder(self.root)}
+            return False, "no node named %r in this tree%s" % (cmd.get("node"), did_you_mean(cmd.get("node"), names))
         if what == "break":
             for b in nodes:
                 self._wrap(b)
@@ -173,7 +205,8 @@ class Controller(RunObserver):
     def _set(self, key: Any, text: Any) -> Tuple[bool, str]:
         bb = self.ctx.blackboard
         if not isinstance(key, str) or key not in bb:
-            return False, "no tree-blackboard key %r (the keys are: %s)" % (key, ", ".join(sorted(bb)) or "none")
+            return False, "no tree-blackboard key %r%s (the keys are: %s)" % (
+                key, did_you_mean(key, bb), ", ".join(sorted(bb)) or "none")
         try:
             value = yaml.safe_load(text) if isinstance(text, str) else text
         except yaml.YAMLError as exc:
@@ -309,6 +342,8 @@ def ros_controller(enabled: bool, max_bytes: int = MAX_REQUEST) -> Controller:
         except (ValueError, TypeError, AttributeError) as exc:
             pub.publish(String(json.dumps({"id": None, "ok": False, "answer": "bad request: %s" % exc})))
             return
+        if cmd.get("to") not in (None, "", rospy.get_name()):
+            return  # for another run on this master (bmtree watch names the run it shows)
         header = getattr(msg, "_connection_header", None) or {}
         cmd["by"] = str(header.get("callerid", "?"))
         ctl.submit(cmd)

@@ -47,6 +47,10 @@ class RunObserver:
     def on_call_end(self, record: Any) -> None:
         """A call ended: its status, error, outputs and duration are set."""
 
+    def on_call_answer(self, record: Any) -> None:
+        """While the run is paused (``--control``), the answer to a call came (``record.answered``,
+        ``record.result``); its leaf takes it at the next tick, which tells ``on_call_end``."""
+
     def on_event(self, event: Any, now: float) -> None:
         """A module event arrived."""
 

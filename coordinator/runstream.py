@@ -13,7 +13,7 @@ import json
 import os
 import time
 import uuid
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -117,6 +117,8 @@ class RunStream(RunObserver):
         self.meta = dict(meta or {})
         self.run_id = run_id or "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
         self._ids: Dict[Any, int] = {}
+        self._loops: List[Tuple[Any, int]] = []  # (for_each behaviour, its id)
+        self._at: Dict[int, Tuple[int, int]] = {}  # for_each id -> (element, of) last written
         self._start = 0.0
         self._ticks = 0
         self._open = False
@@ -135,6 +137,10 @@ class RunStream(RunObserver):
         self._open = True
         nodes = node_table(root)
         self._ids = {b: i for i, b in enumerate(preorder(root))}
+        from coordinator.nodes.loops import ForEach
+
+        self._loops = [(b, i) for b, i in self._ids.items() if isinstance(b, ForEach)]
+        self._at = {}
         self._clock = ctx.clock
         record: Dict[str, Any] = {
             "v": VERSION, "type": "tree", "run": self.run_id, "t": 0.0, "started": time.time(),
@@ -147,7 +153,8 @@ class RunStream(RunObserver):
 
     def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
         self._ticks += 1
-        if changes:
+        loops = self._moved() if self._loops else []
+        if changes or loops:
             ids = self._ids
             rows: List[list] = []
             for b, _old, new in changes:
@@ -159,9 +166,27 @@ class RunStream(RunObserver):
                 else:
                     rows.append([i, new.value])
             # the run clock, not ``now``: runners differ on whether ``now`` counts from the start
-            self._emit("status", {"v": VERSION, "type": "tick", "run": self.run_id, "t": self._t(self._clock.now()),
-                                  "n": self._ticks, "changes": rows})
+            record = {"v": VERSION, "type": "tick", "run": self.run_id, "t": self._t(self._clock.now()),
+                      "n": self._ticks, "changes": rows}
+            if loops:
+                record["loops"] = loops
+            self._emit("status", record)
         self.flush()
+
+    def _moved(self) -> List[List[int]]:
+        """``[id, element, of]`` of each running for_each now at another element than last told
+        (element counted from 1); one that stopped is told again when it runs again."""
+        out = []
+        for b, i in self._loops:
+            items = getattr(b, "items", None)
+            if b.status is Status.RUNNING and items:
+                at = (int(getattr(b, "i", 0)) + 1, len(items))
+                if self._at.get(i) != at:
+                    self._at[i] = at
+                    out.append([i, at[0], at[1]])
+            else:
+                self._at.pop(i, None)
+        return out
 
     def on_call_start(self, record: Any) -> None:
         if self._open:
@@ -180,6 +205,17 @@ class RunStream(RunObserver):
                 "outputs": {k: plain(v) for k, v in record.outputs.items()},
                 "answer": result.status if result is not None else None,
                 "duration": round(record.duration or 0.0, 6)})
+
+    def on_call_answer(self, record: Any) -> None:
+        """The answer to a call came while the run is paused: its leaf takes it at the next tick
+        (then the ``call_end``); viewers show the call as answered meanwhile."""
+        if self._open and record.answered is not None:
+            result = record.result
+            self._emit("calls", {"v": VERSION, "type": "call_answer", "run": self.run_id,
+                                 "t": self._t(record.answered), "call_id": record.call_id, "target": record.target,
+                                 "node": self._ids.get(record.owner),
+                                 "answer": result.status if result is not None else None,
+                                 "error": getattr(result, "error", "") or ""})
 
     def on_event(self, event: Any, now: float) -> None:
         if self._open:

@@ -2,8 +2,10 @@
 
 The watcher subscribes to ``/bmtree/run/*``: the latched ``tree`` and the ``snapshot``
 records catch it up mid-run, the other channels keep it current. On a terminal it
-shows :func:`coordinator.watchview.render` redrawn in place (``rich.live``); otherwise
-one line per change. ``--web`` serves the same state as a page (:mod:`coordinator.webview`).
+shows :func:`coordinator.watchview.render` redrawn in place (``rich.live``,
+:mod:`coordinator.watchterm`); otherwise one line per change. ``--web`` serves the same state as
+a page (:mod:`coordinator.webview`). It shows one run: the first one seen, or the one ``--run``
+names; another run on the same master gets a notice saying how to watch it.
 """
 from __future__ import annotations
 
@@ -15,14 +17,15 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals
 from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
-from coordinator.watchview import LinePrinter, now_since, render
+from coordinator.watchterm import Keys, LiveView, key_reader, keys_help
+from coordinator.watchview import LinePrinter
 
 __all__ = ["RosWatcher", "LiveView", "cmd_watch", "run_view", "STREAM_NS", "WATCH_CHANNELS"]
 
@@ -76,57 +79,24 @@ class RosWatcher:
                 except Exception:  # a printing problem must not stop the subscriber
                     pass
 
+    def show_next(self) -> bool:
+        """Once the run shown has ended (``--follow``): show another one going on the master,
+        which started meanwhile (True), if any."""
+        with self.state.lock:
+            nxt = self.state.others.next_live() if self.state.end is not None else None
+            if nxt is not None:
+                self.apply(nxt)
+            return nxt is not None
+
+    def node(self) -> Optional[str]:
+        """The ROS node of the run shown (its commands name it: another run leaves them alone)."""
+        with self.state.lock:
+            return self.nodes.get(self.state.run) if self.state.nodes else None
+
     def close(self) -> None:
         for s in self._subs:
             s.unregister()
         self._subs = []
-
-
-class LiveView:
-    """Redraws ``state`` in place on a terminal (rich.live, alternate screen) until stopped;
-    ``footer`` (or a callable making it from the state) is the last line, ``title`` the header's first words."""
-
-    def __init__(self, state: WatchState, console: Any = None, footer: Union[str, Callable[[WatchState], str]] = "",
-                 refresh: float = 0.2, title: str = "bmtree watch"):
-        from rich.console import Console
-
-        self.state = state
-        self.console = console or Console()
-        self.footer = footer
-        self.title = title
-        self.refresh = refresh
-        self.message = ""
-        self._stop = threading.Event()
-        self._thread: Optional[threading.Thread] = None
-
-    def _frame(self, anchor: List[float]) -> Any:
-        size = self.console.size
-        help_ = self.footer(self.state) if callable(self.footer) else self.footer
-        foot = self.message or help_  # an answer replaces the help until the next key
-        return render(self.state, size.width, size.height, foot.strip(), now_since(self.state, anchor), self.title)
-
-    def _loop(self) -> None:
-        from rich.live import Live
-
-        anchor: List[float] = []
-        with Live(self._frame(anchor), console=self.console, screen=True, auto_refresh=False,
-                  redirect_stdout=False, redirect_stderr=False) as live:
-            while not self._stop.wait(self.refresh):
-                live.update(self._frame(anchor), refresh=True)
-
-    def start(self) -> LiveView:
-        self._thread = threading.Thread(target=self._loop, name="bmtree-live-view", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self, final: bool = True) -> None:
-        """Leave the alternate screen; with ``final`` print the last view once (it stays in the scrollback)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        if final:
-            size = self.console.size
-            self.console.print(render(self.state, size.width, max(24, size.height) - 1, "", title=self.title))
 
 
 def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[Optional[LiveView], List[Any]]:
@@ -153,96 +123,22 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
     return view, [sink]
 
 
-KEYS_HELP = "q quit  p pause/resume  s step  : command (break NODE, clear NODE, force NODE SUCCESS, set KEY VALUE)"
-NO_CONTROL_HELP = "q quit  (this run takes no commands: it was started without --control)"
-
-
-def keys_help(state: WatchState) -> str:
-    """The footer: the steering keys only for a run that takes them."""
-    return KEYS_HELP if state.steerable else NO_CONTROL_HELP
-
-
-class Keys:
-    """The watch's keys: p, s, q, and ``:`` for a typed command; answers go to the view's footer."""
-
-    def __init__(self, view: LiveView, client: Any, stop: threading.Event):
-        self.view, self.client, self.stop = view, client, stop
-        self.line: Optional[str] = None
-
-    def _send(self, cmd: dict) -> None:
-        def go() -> None:
-            reply = self.client.send(cmd, 10.0)
-            self.view.message = ("ok: " if reply.get("ok") else "refused: ") + str(reply.get("answer"))
-        threading.Thread(target=go, daemon=True).start()
-
-    def press(self, ch: str) -> None:
-        from coordinator.control import parse_command
-
-        if self.line is not None:
-            if ch in ("\r", "\n"):
-                words, self.line = self.line.split(), None
-                try:
-                    self._send(parse_command(words))
-                except ValueError as exc:
-                    self.view.message = "refused: %s" % exc
-            elif ch == "\x1b":
-                self.line, self.view.message = None, ""
-            elif ch in ("\x7f", "\b"):
-                self.line = self.line[:-1]
-                self.view.message = ":" + self.line
-            elif ch.isprintable():
-                self.line += ch
-                self.view.message = ":" + self.line
-            return
-        if ch in ("q", "Q"):
-            self.stop.set()
-        elif ch == "p":
-            self._send({"command": "resume" if self.view.state.paused else "pause"})
-        elif ch == "s":
-            self._send({"command": "step"})
-        elif ch == ":":
-            self.line = ""
-            self.view.message = ":"
-
-
-def _key_reader(handler: Callable[[str], None], stop: threading.Event) -> Optional[threading.Thread]:
-    """Single keys from a terminal's stdin (cbreak mode), given to ``handler``; None without a terminal."""
-    if not sys.stdin.isatty():
-        return None
-    import select
-    import termios
-    import tty
-
-    fd = sys.stdin.fileno()
-    old = termios.tcgetattr(fd)
-
-    def loop() -> None:
-        tty.setcbreak(fd)
-        try:
-            while not stop.is_set():
-                ready, _, _ = select.select([fd], [], [], 0.2)
-                if ready:
-                    ch = os.read(fd, 1).decode("utf-8", "replace")
-                    handler(ch)
-        finally:
-            termios.tcsetattr(fd, termios.TCSADRAIN, old)
-
-    t = threading.Thread(target=loop, name="bmtree-keys", daemon=True)
-    t.start()
-    return t
-
-
-def gone_record(state: WatchState, node: str, reason: str) -> Dict[str, Any]:
+def gone_record(state: WatchState, node: str, reason: str, alive: Optional[float] = None) -> Dict[str, Any]:
     """The watch's own ``end`` of a run whose process is gone before its end (killed outright, crashed):
-    status ``UNFINISHED``, ``gone`` true; never on the run stream, which that run can no longer write."""
+    status ``UNFINISHED``, ``gone`` true; never on the run stream, which that run can no longer write.
+    ``alive``: the run's time when its process was found gone (:meth:`WatchState.now` then), its
+    ``duration`` (else the time of its last record); the last tick is the run's last tick record's
+    (a snapshot carries it as ``tick_t``), not the time the watch caught up."""
     started = state.tree.get("started")
     wall = ""
     if isinstance(started, (int, float)):
         wall = " (%s)" % time.strftime("%H:%M:%S", time.localtime(started + state.tick_t))
-    return {"v": 1, "type": "end", "run": state.run, "t": state.t, "status": "UNFINISHED", "gone": True,
-            "reason": "the run (pid %s, node %s) is gone, its last tick (%d) at %.3fs%s: %s; it did not stop its "
-                      "calls" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t, wall, reason),
-            "ticks": state.tick, "duration": state.t, "calls": len(state.calls)}
+    lived = max(state.t, alive if alive is not None else state.t)
+    return {"v": 1, "type": "end", "run": state.run, "t": round(lived, 6), "status": "UNFINISHED", "gone": True,
+            "reason": "the run (pid %s, node %s) is gone, its last tick (%d) at %.3fs%s, found gone at about %.1fs: "
+                      "%s; it did not stop its calls" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t,
+                                                         wall, lived, reason),
+            "ticks": state.tick, "duration": round(lived, 6), "calls": state.calls_total}
 
 
 class RunLiveness:
@@ -286,12 +182,22 @@ class RunLiveness:
             run = self.state.run
             if self.watcher.nodes.get(run) != node:
                 return
+            alive = self.state.now()  # its process is found gone now, not at its last record
         # an ending run leaves right after its (latched) end: give it the time to arrive
         if self.state.wait(lambda s: s.end is not None or s.run != run, END_TICKS_GRACE):
             return
         with self.state.lock:
             if self.state.end is None and self.state.run == run:
-                self.watcher.apply(gone_record(self.state, node, reason))
+                self.watcher.apply(gone_record(self.state, node, reason, alive))
+
+
+def no_run_message(namespace: str, waited: float, only: str = "", others: Optional[List[Dict[str, Any]]] = None) -> str:
+    """Why ``bmtree watch`` found nothing to show, and where a run that already ended is."""
+    seen = ", ".join("%s (%s)" % (o.get("run"), o.get("name")) for o in others or [])
+    return ("error: %s on %s/tree after %gs (is 'bmtree run' running on this master?)%s. A run that has already "
+            "ended is recorded on the machine that ran it: 'bmtree runs' lists them, 'bmtree replay last' (or RUN) "
+            "shows one" % ("no run %s" % only if only else "no run", namespace, waited,
+                           "; the runs seen: %s" % seen if seen else ""))
 
 
 def cmd_watch(args: argparse.Namespace) -> int:
@@ -303,7 +209,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     if not master_up(args.wait):
         err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
         return EXIT_ENV
-    state = WatchState()
+    state = WatchState(only=getattr(args, "run", None) or "")
     tty = sys.stdout.isatty() and not args.plain
     printer = None if tty or args.web else LinePrinter(sys.stdout)
     # Ctrl-C, kill, timeout or a closed terminal only raise a flag that the waits poll, and the
@@ -336,30 +242,41 @@ def cmd_watch(args: argparse.Namespace) -> int:
         from coordinator.control import ControlClient
 
         client = ControlClient()
+        to = watcher.node
+
+        def steer(cmd: Dict[str, Any]) -> Dict[str, Any]:
+            """A command of the page, to the run shown only."""
+            node = to()
+            return client.send(dict(cmd, to=node) if node else cmd, 10.0)
+
         if args.web:
             from coordinator.webview import serve
 
-            server = serve(state, args.bind, args.port, control=lambda cmd: client.send(cmd, 10.0))
+            server = serve(state, args.bind, args.port, control=steer)
             print("watching %s/* of the master %s; page at %s" % (
                 args.namespace, os.environ.get("ROS_MASTER_URI", ""), server.where()))
             sys.stdout.flush()
         elif tty:
-            view = LiveView(state, footer=keys_help).start()
-            _key_reader(Keys(view, client, stop).press, stop)
+            view = LiveView(state, footer=keys_help, summary=True).start()
+            key_reader(Keys(view, client, stop, to).press, stop)
         if not wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
             if signals.requested or stop.is_set():
                 return EXIT_OK
             if view is not None:
                 view.stop(final=False)
                 view = None
-            err("error: no run on %s/tree after %gs (is 'bmtree run' running on this master?)" % (
-                args.namespace, args.wait))
+            err(no_run_message(args.namespace, args.wait, state.only, state.others.summary()))
             return EXIT_ENV
-        wait(lambda s: s.end is not None and not args.follow, 1e9)  # or a stop
-        if printer is not None and state.end is not None:  # the latched end can overtake the last ticks
-            wait(lambda s: s.tick >= int(s.end.get("ticks") or 0), END_TICKS_GRACE)
-            with state.lock:
-                printer.finish()
+        while wait(lambda s: s.end is not None, 1e9):  # (False: a stop)
+            if printer is not None:  # the latched end can overtake the last ticks
+                wait(lambda s: s.end is None or s.tick >= int(s.end.get("ticks") or 0), END_TICKS_GRACE)
+                with state.lock:
+                    printer.finish()
+            if not args.follow:
+                break
+            run = state.run
+            watcher.show_next()  # a run going on already; else the next run's tree is shown when it comes
+            wait(lambda s, shown=run: s.run != shown or s.end is None, 1e9)
         if server is not None and state.end is not None and not (signals.requested or stop.is_set()):
             print("the run ended: %s; the page keeps showing it (--follow serves it for the next run too)"
                   % state.end.get("status"))
@@ -367,7 +284,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
             if wait(lambda s: server.end_served.is_set(), END_GRACE):
                 wait(lambda s: False, 1.0)
         if state.end is not None and state.end.get("gone"):
-            if printer is None and not (signals.requested or stop.is_set()):
+            if server is not None and not (signals.requested or stop.is_set()):
+                # (the terminal view prints it once its alternate screen is gone, the lines have their end)
                 err("the run did not finish: %s" % state.end.get("reason"))
             return EXIT_ENV
         return EXIT_OK
@@ -410,6 +328,8 @@ def add_watch_parser(sub: Any) -> None:
     w = sub.add_parser("watch", help="show the tree running on $ROS_MASTER_URI, live (terminal or --web)")
     w.add_argument("--plain", action="store_true", help="one line per change even on a terminal")
     w.add_argument("--follow", action="store_true", help="keep watching after the run ends (the next run too)")
+    w.add_argument("--run", metavar="ID", help="show this run (its id, as in the run stream and its log's name, or "
+                                               "the id's last part); default: the first run seen")
     w.add_argument("--namespace", default=STREAM_NS, help="the run stream's topics (default %(default)s)")
     w.add_argument("--wait", type=seconds("do not wait"), default=10.0, help="how long to wait for the master and a run (s)")
     w.add_argument("--web", action="store_true", help="serve a live page instead of the terminal view")
@@ -436,7 +356,7 @@ def cmd_control(args: argparse.Namespace) -> int:
     rospy.init_node("bmtree_control", anonymous=True, disable_signals=True)
     client = ControlClient()
     try:
-        reply = client.send(cmd, args.wait)
+        reply = client.send(dict(cmd, to=args.node) if args.node else cmd, args.wait)
     finally:
         client.close()
         rospy.signal_shutdown("bmtree control finished")
@@ -452,4 +372,7 @@ def add_control_parser(sub: Any) -> None:
     c.add_argument("words", nargs="+", metavar="COMMAND",
                    help="pause | resume | step | break NODE | clear NODE | force NODE SUCCESS|FAILURE | set KEY VALUE")
     c.add_argument("--wait", type=seconds(), default=10.0, help="how long to wait for the run's answer (s)")
+    c.add_argument("--node", default="", metavar="NODE",
+                   help="only the run of this ROS node (e.g. /bmtree_14239_1795636146106, as 'bmtree run' names "
+                        "another run on the master), when several runs share one master")
     c.set_defaults(func=cmd_control)

@@ -5,6 +5,10 @@ or from the run's own stream in-process) and can be caught up at once from a
 ``snapshot`` record, which the running process publishes latched and periodically
 (:class:`SnapshotSink`) so that a watcher that attaches mid-run sees the present
 state without the history. Plain data only: the terminal and web views draw it.
+
+One master may carry two runs' streams (a forgotten terminal): the state stays on the
+first run it shows (or the one ``only`` names, ``watch --run``) and keeps the other runs'
+records aside (:class:`OtherRuns`), with a notice of the watch's own for each.
 """
 from __future__ import annotations
 
@@ -14,6 +18,7 @@ import time
 from typing import Any, Callable, Dict, List, Optional
 
 from coordinator.runstream import VERSION, Sink, to_json
+from coordinator.watchruns import OtherRuns, run_matches
 
 __all__ = ["WatchState", "SnapshotSink", "StateSink", "SNAPSHOT_VERSION"]
 
@@ -25,10 +30,14 @@ OUTCOMES = ("SUCCESS", "FAILURE")
 class WatchState:
     """One run as seen from outside; every method is thread-safe."""
 
-    def __init__(self) -> None:
+    def __init__(self, only: str = "") -> None:
         self.lock = threading.RLock()
         self.changed = threading.Condition(self.lock)
         self.version = 0  # bumped on every applied record (the web view polls it)
+        #: the run to show (``watch --run``: its id or the id's last part); '' the first one seen
+        self.only = only
+        #: the runs on the same stream that are not shown, their records kept aside
+        self.others = OtherRuns()
         self._reset()
 
     def _reset(self, run: str = "") -> None:
@@ -44,16 +53,26 @@ class WatchState:
         self.last: Dict[int, str] = {}
         #: tree-blackboard keys, least recently written first (the view keeps the newest when cut)
         self.written: List[str] = []
+        #: calls in flight (``call_start`` records); after the answer came while the run was paused,
+        #: ``answered`` (its time) and ``answer``; after the watch's own end of a run that is gone,
+        #: ``maybe_running`` (the module may still be running it: nobody cancelled it)
         self.pending: Dict[str, Dict[str, Any]] = {}
+        #: the finished calls (``call_end`` records with ``started`` and the ``inputs`` of their start)
         self.calls: List[Dict[str, Any]] = []
+        self.ncalls = 0  # calls finished in the run, also the ones before a late watch and past KEEP
+        #: for_each nodes' positions (id -> [element, of]), from the ticks' ``loops``
+        self.loops: Dict[int, List[int]] = {}
+        #: the watch's own notices (another run started on this master): not the run's records
+        self.notes: List[Dict[str, Any]] = []
         self.events: List[Dict[str, Any]] = []
         self.control: List[Dict[str, Any]] = []
         self.blackboard: Dict[str, Any] = {}
         self.end: Optional[Dict[str, Any]] = None
         self.paused = False
         self.t = 0.0
+        self._seen = time.monotonic()  # when ``t`` last moved on (to tell the run's time between records)
         self.tick = 0
-        self.tick_t = 0.0  # the run's time of its last tick (or snapshot)
+        self.tick_t = 0.0  # the run's time of its last tick
         self.caught_up = False
 
     # applying ---------------------------------------------------------------------------
@@ -79,6 +98,9 @@ class WatchState:
         kind = rec.get("type")
         run = str(rec.get("run") or "")
         if kind == "tree":
+            if not self._shows(run):
+                self._aside(run, rec)
+                return
             if run != self.run or not self.nodes:
                 self._reset(run)
             self.tree = {k: v for k, v in rec.items() if k != "nodes"}
@@ -87,28 +109,35 @@ class WatchState:
                 if str(key) not in self.blackboard:  # the same run's tree again must not undo its writes
                     self._write(str(key), value)
             early, self._early = self._early, []
-            for r in early:  # records that came before the tree (topics are not ordered among them)
-                if str(r.get("run") or "") == run:
+            kept = self.others.take(run)  # a run shown after another one ended (--follow)
+            for r in early + kept:  # records that came before the tree (topics are not ordered among them)
+                other = str(r.get("run") or "")
+                if other == run:
                     self._apply(r)
+                elif other:
+                    self.others.keep(other, r)
             return
         if not self.nodes:
             if len(self._early) < 1000:
                 self._early.append(rec)
             return
         if run and self.run and run != self.run:
-            return  # a record of another run (an old latched one)
+            self.others.keep(run, rec)  # another run's (shown if this one ends first, with --follow)
+            return
         if kind == "snapshot":
             if self.caught_up and int(rec.get("n") or 0) <= self.tick:
                 return
             self._load(rec)
             return
-        self.t = max(self.t, float(rec.get("t") or 0.0))
+        self._advance(float(rec.get("t") or 0.0))
         if kind == "tick":
             n = int(rec.get("n") or 0)
             if n and n <= self.tick:
                 return  # already in the snapshot
             self.tick = n or self.tick + 1
-            self.tick_t = self.t
+            self.tick_t = float(rec.get("t") or self.t)
+            for row in rec.get("loops") or []:  # for_each nodes that moved to another element
+                self.loops[int(row[0])] = [int(row[1]), int(row[2])]
             for change in rec.get("changes") or []:
                 i, new = int(change[0]), str(change[1])
                 old = self.status.get(i, "INVALID")
@@ -120,11 +149,19 @@ class WatchState:
                     self.feedback[i] = str(change[2]) if len(change) > 2 else ""
         elif kind == "call_start":
             self.pending[str(rec.get("call_id"))] = rec
+        elif kind == "call_answer":  # answered while the run is paused: its leaf takes it at the next tick
+            cid = str(rec.get("call_id"))
+            if cid in self.pending:
+                self.pending[cid] = dict(self.pending[cid], answered=rec.get("t"), answer=rec.get("answer"))
         elif kind == "call_end":
             start = self.pending.pop(str(rec.get("call_id")), None)
             if not any(c.get("call_id") == rec.get("call_id") for c in self.calls[-20:]):
-                self.calls.append(dict(rec, started=(start or {}).get("t", rec.get("t"))))
+                done = dict(rec, started=(start or {}).get("t", rec.get("t")))
+                if start is not None and "inputs" not in done:
+                    done["inputs"] = start.get("inputs")
+                self.calls.append(done)
                 del self.calls[:-KEEP]
+                self.ncalls += 1
         elif kind == "write":
             self._write(str(rec.get("key")), rec.get("value"))
         elif kind in ("event", "notice"):  # a notice: what happened to the ROS graph (the master went away)
@@ -137,8 +174,30 @@ class WatchState:
                 self.paused = bool(rec["paused"])
         elif kind == "end":
             self.end = rec
-            self.pending.clear()
+            if rec.get("gone"):  # nobody stopped them: the modules may still be running them
+                self.pending = {k: dict(c, maybe_running=True) for k, c in self.pending.items()}
+            else:
+                self.pending.clear()
 
+    def _advance(self, t: float) -> None:
+        if t > self.t:
+            self.t = t
+            self._seen = time.monotonic()
+
+    def _shows(self, run: str) -> bool:
+        """Whether a tree record of ``run`` is (or becomes) the one shown: the one ``only`` names,
+        else the first one seen, and another one only once the one shown has ended."""
+        if self.only:
+            return run_matches(run, self.only) and (not self.nodes or run == self.run or self.end is not None)
+        return not self.nodes or run == self.run or self.end is not None
+
+    def _aside(self, run: str, rec: Dict[str, Any]) -> None:
+        """A tree record of a run not shown: kept aside, and the first one a notice of the watch's own."""
+        if self.others.tree(run, rec) and self.nodes and not self.only:
+            self.notes.append({"v": VERSION, "type": "notice", "what": "other_run", "run": self.run,
+                               "t": round(self.now(), 6),
+                               "watch": True, "text": self.others.notice(run, str(self.tree.get("name") or "?"))})
+            del self.notes[:-KEEP]
     def _write(self, key: str, value: Any) -> None:
         self.blackboard[key] = value
         if key in self.written:
@@ -147,8 +206,10 @@ class WatchState:
 
     def _load(self, rec: Dict[str, Any]) -> None:
         self.t = float(rec.get("t") or 0.0)
+        self._seen = time.monotonic()
         self.tick = int(rec.get("n") or 0)
-        self.tick_t = self.t
+        # the snapshot's own time is when it was taken; a snapshot of an older bmtree has no tick_t
+        self.tick_t = float(rec["tick_t"]) if rec.get("tick_t") is not None else self.t
         self.status = {int(k): str(v) for k, v in (rec.get("status") or {}).items()}
         self.halted = {int(k): True for k in rec.get("halted") or []}
         self.feedback = {int(k): str(v) for k, v in (rec.get("feedback") or {}).items()}
@@ -156,6 +217,8 @@ class WatchState:
         self.last.update((k, v) for k, v in self.status.items() if v in OUTCOMES)
         self.pending = {str(c.get("call_id")): c for c in rec.get("pending") or []}
         self.calls = list(rec.get("calls") or [])
+        self.ncalls = max(int(rec.get("ncalls") or 0), len(self.calls))
+        self.loops = {int(k): [int(v[0]), int(v[1])] for k, v in (rec.get("loops") or {}).items()}
         self.events = list(rec.get("events") or [])
         self.control = list(rec.get("control") or [])
         board = rec.get("blackboard") or {}
@@ -173,7 +236,9 @@ class WatchState:
         """The present state as a versioned ``snapshot`` record (what a late watcher loads)."""
         with self.lock:
             return {"v": VERSION, "type": "snapshot", "sv": SNAPSHOT_VERSION, "run": self.run, "t": self.t,
-                    "n": self.tick, "status": {str(k): v for k, v in self.status.items() if v != "INVALID"},
+                    "n": self.tick, "tick_t": self.tick_t, "ncalls": self.ncalls,
+                    "loops": {str(k): v for k, v in self.loops.items()},
+                    "status": {str(k): v for k, v in self.status.items() if v != "INVALID"},
                     "halted": [k for k, v in self.halted.items() if v],
                     "feedback": {str(k): v for k, v in self.feedback.items() if v},
                     "last": {str(k): v for k, v in self.last.items() if self.status.get(k, "INVALID") == "INVALID"},
@@ -182,12 +247,37 @@ class WatchState:
                     "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused, "end": self.end}
 
     def view(self) -> Dict[str, Any]:
-        """Everything a view draws, as plain data (the web page's JSON)."""
+        """Everything a view draws, as plain data (the web page's JSON): the snapshot, with the
+        watch's own notices among the events (``watch``: true) and ``calls_total``."""
         with self.lock:
             snap = self.snapshot(calls=KEEP, events=KEEP)
             snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started", "control")},
-                        nodes=self.nodes, version=self.version)
+                        nodes=self.nodes, version=self.version, events=self.all_events()[-KEEP:],
+                        calls_total=self.calls_total, others=self.others.summary())
             return snap
+
+    def all_events(self) -> List[Dict[str, Any]]:
+        """The run's events and notices with the watch's own notices, by time (in arrival order at one time)."""
+        if not self.notes:
+            return list(self.events)
+        return sorted(self.events + self.notes, key=lambda e: float(e.get("t") or 0.0))
+
+    @property
+    def calls_total(self) -> int:
+        """How many calls the run finished: also those before a late watch attached and those past
+        the KEEP kept; at the end the run's own count (its ``end`` record's ``calls``)."""
+        total = max(self.ncalls, len(self.calls))
+        if self.end and isinstance(self.end.get("calls"), int) and not self.end.get("gone"):
+            total = max(total, int(self.end["calls"]))
+        return total
+
+    def now(self) -> float:
+        """The run's time now: its last record's, advanced by the wall clock since (a long call
+        makes no record until it ends); once it has ended, the time of its end."""
+        with self.lock:
+            if self.end is not None or not self.nodes:
+                return self.t
+            return self.t + max(0.0, time.monotonic() - self._seen)
 
     @property
     def steerable(self) -> bool:

@@ -3,8 +3,10 @@ events and call log, drawn with ``rich`` to fit the terminal (README, "Watching 
 
 The tree folds to fit: finished or idle subtrees collapse to one line, and if it
 still does not fit, a window around the running branch is shown. Every line is cut,
-never wrapped, so redrawing in place leaves no stale lines. Where the output is not
-a terminal, :class:`LinePrinter` writes one line per change instead.
+never wrapped, so redrawing in place leaves no stale lines; the result is wrapped into
+lines of its own (over a few at most). The words of calls and of the result are
+:mod:`coordinator.watchtext`'s. Where the output is not a terminal, :class:`LinePrinter`
+writes one line per change instead.
 """
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ from rich.text import Text
 
 from coordinator.runevents import control_line
 from coordinator.watchstate import WatchState
+from coordinator.watchtext import call_text, pending_text, result_text, values_text, wrap
+from coordinator.watchtext import cut as _cut
 
 __all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
 
@@ -82,6 +86,8 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
             line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
         if label:
             line.append("  %s" % label, style=STYLE[label])
+        if label == "RUNNING" and i in state.loops:  # a for_each: the element it runs
+            line.append("  item %d of %d" % tuple(state.loops[i]), style="dim")
         if hidden:
             line.append("  (+%d folded)" % hidden, style="dim")
         fb = state.feedback.get(i)
@@ -99,7 +105,8 @@ def _section(title: str) -> Text:
 
 
 def _panel(title: str, shown: List[Text], total: int, empty: str) -> List[Text]:
-    """A section's title (``(6 of 8)`` when cut) and the lines it shows."""
+    """A section's title (``(6 of 8)`` when cut: ``total`` is how many there are, also the ones
+    no longer kept) and the lines it shows."""
     head = _section("%s%s" % (title, "" if total else ": " + empty))
     if total > len(shown):
         head.append(" (%d of %d%s)" % (len(shown), total, ", last written" if title == "tree blackboard" else ""),
@@ -108,10 +115,12 @@ def _panel(title: str, shown: List[Text], total: int, empty: str) -> List[Text]:
 
 
 def render(state: WatchState, width: int, height: int, footer: str = "", now: Optional[float] = None,
-           title: str = "bmtree watch") -> Group:
+           title: str = "bmtree watch", result: str = "wrap") -> Group:
     """The whole view, exactly ``height`` lines or fewer, none longer than ``width``. ``now``: the
     run's time advanced by the wall clock since its last record (:func:`now_since`) for the header's
-    clock and the pending calls' elapsed times; ``title``: what shows it (``bmtree run``)."""
+    clock and the pending calls' elapsed times; ``title``: what shows it (``bmtree run``);
+    ``result``: the result line wrapped to at most a sixth of the height (``wrap``), whole
+    (``full``) or left out (``none``: the watch prints it after the view)."""
     with state.lock:
         name = state.tree.get("name") or "(waiting for a run on the run stream)"
         # between records the run's clock moves on: a long call makes no record until it ends
@@ -123,32 +132,32 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
             head.append("  PAUSED", style="bold magenta")
         if state.end:
             head.append("  %s" % state.end.get("status"), style=STYLE.get(str(state.end.get("status")), ""))
-        plines = []
-        for c in state.pending.values():
-            el = max(0.0, t_now - float(c.get("t") or 0.0))
-            to = c.get("timeout")
-            plines.append(Text("  %-24s %6.1fs / %s  %s" % (
-                c.get("target"), el, ("%gs" % to) if to else "-", _short(c.get("inputs"), 40))))
+        pending = list(state.pending.values())
+        tw = max([16] + [len(str(c.get("target"))) for c in pending])
+        plines = [Text(pending_text(state, c, t_now, width, min(24, tw)),
+                       style="yellow" if c.get("maybe_running") else "dim" if c.get("answered") is not None else "")
+                  for c in pending]
         written = [k for k in state.written if k in state.blackboard]  # oldest write first
         known = set(written)
         written = [k for k in state.blackboard if k not in known] + written
-        ev = [Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
-                   style="yellow" if e.get("type") == "notice" else "") for e in state.events]
-        ev += [Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)), style="magenta")
-               for c in state.control]
-        ev.sort(key=lambda x: x.plain)
-        calls = []
-        for c in state.calls:
-            st = str(c.get("status"))
-            calls.append(Text("  %7.2fs %-24s %-9s %6.2fs %s" % (
-                float(c.get("started") or 0.0), c.get("target"), st, float(c.get("duration") or 0.0),
-                c.get("error") or ""), style="red" if st not in ("succeeded",) else ""))
+        # by time, and at one time in the order they came (a breakpoint hit right after a resume
+        # comes after it); the run's events before its control answers
+        timed = [(float(e.get("t") or 0.0), Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
+                                                 style="yellow" if e.get("type") == "notice" else ""))
+                 for e in state.all_events()]
+        timed += [(float(c.get("t") or 0.0), Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)),
+                                                  style="magenta")) for c in state.control]
+        timed.sort(key=lambda x: x[0])
+        ev = [text for _t, text in timed]
+        tw = max([16] + [len(str(c.get("target"))) for c in state.calls])
+        sw = max([9] + [len(str(c.get("status"))) for c in state.calls])
+        calls = [Text(call_text(c, width, min(24, tw), sw), style="red" if c.get("status") != "succeeded" else "")
+                 for c in state.calls]
         end = []
-        if state.end:
-            end.append(Text("result: %s in %.2fs (%s ticks)%s" % (
-                state.end.get("status"), float(state.end.get("duration") or 0.0), state.end.get("ticks"),
-                ("  reason: %s" % state.end.get("reason")) if state.end.get("reason") else ""),
-                style=STYLE.get(str(state.end.get("status")), "")))
+        if state.end and result != "none":
+            style = STYLE.get(str(state.end.get("status")), "")
+            most = None if result == "full" else max(2, height // 6)
+            end = [Text(line, style=style) for line in wrap(result_text(state.end), width, most)]
 
         def board(take: int) -> List[Text]:
             """The keys shown in order; cut, the most recently written ones (a stale one matters least)."""
@@ -172,7 +181,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         body = (_panel("pending calls", plines[:takes[0]], len(plines), "none")
                 + _panel("tree blackboard", board(takes[1]), len(written), "empty")
                 + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
-                + _panel("call log", calls[len(calls) - takes[3]:], len(calls), "none"))
+                + _panel("call log", calls[len(calls) - takes[3]:], max(len(calls), state.calls_total), "none"))
         out = [head] + tree + body + end + ([Text(footer, style="dim")] if footer else [])
     out = out[:height]
     for line in out:
@@ -196,6 +205,7 @@ class LinePrinter:
         self.out = out
         self._caught: Any = None
         self._end: Optional[Tuple[int, str]] = None  # the end's line, held until its last tick is printed
+        self._noted = 0  # the watch's own notices printed (another run started)
 
     def finish(self) -> None:
         """Print the end's line if it is still held (its last tick never came)."""
@@ -213,6 +223,11 @@ class LinePrinter:
         t = float(rec.get("t") or 0.0)
         names = {n.get("id"): n.get("name") for n in state.nodes}
         lines = []
+        self._noted = min(self._noted, len(state.notes))  # another run shown (--follow): its notes start anew
+        lines += ["[%7.3fs] notice    %s" % (float(n.get("t") or 0.0), n.get("text")) for n in state.notes[self._noted:]]
+        self._noted = len(state.notes)
+        if rec.get("run") and state.run and rec.get("run") != state.run:
+            kind = None  # another run's record: the state keeps it aside, the notice above said so
         if kind == "tree":
             lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
         elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
@@ -220,9 +235,10 @@ class LinePrinter:
             running = ["%s RUNNING" % names.get(int(k), k) for k, v in (rec.get("status") or {}).items()
                        if v == "RUNNING"]
             pending = ["%s since %.3fs" % (c.get("target"), float(c.get("t") or 0.0)) for c in rec.get("pending") or []]
-            lines.append("[%7.3fs] caught up at tick %s: %s; pending calls: %s; %d calls done" % (
+            done = max(int(rec.get("ncalls") or 0), len(rec.get("calls") or []))
+            lines.append("[%7.3fs] caught up at tick %s: %s; pending calls: %s; %d call%s done" % (
                 t, rec.get("n"), ", ".join(running) or "nothing running", ", ".join(pending) or "none",
-                len(rec.get("calls") or [])))
+                done, "" if done == 1 else "s"))
         elif kind == "tick":
             for ch in rec.get("changes") or []:
                 status = ch[1]
@@ -235,7 +251,13 @@ class LinePrinter:
         elif kind == "call_start":
             lines.append("[%7.3fs] call      %s %s" % (t, rec.get("target"), _short(rec.get("inputs"))))
         elif kind == "call_end":
-            lines.append("[%7.3fs] %-9s %s %s" % (t, rec.get("status"), rec.get("target"), rec.get("error") or ""))
+            # the column is 9 wide: module_lost says "lost" (its error says which module was lost)
+            status = "lost" if rec.get("status") == "module_lost" else rec.get("status")
+            outputs = values_text(rec.get("outputs")) if not rec.get("error") else ""
+            lines.append("[%7.3fs] %-9s %s %s" % (t, status, rec.get("target"), rec.get("error") or (
+                "→ " + _cut(outputs, 100) if outputs else "")))
+        elif kind == "call_answer":
+            lines.append("[%7.3fs] answered  %s (%s), taken at the next tick" % (t, rec.get("target"), rec.get("answer")))
         elif kind == "event":
             lines.append("[%7.3fs] event     %s" % (t, event_text(rec)))
         elif kind == "notice":
@@ -247,6 +269,9 @@ class LinePrinter:
         elif kind == "end":
             line = "[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else "")
             ticks = rec.get("ticks")
+            for c in state.pending.values() if rec.get("gone") else ():
+                line += "\n[%7.3fs] maybe still running (run gone): %s since %.3fs %s" % (
+                    t, c.get("target"), float(c.get("t") or 0.0), _short(c.get("inputs")))
             if isinstance(ticks, int) and state.tick < ticks:  # latched, it can overtake the queued last ticks
                 self._end = (ticks, line)
             else:

@@ -1,14 +1,54 @@
 // bmtree's web view: long-polls /state and draws the run (no library, nothing from the network).
 "use strict";
-const W = 170, H = 38, GX = 10, GY = 40;
+// a node's box: W wide, up to three lines of text, centred (the name on up to two, then kind and
+// status; a failed node's reason, cut to a line, replaces the name's second one), GX between rows,
+// GY between depths
+const W = 240, H = 52, GX = 12, GY = 44, PAD = 6, LINE = 14, FONT = "12px sans-serif";
+const QUIET_MS = 5000; // the view follows the run only when the user has not scrolled it for this long
 const $ = (id) => document.getElementById(id);
-let version = -1, mode = null, last = null, shownNodes = "";
+let version = -1, mode = null, last = null, shownNodes = "", gone = false;
+let boxes = {}, depths = {}, focused = null, rootId = null, culprit = null, userScrolled = 0, ours = null, replayMeta = {};
 
 function el(tag, attrs, text) {
   const e = document.createElementNS("http://www.w3.org/2000/svg", tag);
   for (const k in attrs) e.setAttribute(k, attrs[k]);
   if (text !== undefined) e.textContent = text;
   return e;
+}
+
+const measure = (() => {
+  const ctx = document.createElement("canvas").getContext("2d");
+  ctx.font = FONT;
+  return (t) => ctx.measureText(t).width;
+})();
+const wrapped = new Map();
+
+function wrap(text, width, lines) {
+  // up to `lines` lines of at most `width` px, broken at spaces (inside a word only when it must);
+  // what does not fit ends the last line with "…"
+  const memo = text + "\u0000" + width + "\u0000" + lines;
+  if (wrapped.has(memo)) return wrapped.get(memo);
+  const out = [];
+  let rest = String(text).replace(/\s+/g, " ").trim();
+  while (rest && out.length < lines) {
+    if (measure(rest) <= width) { out.push(rest); rest = ""; break; }
+    let lo = 1, hi = rest.length; // the longest prefix that fits
+    while (lo < hi) { const mid = (lo + hi + 1) >> 1; if (measure(rest.slice(0, mid)) <= width) lo = mid; else hi = mid - 1; }
+    if (out.length === lines - 1) {
+      let n = lo;
+      while (n > 1 && measure(rest.slice(0, n).trimEnd() + "…") > width) n--;
+      out.push(rest.slice(0, n).trimEnd() + "…");
+      rest = "";
+      break;
+    }
+    const space = rest.lastIndexOf(" ", lo);
+    const cut = space > lo / 3 ? space : lo;
+    out.push(rest.slice(0, cut).trimEnd());
+    rest = rest.slice(cut).trimStart();
+  }
+  if (wrapped.size > 5000) wrapped.clear();
+  wrapped.set(memo, out);
+  return out;
 }
 
 function label(s, i) {
@@ -21,10 +61,25 @@ function label(s, i) {
   return was ? "was " + was : "";
 }
 
+const failedLabel = (st) => st === "FAILURE" || st === "was FAILURE";
+
+function culpritOf(s) {
+  // the leaf whose failure ended the run: a replay knows it (where `replay --failure` goes), once it
+  // happened; live, the node the end's reason starts with ("look for it: vision.find_object ...")
+  const f = replayMeta.failure;
+  if (mode === "replay") return f && s.t >= f.t - 1e-6 ? f.node : null;
+  const why = s.end && s.end.status === "FAILURE" ? String(s.end.reason || "") : "";
+  let best = null, len = 0;
+  for (const n of s.nodes) {
+    if (why && n.name.length > len && (why.startsWith(n.name + ":") || why.startsWith(n.name + " ("))) { best = n.id; len = n.name.length; }
+  }
+  return best;
+}
+
 function layout(nodes) {
-  // leaves take the next column; a parent sits above the middle of its children
-  const kids = {}, pos = {};
-  let roots = [], col = 0;
+  // leaves take the next row; a parent sits level with the middle of its children
+  const kids = {}, pos = {}, roots = [];
+  let col = 0;
   for (const n of nodes) {
     if (n.parent === null || n.parent === undefined) roots.push(n.id);
     else (kids[n.parent] = kids[n.parent] || []).push(n.id);
@@ -36,20 +91,25 @@ function layout(nodes) {
     pos[i] = [(pos[ks[0]][0] + pos[ks[ks.length - 1]][0]) / 2, depth];
   }
   roots.forEach((r) => place(r, 0));
-  return { pos, kids, cols: col };
+  return { pos, kids, cols: col, root: roots.length ? roots[0] : null };
 }
 
 function drawTree(s) {
   const g = $("graph");
-  g.textContent = "";
-  if (!s.nodes.length) return;
-  const { pos, kids, cols } = layout(s.nodes);
+  if (!s.nodes.length) { g.textContent = ""; boxes = {}; return; }
+  const { pos, kids, cols, root } = layout(s.nodes);
+  rootId = root;
   let depth = 0;
   for (const k in pos) depth = Math.max(depth, pos[k][1]);
   // depth goes right, siblings go down: a behaviour tree reads like an outline
-  const svg = el("svg", { width: (depth + 1) * (W + GY) + GX, height: cols * (H + GX) + GX, id: "tree" });
+  const stale = s.end && s.end.status === "UNFINISHED";
+  const svg = el("svg", { width: (depth + 1) * (W + GY) + GX, height: cols * (H + GX) + GX, id: "tree",
+    class: stale ? "stale" : "" });
   const xy = (i) => [GX + pos[i][1] * (W + GY), GX + pos[i][0] * (H + GX)];
+  boxes = {};
+  depths = {};
   for (const n of s.nodes) {
+    depths[n.id] = pos[n.id][1];
     for (const k of kids[n.id] || []) {
       const [x1, y1] = xy(n.id), [x2, y2] = xy(k);
       const cls = label(s, k) === "RUNNING" ? "edge RUNNING" : "edge";
@@ -58,50 +118,163 @@ function drawTree(s) {
   }
   for (const n of s.nodes) {
     const [x, y] = xy(n.id), st = label(s, n.id);
-    const grp = el("g", { class: "node " + st.replace(" ", "-"), "data-name": n.name, "data-status": st || "IDLE" });
+    boxes[n.id] = [x, y];
+    const feedback = s.feedback[String(n.id)] || "";
+    const why = failedLabel(st) ? feedback : "";
+    const cls = "node " + st.replace(" ", "-") + (n.id === culprit && failedLabel(st) ? " culprit" : "");
+    const grp = el("g", { class: cls, "data-name": n.name, "data-status": st || "IDLE", "data-id": n.id });
     grp.appendChild(el("rect", { x, y, width: W, height: H, rx: 6 }));
-    const name = n.name.length > 22 ? n.name.slice(0, 21) + "…" : n.name;
-    grp.appendChild(el("text", { x: x + 6, y: y + 15 }, name));
-    grp.appendChild(el("text", { x: x + 6, y: y + 32, fill: "#555" }, (n.kind || n.shape) + (st ? " · " + st : "")));
-    const tip = el("title", {}, n.name + (s.feedback[String(n.id)] ? ": " + s.feedback[String(n.id)] : ""));
-    grp.appendChild(tip);
+    const name = wrap(n.name, W - 2 * PAD, why ? 1 : 2);
+    const y0 = y + Math.round((H - (name.length + (why ? 2 : 1)) * LINE) / 2) + 11; // the lines centred in the box
+    name.forEach((line, k) => grp.appendChild(el("text", { x: x + PAD, y: y0 + k * LINE, class: "name" }, line)));
+    const at = (s.loops || {})[String(n.id)]; // a for_each's element now: 2/4
+    const kind = (n.kind || n.shape) + (st ? " · " + st : "") + (at && st === "RUNNING" ? " · " + at[0] + "/" + at[1] : "");
+    grp.appendChild(el("text", { x: x + PAD, y: y0 + name.length * LINE, fill: "#555" }, kind));
+    if (why) grp.appendChild(el("text", { x: x + PAD, y: y0 + 2 * LINE, class: "reason" }, wrap(why, W - 2 * PAD, 1)[0]));
+    grp.appendChild(el("title", {}, n.name + (feedback ? ": " + feedback : "")));
     svg.appendChild(grp);
   }
-  g.appendChild(svg);
+  const old = g.firstChild;
+  if (old) g.replaceChild(svg, old); else g.appendChild(svg);
 }
 
-function rows(id, items, cells) {
+// following the run: the root on load, then the running (or failed) node whenever it changes, unless
+// the user scrolled the graph in the last QUIET_MS
+function focusOf(s) {
+  const deepest = (want) => {
+    let best = null, bd = -1;
+    for (const n of s.nodes) if (want(n) && depths[n.id] > bd) { best = n.id; bd = depths[n.id]; }
+    return best;
+  };
+  const running = deepest((n) => label(s, n.id) === "RUNNING");
+  if (running !== null) return running;
+  if (culprit !== null && failedLabel(label(s, culprit))) return culprit;
+  const failed = deepest((n) => label(s, n.id) === "FAILURE" && s.feedback[String(n.id)]);
+  return failed !== null ? failed : rootId;
+}
+
+function scrollGraph(left, top) {
+  const g = $("graph");
+  g.scrollLeft = Math.max(0, left);
+  g.scrollTop = Math.max(0, top);
+  ours = [g.scrollLeft, g.scrollTop]; // a scroll event at this place is ours, not the user's
+}
+
+function follow(s, force) {
+  // force: the user asked for it (jump to the failure): the culprit, whatever else runs then
+  const g = $("graph");
+  const first = focused === null;
+  const target = force && culprit !== null ? culprit : focusOf(s);
+  if (target === null || !boxes[target]) return;
+  if (!force && target === focused) return;
+  if (!force && !first && Date.now() - userScrolled < QUIET_MS) return;
+  focused = target;
+  if (first && rootId !== null && boxes[rootId]) { // the root first, at the left, level with the middle
+    scrollGraph(0, boxes[rootId][1] + H / 2 - g.clientHeight / 2);
+  }
+  const [x, y] = boxes[target], m = 16;
+  let left = g.scrollLeft, top = g.scrollTop;
+  if (x - m < left || x + W + m > left + g.clientWidth) left = Math.min(x - m, x + W + GY - g.clientWidth); // with its parents to its left
+  if (y - m < top || y + H + m > top + g.clientHeight) top = y + H / 2 - g.clientHeight / 2;
+  if (left !== g.scrollLeft || top !== g.scrollTop) scrollGraph(left, top);
+}
+
+(function watchUser() {
+  const g = $("graph");
+  const mark = () => { userScrolled = Date.now(); };
+  for (const ev of ["wheel", "mousedown", "touchstart", "keydown"]) g.addEventListener(ev, mark, { passive: true });
+  g.addEventListener("scroll", () => {
+    if (ours && Math.abs(g.scrollLeft - ours[0]) <= 1 && Math.abs(g.scrollTop - ours[1]) <= 1) return;
+    ours = null;
+    mark();
+  }, { passive: true });
+})();
+
+function rows(id, items, cells, cols) {
+  // cells(item): the cells' texts, or [texts, the row's class]; cols: each column's class
   const t = $(id);
   t.textContent = "";
   if (!items.length) { const r = t.insertRow(); r.insertCell().textContent = "none"; return; }
   for (const it of items) {
+    let c = cells(it), cls = "";
+    if (c.length === 2 && Array.isArray(c[0])) [c, cls] = c;
     const r = t.insertRow();
-    for (const c of cells(it)) r.insertCell().textContent = c;
+    if (cls) r.className = cls;
+    c.forEach((text, k) => { const d = r.insertCell(); d.textContent = text; if (cols[k]) d.className = cols[k]; });
   }
 }
 
 const js = (v) => JSON.stringify(v);
 const sec = (v) => (Number(v) || 0).toFixed(2) + "s";
+const pad2 = (n) => String(n).padStart(2, "0");
+function wall(epoch, withDate) {
+  const d = new Date(epoch * 1000);
+  const time = pad2(d.getHours()) + ":" + pad2(d.getMinutes()) + ":" + pad2(d.getSeconds());
+  return withDate ? d.getFullYear() + "-" + pad2(d.getMonth() + 1) + "-" + pad2(d.getDate()) + " " + time : time;
+}
+
+function noticeClass(e) {
+  const what = String(e.what || "");
+  return "notice" + (/_down$/.test(what) ? " down" : /_back$/.test(what) ? " back" : "");
+}
+
+function graphAlert(s) {
+  // what of the ROS graph is down now (a *_down notice not followed by its *_back), for the header
+  const down = {};
+  for (const e of s.events) {
+    const m = e.type === "notice" && /^(.*)_(down|back)$/.exec(String(e.what || ""));
+    if (m) down[m[1]] = m[2] === "down" ? e.t : undefined;
+  }
+  const names = { blackboard: "Blackboard node", master: "ROS master" };
+  return Object.keys(down).filter((k) => down[k] !== undefined)
+    .map((k) => (names[k] || k) + " down since " + sec(down[k])).join("; ");
+}
+
+function drawTitle(s) {
+  const t = s.tree || {};
+  const name = t.name || "(waiting for a run)";
+  $("title").textContent = name;
+  $("mode").hidden = mode !== "replay";
+  $("mode").textContent = "REPLAY";
+  const started = typeof t.started === "number" && t.started > 0 ? t.started : null;
+  $("run").textContent = t.run ? "run " + t.run + (started ? ", started " + wall(started, true) : "") : "";
+  const status = s.end ? " · " + s.end.status : (mode === "replay" ? "" : " · live");
+  document.title = t.name ? name + " · " + (mode === "replay" ? "replay" : "watch") + " of run " + (t.run || "?")
+    + (started ? " (" + wall(started, true) + ")" : "") + status + " — bmtree" : "bmtree";
+}
 
 function draw(s) {
+  const names = s.nodes.map((n) => n.name).join("\n");
+  if (names !== shownNodes) focused = null; // another tree (or run): the root again
   last = s;
-  $("title").textContent = (s.tree && s.tree.name) || "(waiting for a run)";
+  culprit = culpritOf(s);
+  drawTitle(s);
   $("clock").textContent = "t=" + sec(s.t) + "  tick " + s.n;
   $("paused").hidden = !s.paused;
   const r = $("result");
   r.className = s.end ? s.end.status : "";
-  r.textContent = s.end ? "result: " + s.end.status + " in " + sec(s.end.duration) + (s.end.reason ? " (" + s.end.reason + ")" : "") : "";
+  r.textContent = s.end ? "result: " + s.end.status + (s.end.status === "UNFINISHED" ? "" : " in " + sec(s.end.duration))
+    + (s.end.reason ? " (" + s.end.reason + ")" : "") : "";
+  const down = graphAlert(s);
+  $("alert").hidden = !down;
+  $("alert").textContent = down;
   drawTree(s);
   if (s.t !== anchor[0]) anchor = [s.t, Date.now()];
   drawPending(s);
-  rows("blackboard", Object.keys(s.blackboard).sort(), (k) => [k, js(s.blackboard[k])]);
-  const ev = s.events.map((e) => e.type === "notice" ? [e.t, sec(e.t), "ROS graph", e.text]
-    : [e.t, sec(e.t), e.module + "." + e.event, js(e.params)])
-    .concat(s.control.map((c) => [c.t, sec(c.t), "control " + c.command + " " + js(c.args || {}), c.answer]));
+  const why = s.nodes.filter((n) => failedLabel(label(s, n.id)) && s.feedback[String(n.id)])
+    .sort((a, b) => (b.id === culprit) - (a.id === culprit));
+  $("whybox").hidden = !why.length;
+  rows("why", why, (n) => [[n.name, s.feedback[String(n.id)]], label(s, n.id) === "FAILURE" ? "failed" : ""], ["name", "val"]);
+  rows("blackboard", Object.keys(s.blackboard).sort(), (k) => [k, js(s.blackboard[k])], ["key", "val"]);
+  const ev = s.events.map((e) => e.type === "notice" ? [e.t, [[sec(e.t), "ROS graph", e.text], noticeClass(e)]]
+    : [e.t, [sec(e.t), e.module + "." + e.event, js(e.params)]])
+    .concat(s.control.map((c) => [c.t, [sec(c.t), "control " + c.command + " " + js(c.args || {}), c.answer]]));
   ev.sort((a, b) => a[0] - b[0]);
-  rows("events", ev.slice(-30), (e) => e.slice(1));
-  rows("calls", s.calls.slice(-40), (c) => [sec(c.started), c.target, c.status, sec(c.duration), c.error || ""]);
-  const names = s.nodes.map((n) => n.name).join("\n");
+  rows("events", ev.slice(-30), (e) => e[1], ["num", "key", "val"]);
+  const total = Math.max(Number(s.calls_total) || 0, s.calls.length);
+  $("callsh").textContent = "call log" + (total > 40 ? " (the last 40 of " + total + ")" : "");
+  rows("calls", s.calls.slice(-40), (c) => [[sec(c.started), c.target, c.status, sec(c.duration), c.error || ""],
+    c.status === "succeeded" ? "" : "failed"], ["num", "name", "st", "num", "val"]);
   if (names !== shownNodes) {
     shownNodes = names;
     const sel = $("node");
@@ -109,6 +282,7 @@ function draw(s) {
     for (const n of s.nodes) { const o = document.createElement("option"); o.textContent = n.name; sel.appendChild(o); }
   }
   $("controls").hidden = !s.steer || gone;
+  follow(s, false);
 }
 
 let anchor = [null, 0];
@@ -117,11 +291,15 @@ function drawPending(s) {
   // here, as the terminal does (not in a replay or after the end)
   const now = mode === "replay" || s.end || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
-  rows("pending", s.pending, (c) => [c.target, sec(now - c.t) + " / " + (c.timeout ? c.timeout + "s" : "-"), js(c.inputs)]);
+  // answered while the run was paused (its leaf takes it at the next tick), or of a run that is gone
+  const note = (c) => (c.answered !== undefined && c.answered !== null ? " · answered " + (c.answer || "")
+    : c.maybe_running ? " · may still be running" : "");
+  const took = (c) => (c.answered !== undefined && c.answered !== null ? Number(c.answered) : now) - c.t;
+  rows("pending", s.pending, (c) => [c.target, sec(took(c)) + " / " + (c.timeout ? c.timeout + "s" : "-") + note(c),
+    js(c.inputs)], ["name", "num", "val"]);
 }
 setInterval(() => { if (last) drawPending(last); }, 500);
 
-let gone = false;
 function setGone(g) {
   // the watch has ended (with its run) or is unreachable: the page keeps the last state it got
   gone = g;
@@ -137,6 +315,7 @@ async function poll() {
       version = s.version;
       if (gone) setGone(false);
       if (s.mode === "replay") { startReplay(s); return; }
+      mode = "live";
       draw(s);
     } catch (e) {
       if (last && !gone) setGone(true);
@@ -147,18 +326,39 @@ async function poll() {
 
 function startReplay(s) {
   mode = "replay";
+  replayMeta = s.replay || {};
   $("timeline").hidden = false;
   const scrub = $("scrub");
-  scrub.max = s.duration;
-  scrub.value = s.at;
-  $("at").textContent = sec(s.at) + " of " + sec(s.duration);
+  const max = Math.ceil(Number(s.duration) * 100 - 1e-6) / 100; // the slider's steps reach the end
+  scrub.max = max;
+  scrub.value = max;
+  const killed = $("killed");
+  if (replayMeta.unfinished) {
+    killed.hidden = false;
+    killed.textContent = "UNFINISHED: its log has no end (killed?); last seen alive at " + sec(replayMeta.last_alive)
+      + (s.tree && s.tree.started ? " (" + wall(s.tree.started + replayMeta.last_alive) + ")" : "");
+  }
+  const showAt = (st) => { $("at").textContent = sec(st.at) + " of " + sec(st.duration); };
+  showAt(s);
   draw(s);
-  scrub.addEventListener("input", async () => {
-    const res = await fetch("state?at=" + scrub.value);
+  let asked = 0;
+  async function go(at, force) {
+    const mine = ++asked; // answers can overtake each other: only the last one asked is drawn
+    const res = await fetch("state?at=" + at);
     const st = await res.json();
-    $("at").textContent = sec(st.at) + " of " + sec(st.duration);
+    if (mine !== asked) return;
+    showAt(st);
     draw(st);
-  });
+    if (force) follow(st, true);
+  }
+  scrub.addEventListener("input", () => go(Number(scrub.value) >= max ? "end" : scrub.value, false));
+  const f = replayMeta.failure;
+  if (f) {
+    const jump = $("jump");
+    jump.hidden = false;
+    jump.title = "'" + f.name + "' failed at " + sec(f.t) + ": " + f.message;
+    jump.onclick = () => { scrub.value = f.t; userScrolled = 0; go(f.t, true); };
+  }
 }
 
 async function control(cmd) {

@@ -20,7 +20,7 @@ def test_watch_attaches_mid_run_and_catches_up(tmp_path):
         caught = out.wait_for("caught up at tick")
         assert "go to the kitchen RUNNING" in caught
         assert "pending calls: navigation.go_to since" in caught
-        assert "1 calls done" in caught  # speech.say ended before the watcher attached
+        assert "1 call done" in caught  # speech.say ended before the watcher attached
         # then it follows live: the navigation ends, the last leaf runs, the run ends
         out.wait_for("succeeded navigation.go_to")
         out.wait_for("SUCCESS   arrived")
