@@ -132,14 +132,17 @@ class Call(Leaf):
         rec.output_messages = dict(values)
         if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:
             self.ctx.finish(rec, RecordStatus.FAILED, "answered success: false")
+            self._write_outputs(values)   # the original modules' convention: why, in the other outputs
             return self._ended(RecordStatus.FAILED, "answered success: false", "%s answered success: false" % rec.target)
         self.ctx.finish(rec, RecordStatus.SUCCEEDED)
         self.feedback_message = "succeeded in %.3fs" % (rec.duration or 0.0)
-        spec: CallSpec = self.node.spec
-        for out, key in spec.outputs.items():
-            self.ctx.write(key, values[out])
+        self._write_outputs(values)
         self._say(RecordStatus.SUCCEEDED, "")
         return Status.SUCCESS
+
+    def _write_outputs(self, values: Dict[str, Any]) -> None:
+        for out, key in self.node.spec.outputs.items():
+            self.ctx.write(key, values[out])
 
     def _ended(self, status: str, error: str, reason: str) -> Status:
         """FAILURE with ``reason``, after writing the ``status`` and ``error`` keys."""
@@ -188,7 +191,8 @@ class CallKind(NodeKind):
     summary = ("send the call; RUNNING until the answer, SUCCESS when it succeeds (and its `success` output, "
                "if any, is not false)")
     options = (Option("inputs", "inputs", "input name → value (YAML literal, `$reference`, `$( … )`, `{…}` text)"),
-               Option("outputs", "outputs", "output name → tree key (written only when the call succeeds)"),
+               Option("outputs", "outputs", "output name → tree key (written when the module answered them: the call "
+                                              "succeeded, or answered `success: false`)"),
                Option("status", "key", "a tree key given how the call ended, whether it succeeded or not: "
                                        "`succeeded`, `failed` (also an answered `success: false`), `rejected`, "
                                        "`cancelled`, `timeout`, `module_lost`, `not_sent` (it could not be built); "

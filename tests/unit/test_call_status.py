@@ -84,7 +84,8 @@ def test_a_switch_on_the_status_routes_each_ending(tree, outcome, status, text):
     assert run.succeeded, run.reason
     assert said(run) == [text]
     assert run.blackboard["grasp"] == status
-    assert ("cup_pose" in run.blackboard) == (status == "succeeded")   # outputs only on success, as before
+    # outputs when the module answered them: on success, and with success: false
+    assert ("cup_pose" in run.blackboard) == (status in ("succeeded", "failed"))
 
 
 def test_the_error_text_is_the_modules_and_empty_on_success(tree):
@@ -223,3 +224,17 @@ def test_a_calls_outputs_are_plain_data_like_its_inputs(tree):
     assert call.inputs == {"object": "cup"}
     assert call.outputs["success"] is True and call.outputs["pose"]["position"] == {"x": 0.0, "y": 0.0, "z": 0.0}
     assert call.output_messages["success"].data is True
+
+
+def test_an_answered_success_false_still_writes_its_outputs(tree):
+    """The original modules' convention: ``success: false`` and why in the other outputs (an error
+    code); those outputs were dropped, so a tree could not tell "grasp missed" from "arm fault"."""
+    t = tree(GRASP)
+    t.mocks["arm.grasp"].succeed(success=False, pose={"position": {"x": 1.5}})
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert run.blackboard["grasp"] == "failed" and run.blackboard["why"] == "answered success: false"
+    assert run.blackboard["cup_pose"]["position"]["x"] == 1.5
+    assert run.said() == ["missed (answered success: false)"]
+    t.mocks["arm.grasp"].script(reject("busy"))   # an answer without outputs writes none
+    assert "cup_pose" not in t.run().blackboard
