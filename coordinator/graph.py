@@ -23,6 +23,12 @@ from typing import Callable, Dict, List, Optional, Sequence, Set
 from comm.errors import EnvironmentProblem
 from modules.discovery import node_alive
 
+_HOME = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # where bmtree's packages are
+# ``python -m`` would put the working directory first on sys.path, where a team's own ``modules/``
+# folder hides bmtree's package: run the module with bmtree's folder there instead.
+_RUN_MODULE = ("import runpy, sys; sys.path[0] = %r; del sys.argv[0]; "
+               "runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)" % _HOME)
+
 __all__ = ["RosGraph", "GraphError", "free_port", "orphan_guard", "end_processes", "LOOPBACK"]
 
 #: Address every process of a private graph advertises: the graph works where the machine's
@@ -152,13 +158,14 @@ class RosGraph:
     def start_node(self, args: Sequence[str], name: str, timeout: float = 20.0,
                    env: Optional[Dict[str, str]] = None, wait: bool = True,
                    stop_last: bool = False) -> subprocess.Popen:
-        """Start ``args`` (``sys.executable`` is used for a leading ``-m``) and, with ``wait``,
+        """Start ``args`` (a leading ``-m``: that module, with ``sys.executable`` and not the working
+        directory on its path) and, with ``wait``,
         wait until the node ``name`` is registered with the master and answers.
 
         :meth:`close` stops the nodes all at once (rospy takes over half a second to stop a node:
         its XML-RPC server polls twice a second), those started with ``stop_last`` (the
         Blackboard, which stores what the others sent) once the others have ended."""
-        argv = [sys.executable, *args] if args and args[0] == "-m" else list(args)
+        argv = [sys.executable, "-c", _RUN_MODULE, *args[1:]] if args and args[0] == "-m" else list(args)
         proc = subprocess.Popen([*orphan_guard(), *argv], env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
                                 stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
         self.nodes.append(proc)

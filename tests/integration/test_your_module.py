@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 
 from tests.conftest import DATA
@@ -10,9 +11,9 @@ from tests.integration.conftest import bmtree_cmd
 GRIPPER = os.path.join(DATA, "gripper")
 
 
-def _run(*args):
+def _run(*args, cwd=None):
     return subprocess.run(bmtree_cmd("run", "--sim", "-q", *args), capture_output=True, text=True, timeout=180,
-                          stdin=subprocess.DEVNULL)
+                          stdin=subprocess.DEVNULL, cwd=cwd)
 
 
 def test_your_module_runs_beside_the_simulated_ones():
@@ -33,3 +34,13 @@ def test_your_module_with_a_parameter_that_is_not_an_input_is_exit_2():
     assert "Traceback" not in out.stderr
     assert "your module gripper exited with code 2" in out.stderr
     assert "parameter 'size' is not an input; input 'width' has no parameter" in out.stderr
+
+
+def test_a_teams_own_modules_folder_does_not_hide_bmtrees(tmp_path):
+    """A team keeps its definitions and classes in ``modules/`` and runs from its repository: the nodes
+    bmtree started with ``python -m`` had the working directory first on their path, so the team's
+    folder hid bmtree's ``modules`` package (``cannot import name 'BasicModule' from 'modules'``)."""
+    shutil.copytree(GRIPPER, str(tmp_path / "modules"))
+    out = _run("--module", "modules/gripper.json=modules/gripper.py:Gripper", "modules/grasp.yaml", cwd=str(tmp_path))
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "grasp_apple: SUCCESS" in out.stdout
