@@ -4,7 +4,6 @@ Its ``status`` and ``error`` options write how the call ended (succeeded or not)
 ``switch`` to route on; ``timeout: none`` waits as long as it takes."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
@@ -19,7 +18,6 @@ from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import CallRecord, RecordStatus
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import (
-    TYPES,
     Flow,
     NodeKind,
     Option,
@@ -30,6 +28,7 @@ from coordinator.nodes.base import (
     where,
 )
 from coordinator.nodes.leafbase import Leaf
+from coordinator.nodes.timeouts import NO_TIMEOUT, timeout_option, with_no_timeout
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
 from coordinator.values import read_at, ref_type, value_type_errors
@@ -37,8 +36,6 @@ from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS", "NOT_SENT", "NO_TIMEOUT", "STATUS_TEXTS"]
 
-NO_TIMEOUT = "none"
-"""``timeout: none``, as the spec holds it: no limit (the only text a call's timeout may be)."""
 NOT_SENT = "not_sent"
 """The status of a call that could not be built (an input's reference unset, a bad value): never sent."""
 STATUS_TEXTS: Tuple[str, ...] = tuple(s.value for s in RecordStatus if s not in (
@@ -205,7 +202,7 @@ class CallKind(NodeKind):
                Option("check_success", "bool", "`false`: a `success: false` output is not a failure", default=True))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> CallSpec:
-        spec = CallSpec(target=value, timeout=_timeout(p, node, raw, self.option("timeout")),
+        spec = CallSpec(target=value, timeout=timeout_option(p, node, raw, self.option("timeout"), "call", _HOW),
                         check_success=p.opt(node, raw, self.option("check_success")),
                         status=p.opt(node, raw, self.option("status")), error=p.opt(node, raw, self.option("error")))
         if "timeout" in raw:
@@ -293,10 +290,7 @@ class CallKind(NodeKind):
             label, key, said, ", ".join(repr(s) for s in STATUS_TEXTS), did_you_mean(label, STATUS_TEXTS))
 
     def schema(self) -> Dict[str, Any]:
-        s = super().schema()
-        t = s["properties"]["timeout"]
-        t["anyOf"] = list(t["anyOf"]) + [{"const": NO_TIMEOUT}]
-        return s
+        return with_no_timeout(super().schema())
 
     def modules(self, node: TreeNode) -> Iterable[str]:
         t = node.spec.target
@@ -332,29 +326,8 @@ class CallKind(NodeKind):
         return Call(node, ctx)
 
 
-def _timeout(p: Any, node: TreeNode, raw: Any, option: Option) -> Any:
-    """The ``timeout`` option: seconds, a reference or an expression (``p.opt``), or ``none``; a YAML null,
-    a bool, zero, infinity or other text (``None``, ``never``) is an error saying how to write it."""
-    if "timeout" not in raw:
-        return None
-    v = raw["timeout"]
-    if isinstance(v, str) and v == NO_TIMEOUT:
-        return NO_TIMEOUT
-    how = "for no time limit write 'timeout: none'; else give seconds (> 0), or leave it out for --call-timeout"
-    if v is None:
-        p.err(raw.val_pos["timeout"], "timeout of call is null (written null, ~ or left empty), which is not read "
-                                      "as no limit: %s" % how)
-    elif isinstance(v, bool):
-        p.err(raw.val_pos["timeout"], "timeout of call is %s (YAML reads an unquoted yes/no/on/off as true or "
-                                      "false): %s" % (str(v).lower(), how))
-    elif isinstance(v, (int, float)) and not (math.isfinite(v) and v > 0):
-        p.err(raw.val_pos["timeout"], "timeout of call must be %s, got %r: %s" % (TYPES["seconds"].expect, v, how))
-    elif isinstance(v, str) and (not v.startswith("$") or v.startswith("$$")):   # 'None', 'never', '5s'…
-        p.err(raw.val_pos["timeout"], "timeout of call must be %s or 'none', got %r: %s" % (
-            TYPES["seconds"].expect, v, how))
-    else:
-        return p.opt(node, raw, option)
-    return None
+_HOW = "for no time limit write 'timeout: none'; else give seconds (> 0), or leave it out for --call-timeout"
+"""How a call's timeout is written, said after an error of it."""
 
 
 def _ending_keys(spec: CallSpec) -> List[str]:

@@ -220,16 +220,23 @@ def _clashes(node: TreeNode, sub: TreeFile, held: FrozenSet[str], f: Flow) -> Li
 
 
 def _caller_place(node: TreeNode, sub: TreeFile, key: str, f: Flow) -> str:
-    """Where the caller's ``key`` comes from, as the warning at ``node`` names it ('' when only runs of
-    ``sub`` itself write it): an input of the including file, else a writer outside ``sub``'s file (one
-    in the including file first), else an input of a file further up."""
+    """Where the caller's ``key`` comes from, as the warning at ``node`` names it ('' when it is not the
+    caller's: only runs of ``sub`` itself, or of other subtrees, write it): an input of the including
+    file, else a writer in the including file or a file further up the includes (one in the including
+    file first; an include there counts by its ``outputs`` only; in the including file, only one before
+    the include), else an input of a file further up. A key that only the nodes or arguments of other
+    included files write (two subtrees that each write ``answer``, copied to the caller's keys by
+    ``outputs``; two that each take an input ``question``) belongs to those subtrees."""
     caller = f.files[-1] if f.files else None
     here = node.pos.file
     if caller is not None and key in caller.inputs:
         return "an input of %s" % os.path.basename(caller.path)
-    mine = sub.root.pos.file
-    writers = [w for w in f.writers(key)   # not this include, nor another of the same file
-               if w.pos.file != mine and not (w.kind == "include" and w.spec.tree is sub)]
+    callers = {t.root.pos.file for t in f.files}
+    at = (node.pos.line, node.pos.column)
+    writers = [w for w in f.writers(key)   # not this include, nor another of the same file, nor one after it
+               if w.pos.file in callers and not (w.kind == "include" and (
+                   w.spec.tree is sub or key not in getattr(w.spec, "outputs", {}).values()))
+               and not (w.pos.file == here and (w.pos.line, w.pos.column) > at)]
     if writers:
         w = next((w for w in writers if w.pos.file == here), writers[0])
         return "written at %s" % where(w.pos, node.pos)

@@ -20,6 +20,7 @@ from coordinator.nodes.base import (
 )
 from coordinator.nodes.leafbase import Leaf
 from coordinator.nodes.loops import expr_option, expr_type_errors
+from coordinator.nodes.timeouts import NO_TIMEOUT, timeout_option, with_no_timeout
 from coordinator.refs import Ref, RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at, value_type_errors
@@ -27,6 +28,9 @@ from coordinator.values import expr_errors, read_at, value_type_errors
 __all__ = ["Check", "KINDS", "Recall", "SetKeys", "Wait", "WaitEvent"]
 
 _WRITES_NOTHING: FrozenSet[str] = frozenset()
+_RECALL_HOW = "a recall always has a time limit (by default 5 s): give seconds (> 0), or leave it out for 5 s"
+_WAIT_EVENT_HOW = ("wait_event waits without a time limit by default: leave timeout out, or write 'timeout: none', "
+                   "for no limit; else give seconds (> 0)")
 
 
 # recall -----------------------------------------------------------------------------------
@@ -82,11 +86,11 @@ class RecallKind(NodeKind):
     family = "leaf"
     value = ("recall", "tree key → Blackboard name (`name` or `module/function/name`)")
     summary = "ask the Blackboard node for the latest values; FAILURE names the missing ones"
-    options = (Option("timeout", "seconds", "seconds", shown="`5`"),)
+    options = (Option("timeout", "seconds", "seconds (a recall always has a limit: no `none`)", shown="`5`"),)
     uses_blackboard_node = True
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> RecallSpec:
-        timeout = p.opt(node, raw, self.option("timeout"))
+        timeout = timeout_option(p, node, raw, self.option("timeout"), "recall", _RECALL_HOW, unlimited=False)
         m = p.keys(node, value, at, "tree key: blackboard name")
         names = {}
         types = {}
@@ -287,13 +291,16 @@ class WaitEventKind(NodeKind):
     value = ("event", "`module.event`")
     summary = "SUCCESS at the first matching event that arrives after the leaf starts"
     options = (Option("outputs", "outputs", "event param → tree key"),
-               Option("timeout", "seconds", "seconds", shown="none"),
+               Option("timeout", "seconds", "seconds, or `none`: no limit, as when left out", shown="none"),
                Option("where", "expr", "an expression over the event's params, by their names (`person == "
                                        "\"Ana\"`): the first event for which it is true is taken, the others "
                                        "skipped"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> WaitEventSpec:
-        spec = WaitEventSpec(target=value, timeout=p.opt(node, raw, self.option("timeout")),
+        timeout = timeout_option(p, node, raw, self.option("timeout"), "wait_event", _WAIT_EVENT_HOW)
+        if isinstance(timeout, str) and timeout == NO_TIMEOUT:
+            timeout = None   # no limit, as when left out
+        spec = WaitEventSpec(target=value, timeout=timeout,
                              timeout_pos=raw.val_pos["timeout"] if "timeout" in raw else None)
         if "where" in raw:
             spec.where, spec.where_pos = expr_option(p, raw, "where"), raw.val_pos["where"]
@@ -334,6 +341,9 @@ class WaitEventKind(NodeKind):
         param_type_errors(spec.timeout, spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
         if spec.where is not None and spec.event is not None:   # the params' types, not the tree keys'
             expr_type_errors(spec.where, spec.where_pos, {q.name: {q.rostype} for q in spec.event.params}, errors)
+
+    def schema(self) -> Dict[str, Any]:
+        return with_no_timeout(super().schema())
 
     def modules(self, node: TreeNode) -> Iterable[str]:
         t = node.spec.target

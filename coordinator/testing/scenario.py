@@ -69,6 +69,7 @@ from coordinator.testing.scenariokeys import (
     check_calls,
     check_duration,
     duration_of,
+    event_problem,
     expected_calls,
     listed_calls,
     modules_key,
@@ -290,7 +291,7 @@ def _event(mocked: Mocks, ev: Any, ev_at: Pos, defs: Dict[str, ModuleDefinition]
         else:
             mocked.event_after(str(after), when, target, dict(params), nth)
     except MockError as exc:
-        out.add(pos_of(ev, "event", ev_at) if event is None else ev_at, str(exc))
+        out.add(pos_of(ev, "event", ev_at) if event is None else ev_at, event_problem(str(exc), event, params))
 
 
 def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> None:

@@ -4,14 +4,18 @@
   used when ``bmtree test`` is given no ``--modules`` (which then wins);
 - ``expect: calls``, a list (exactly these calls) or ``{in_order: [...]}`` (these calls in this
   order, others may come between), each call checked against the definitions;
-- ``expect: duration``, ``{at_least: S, at_most: S}`` in simulated seconds.
+- ``expect: duration``, ``{at_least: S, at_most: S}`` in simulated seconds;
+- ``events``: an event's params, every one the definition lists (they get no defaults).
 
 Each problem goes to ``add(pos, message)``, where it is written; every one is reported.
 """
 from __future__ import annotations
 
+import json
 import os
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
+
+import yaml
 
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
@@ -22,7 +26,7 @@ from modules.definition import DefinitionError, ModuleDefinition, load_definitio
 from modules.search import default_definitions
 
 __all__ = ["CALLS_FORMS", "DURATION_KEYS", "ScenarioDefinitions", "check_calls", "check_duration", "duration_of",
-           "expected_calls", "function_of", "listed_calls", "modules_key"]
+           "event_problem", "expected_calls", "function_of", "listed_calls", "modules_key"]
 
 Add = Callable[[Pos, str], None]
 DURATION_KEYS = ("at_least", "at_most")
@@ -48,10 +52,12 @@ def function_of(defs: Mapping[str, ModuleDefinition], target: Any) -> Tuple[Any,
 # expect: calls ----------------------------------------------------------------------------------------
 def listed_calls(expect: Any) -> Tuple[Any, Any, Optional[Pos]]:
     """``expect: calls`` as (the list of calls, the container holding it, its key there): the list
-    itself, or the ``in_order`` list of ``{in_order: [...]}``; an empty list when there is none."""
+    itself, or the ``in_order`` list of ``{in_order: [...]}``; an empty list when there is none, or
+    when it is not a list (one error, by :func:`check_calls`, not one for each character of a text)."""
     calls = expect.get("calls")
     if isinstance(calls, dict) and "in_order" in calls:
-        return calls.get("in_order") or [], calls, "in_order"
+        listed = calls.get("in_order")
+        return listed if isinstance(listed, list) else [], calls, "in_order"
     return (calls if isinstance(calls, list) else []), expect, "calls"
 
 
@@ -78,12 +84,19 @@ def check_calls(expect: Any, at: Pos, add: Add) -> None:
     listed = calls["in_order"]
     o_at = pos_of(calls, "in_order", c_at)
     if not isinstance(listed, list) or not listed:
-        add(o_at, "calls in_order is a list of the calls made in this order (%s), at least one; got %r" % (
-            _CALL, listed))
+        one = ": write one call as a list of one, in_order: %s" % _flow([listed]) if want_form(listed) else ""
+        add(o_at, "calls in_order is a list of the calls made in this order (%s), at least one; got %r%s" % (
+            _CALL, listed, one))
         return
     for j, c in enumerate(listed):
         if not want_form(c):
             add(pos_of(listed, j, o_at), "calls in_order: call %d is not %s, got %r" % (j + 1, _CALL, c))
+
+
+def _flow(value: Any) -> str:
+    """``value`` as YAML in flow style, on one line (``[{speech.say: {text: hi}}]``)."""
+    plain = json.loads(json.dumps(value, default=str))   # (the loader's mappings are not plain dicts)
+    return yaml.safe_dump(plain, default_flow_style=True, width=float("inf")).strip()
 
 
 def expected_calls(expect: Any, at: Pos, defs: Mapping[str, ModuleDefinition], add: Add) -> List[ExpectedCall]:
@@ -115,6 +128,17 @@ def expected_calls(expect: Any, at: Pos, defs: Mapping[str, ModuleDefinition], a
                 add(inputs.val_pos[name] if isinstance(inputs, LMap) else c_at,
                     said_of("%s input %r" % (fn.qualified, name), exc))
     return found
+
+
+# events -----------------------------------------------------------------------------------------------
+def event_problem(said: str, event: Any, params: Mapping[str, Any]) -> str:
+    """What is wrong with an event of ``events`` (``said``: the kit's words), with the rule when a param
+    is missing: an event gives every param of ``event`` (its definition), as a module's ``emit`` and
+    ``t.mocks.event`` must; a mock's outputs get defaults, an event's params do not."""
+    if event is None or all(q.name in params for q in event.params):
+        return said
+    return ("%s: an event gives every param its definition lists (%s), as a module's emit and t.mocks.event must; "
+            "unlike a mock's outputs, params get no defaults" % (said, ", ".join(q.name for q in event.params)))
 
 
 # expect: duration -----------------------------------------------------------------------------------

@@ -1,0 +1,53 @@
+"""The ``timeout`` option of the leaves that wait for an answer (``call``, ``wait_event``, ``recall``):
+seconds, a ``$reference`` or a ``$( … )`` expression, or, where the kind has no limit to give,
+``none``. A spelling that looks like "no limit" but is not (a YAML null, ``off``, ``0``, ``None``,
+``.inf``) is an error that says how to write it for that kind."""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict
+
+from coordinator.nodes.base import TYPES, Option
+from coordinator.treeast import TreeNode
+
+__all__ = ["NO_TIMEOUT", "timeout_option", "with_no_timeout"]
+
+NO_TIMEOUT = "none"
+"""``timeout: none``, as a spec holds it: no limit (the only text a timeout may be)."""
+
+
+def timeout_option(p: Any, node: TreeNode, raw: Any, option: Option, kind: str, how: str,
+                   unlimited: bool = True) -> Any:
+    """The ``timeout`` option of a ``kind`` node: seconds, a reference or an expression (``p.opt``), or
+    ``NO_TIMEOUT`` (when ``unlimited``: the kind may wait without limit); None when it is left out or
+    wrong (after an error ending with ``how``, the kind's way to write it). A YAML null, a bool, zero,
+    infinity, other text (``None``, ``never``, ``5s``) and, for a kind that always has a limit,
+    ``none`` are errors."""
+    if "timeout" not in raw:
+        return None
+    v, at = raw["timeout"], raw.val_pos["timeout"]
+    label = "timeout of %s" % kind
+    expect = TYPES["seconds"].expect
+    if isinstance(v, str) and v == NO_TIMEOUT:
+        if unlimited:
+            return NO_TIMEOUT
+        p.err(at, "%s must be %s, got 'none': %s" % (label, expect, how))
+    elif v is None:
+        p.err(at, "%s is null (written null, ~ or left empty), which is not read as no limit: %s" % (label, how))
+    elif isinstance(v, bool):
+        p.err(at, "%s is %s (YAML reads an unquoted yes/no/on/off as true or false): %s" % (
+            label, str(v).lower(), how))
+    elif isinstance(v, (int, float)) and not (math.isfinite(v) and v > 0):
+        p.err(at, "%s must be %s, got %r: %s" % (label, expect, v, how))
+    elif isinstance(v, str) and (not v.startswith("$") or v.startswith("$$")):
+        p.err(at, "%s must be %s%s, got %r: %s" % (label, expect, " or 'none'" if unlimited else "", v, how))
+    else:
+        return p.opt(node, raw, option)
+    return None
+
+
+def with_no_timeout(schema: Dict[str, Any]) -> Dict[str, Any]:
+    """A kind's JSON Schema (``NodeKind.schema``) whose ``timeout`` also takes ``none``."""
+    t = schema["properties"]["timeout"]
+    t["anyOf"] = list(t["anyOf"]) + [{"const": NO_TIMEOUT}]
+    return schema
