@@ -7,7 +7,6 @@ its registry object (``coordinator.nodes``); see ``trees/README.md``.
 from __future__ import annotations
 
 import os
-import re
 from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
@@ -15,7 +14,8 @@ from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
-from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, takes
+from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint
+from coordinator.parsehints import LEAF_OPTIONS, closest, misplaced, nearby, nest_hint, unquoted
 from coordinator.refs import RefError
 from coordinator.treeast import (
     REQUIRED,
@@ -52,93 +52,8 @@ _LISTS = frozenset(k for k, nk in REGISTRY.items() if nk.value[0] == "children")
 _NO_CHILDREN = LList()   # a composite whose children are missing, already reported (see _inline, _node)
 _CHILDREN_HINT = (": the children of %s are its value, a list (%s: [...]), or go under 'children:' inside it "
                   "(%s: {children: [...]})")
-# the options of leaves, by option: a decorator or composite given one likely holds a leaf's option mis-indented
-_LEAF_KINDS = tuple(k for k, nk in REGISTRY.items() if nk.family == "leaf")
-_LEAF_OPTIONS: Dict[str, Tuple[str, ...]] = {o: tuple(k for k in _LEAF_KINDS if o in _OPTION_NAMES[k])
-                                             for o in set().union(*(_OPTION_NAMES[k] for k in _LEAF_KINDS))}
 # per kind, what parsing a node asks of it (one lookup per node)
 _INFO = {k: (nk, _ALLOWED[k], _KEYS[k], _REQUIRED[k], k in _LISTS) for k, nk in REGISTRY.items()}
-
-
-def _nearby(raw: LMap, kind: str) -> List[Tuple[str, LMap]]:
-    """The nodes written inside a decorator or composite (its child, its value, its children, its cases),
-    with their kinds: where an option it does not take most likely belongs."""
-    found: List[Tuple[str, LMap]] = []
-    for value in (raw.get(kind), raw.get("child"), raw.get("default"), raw.get("cases")):
-        if isinstance(value, list):
-            items = value
-        elif isinstance(value, LMap) and not any(k in _KINDS for k in value):   # switch's cases: label -> node
-            items = list(value.values())
-        else:
-            items = [value]
-        for item in items:
-            if isinstance(item, LMap):
-                kinds = [k for k in item if k in _KINDS]
-                if kinds:
-                    found.append((kinds[0], item))
-    return found
-
-
-def _either(names: Tuple[str, ...]) -> str:
-    """``call, wait_event or include``."""
-    return names[0] if len(names) == 1 else "%s or %s" % (", ".join(names[:-1]), names[-1])
-
-
-def _misplaced(option: str, kind: str, allowed: Tuple[str, ...], nearby: List[Tuple[str, LMap]]) -> str:
-    """The hint for a leaf's option given to a decorator or composite: what it takes, and which node inside
-    it the option belongs to (indented one level too little)."""
-    for leaf, node in nearby:
-        if option in _OPTION_NAMES[leaf]:
-            return "%s: %r is an option of the %s at line %d: indent it under that %s" % (
-                takes(kind, allowed), option, leaf, node.pos.line, leaf)
-    return "%s: %r is an option of %s: indent it under the node it is for" % (
-        takes(kind, allowed), option, _either(_LEAF_OPTIONS[option]))
-
-
-_HOLE = re.compile(r"\$?([^\W\d][\w.\[\]]*)$")
-
-
-def _unquoted(raw: Any, key: Any, value: Any) -> str:
-    """The hint for text that YAML read as a flow mapping or list because it was not quoted: ``text: {object}``
-    is the mapping {object: null}, ``text: [object]`` a list ('' for anything else)."""
-    if isinstance(value, LMap):
-        name = next(iter(value)) if len(value) == 1 else None
-        m = _HOLE.match(name) if isinstance(name, str) and value[name] is None else None
-        if m is None:
-            return ""
-        hint = ": YAML reads an unquoted {%s} as a mapping; quote it: %s: \"{%s}\"%s" % (
-            name, key, m.group(1), " (or $%s)" % m.group(1) if m.group(1).isidentifier() else "")
-    elif value and all(isinstance(v, str) for v in value):
-        shown = "[%s]" % ", ".join(value)
-        hint = ": YAML reads an unquoted %s as a list; quote it: %s: \"%s\"" % (shown, key, shown)
-    else:
-        return ""
-    if not isinstance(raw, LMap) or not isinstance(key, str) or value.pos.line != raw.key_pos[key].line:
-        return ""   # a block mapping or list starts below its key: written so on purpose
-    return hint
-
-
-def _closest(word: Any, choices: Mapping[str, Any], what: str) -> str:
-    """`` (did you mean 'position'?)`` also for a shortened name (``pos``, which difflib finds too far), else
-    the names there are: an unknown name is never left without what would do."""
-    hint = did_you_mean(word, choices)
-    if hint:
-        return hint
-    text = str(word).lower()
-    starting = [c for c in choices if len(text) >= 2 and c.lower().startswith(text)]
-    if len(starting) == 1:
-        return " (did you mean %r?)" % starting[0]
-    return " (%ss: %s)" % (what, ", ".join(choices) or "none")
-
-
-def _nest_hint(raw: LMap, first: str, second: str) -> str:
-    """How to split a node with two kinds: a leaf beside a decorator goes under its ``child:`` (or its value)."""
-    outer, inner = (second, first) if REGISTRY[first].family != "decorator" else (first, second)
-    if REGISTRY[outer].family != "decorator":
-        return "split it or nest it"
-    where = "'child:'" if "child" in _OPTION_NAMES[outer] else "'%s:'" % outer
-    moved = [k for k in raw if k != inner and k in _OPTION_NAMES[inner] and k not in _OPTION_NAMES[outer]]
-    return "nest the %s%s under %s" % (inner, " and its %s" % ", ".join(moved) if moved else "", where)
 
 
 class Parser:
@@ -339,8 +254,8 @@ class Parser:
                         meant.add("children")
                     elif hint:
                         meant.add(hint[len(" (did you mean '"):-len("'?)")])
-                    elif k in _LEAF_OPTIONS and nk.family != "leaf":
-                        hint = _misplaced(k, kind, allowed, _nearby(raw, kind))
+                    elif k in LEAF_OPTIONS and nk.family != "leaf":
+                        hint = misplaced(k, kind, allowed, nearby(raw, kind))
                     else:
                         hint = option_hint(k, kind, allowed)
                     self.err(raw.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
@@ -376,7 +291,7 @@ class Parser:
             self._no_kind(raw)
         else:
             self.err(raw.key_pos[kinds[1]], "node has two kinds, %r and %r: %s" % (
-                kinds[0], kinds[1], _nest_hint(raw, kinds[0], kinds[1])))
+                kinds[0], kinds[1], nest_hint(raw, kinds[0], kinds[1])))
         return None
 
     def _no_kind(self, raw: LMap) -> None:
@@ -406,8 +321,8 @@ class Parser:
                 if src is inner and k not in allowed:
                     hint = did_you_mean(k, allowed + ("children",))
                     misspelt = misspelt or hint == " (did you mean 'children'?)"
-                    if not hint and k in _LEAF_OPTIONS:
-                        hint = _misplaced(k, kind, allowed, _nearby(inner, "children"))
+                    if not hint and k in LEAF_OPTIONS:
+                        hint = misplaced(k, kind, allowed, nearby(inner, "children"))
                     elif not hint:
                         hint = option_hint(k, kind, allowed)
                     self.err(src.key_pos[k], "unknown option %r for %s%s" % (k, kind, hint))
@@ -485,7 +400,7 @@ class Parser:
         value = raw[key]
         where = pos_of(raw, key, at)
         if value.__class__ is LMap or value.__class__ is LList:
-            hint = _unquoted(raw, key, value)
+            hint = unquoted(raw, key, value)
             if hint:   # said if the value must be text (a kind's error at ``where`` says "takes text")
                 self._unquoted[where] = hint
         for name in loose_dollars(value):
@@ -527,7 +442,7 @@ class Parser:
         target = getattr(node.spec, "target", None) or raw.get(node.kind, node.kind)
         for name, key_ in value.items():
             if allowed is not None and name not in allowed:
-                self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, _closest(name, allowed, what)))
+                self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, closest(name, allowed, what)))
             elif not isinstance(key_, str) or not key_.isidentifier():
                 self.err(value.val_pos[name], "tree key %r is not an identifier" % (key_,))
             else:

@@ -1,0 +1,101 @@
+"""What the tree parser says to fix a mistake: where a mis-indented option belongs, how to quote text
+YAML read as a mapping or a list, the closest name, how to split a node with two kinds."""
+from __future__ import annotations
+
+import re
+from typing import Any, Dict, List, Mapping, Tuple
+
+from comm.errors import did_you_mean
+from coordinator.nodes import REGISTRY
+from coordinator.othernames import takes
+from coordinator.yamlsrc import LMap
+
+__all__ = ["LEAF_OPTIONS", "closest", "misplaced", "nearby", "nest_hint", "unquoted"]
+
+_KINDS = frozenset(REGISTRY)
+_OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
+# the options of leaves, by option: a decorator or composite given one likely holds a leaf's option mis-indented
+_LEAF_KINDS = tuple(k for k, nk in REGISTRY.items() if nk.family == "leaf")
+LEAF_OPTIONS: Dict[str, Tuple[str, ...]] = {o: tuple(k for k in _LEAF_KINDS if o in _OPTION_NAMES[k])
+                                            for o in set().union(*(_OPTION_NAMES[k] for k in _LEAF_KINDS))}
+
+
+def nearby(raw: LMap, kind: str) -> List[Tuple[str, LMap]]:
+    """The nodes written inside a decorator or composite (its child, its value, its children, its cases),
+    with their kinds: where an option it does not take most likely belongs."""
+    found: List[Tuple[str, LMap]] = []
+    for value in (raw.get(kind), raw.get("child"), raw.get("default"), raw.get("cases")):
+        if isinstance(value, list):
+            items = value
+        elif isinstance(value, LMap) and not any(k in _KINDS for k in value):   # switch's cases: label -> node
+            items = list(value.values())
+        else:
+            items = [value]
+        for item in items:
+            if isinstance(item, LMap):
+                kinds = [k for k in item if k in _KINDS]
+                if kinds:
+                    found.append((kinds[0], item))
+    return found
+
+
+def _either(names: Tuple[str, ...]) -> str:
+    """``call, wait_event or include``."""
+    return names[0] if len(names) == 1 else "%s or %s" % (", ".join(names[:-1]), names[-1])
+
+
+def misplaced(option: str, kind: str, allowed: Tuple[str, ...], nearby: List[Tuple[str, LMap]]) -> str:
+    """The hint for a leaf's option given to a decorator or composite: what it takes, and which node inside
+    it the option belongs to (indented one level too little)."""
+    for leaf, node in nearby:
+        if option in _OPTION_NAMES[leaf]:
+            return "%s: %r is an option of the %s at line %d: indent it under that %s" % (
+                takes(kind, allowed), option, leaf, node.pos.line, leaf)
+    return "%s: %r is an option of %s: indent it under the node it is for" % (
+        takes(kind, allowed), option, _either(LEAF_OPTIONS[option]))
+
+
+_HOLE = re.compile(r"\$?([^\W\d][\w.\[\]]*)$")
+
+
+def unquoted(raw: Any, key: Any, value: Any) -> str:
+    """The hint for text that YAML read as a flow mapping or list because it was not quoted: ``text: {object}``
+    is the mapping {object: null}, ``text: [object]`` a list ('' for anything else)."""
+    if isinstance(value, LMap):
+        name = next(iter(value)) if len(value) == 1 else None
+        m = _HOLE.match(name) if isinstance(name, str) and value[name] is None else None
+        if m is None:
+            return ""
+        hint = ": YAML reads an unquoted {%s} as a mapping; quote it: %s: \"{%s}\"%s" % (
+            name, key, m.group(1), " (or $%s)" % m.group(1) if m.group(1).isidentifier() else "")
+    elif value and all(isinstance(v, str) for v in value):
+        shown = "[%s]" % ", ".join(value)
+        hint = ": YAML reads an unquoted %s as a list; quote it: %s: \"%s\"" % (shown, key, shown)
+    else:
+        return ""
+    if not isinstance(raw, LMap) or not isinstance(key, str) or value.pos.line != raw.key_pos[key].line:
+        return ""   # a block mapping or list starts below its key: written so on purpose
+    return hint
+
+
+def closest(word: Any, choices: Mapping[str, Any], what: str) -> str:
+    """`` (did you mean 'position'?)`` also for a shortened name (``pos``, which difflib finds too far), else
+    the names there are: an unknown name is never left without what would do."""
+    hint = did_you_mean(word, choices)
+    if hint:
+        return hint
+    text = str(word).lower()
+    starting = [c for c in choices if len(text) >= 2 and c.lower().startswith(text)]
+    if len(starting) == 1:
+        return " (did you mean %r?)" % starting[0]
+    return " (%ss: %s)" % (what, ", ".join(choices) or "none")
+
+
+def nest_hint(raw: LMap, first: str, second: str) -> str:
+    """How to split a node with two kinds: a leaf beside a decorator goes under its ``child:`` (or its value)."""
+    outer, inner = (second, first) if REGISTRY[first].family != "decorator" else (first, second)
+    if REGISTRY[outer].family != "decorator":
+        return "split it or nest it"
+    where = "'child:'" if "child" in _OPTION_NAMES[outer] else "'%s:'" % outer
+    moved = [k for k in raw if k != inner and k in _OPTION_NAMES[inner] and k not in _OPTION_NAMES[outer]]
+    return "nest the %s%s under %s" % (inner, " and its %s" % ", ".join(moved) if moved else "", where)
