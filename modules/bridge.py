@@ -26,7 +26,7 @@ from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
 from comm.nodelife import stop_requested
 from comm.nodeopts import node_name, seconds
-from modules.cppinfo import data_topic, data_topics, signature_problem
+from modules.cppinfo import data_topic, data_topics, signature_problems
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -39,6 +39,10 @@ log = logging.getLogger("bmtree.bridge")
 #: orders messages per connection only). Measured on loopback: see the README.
 DEFAULT_INPUT_GAP = 0.01
 _POLL = 0.2  # how often a running call checks that the C++ node is still there (s)
+_WATCH = 1.0  # how often the bridge checks, between calls, that the C++ node is still there (s)
+#: after --call-timeout, how long the bridge waits for a node that takes cancels to answer the
+#: cancel, to say what happened (a function that honours it answers within milliseconds)
+_CANCEL_ANSWER = 0.5
 
 
 def _refuses(uri: str) -> bool:
@@ -118,6 +122,10 @@ class CppBridge(BasicModule):
         #: that answer.
         self._owed: Optional[Tuple[str, str, float]] = None
         self._owed_id = ""  # the call_id of the owed call (a library node echoes it in BM_output)
+        self._checked = ""  # the C++ node whose BM_info was compared with the definition
+        self._gone_said = ""  # the URI of a C++ node whose death is in the log already
+        self._watch_stop = threading.Event()
+        self._watcher: Optional[threading.Thread] = None
 
     # -- set-up ----------------------------------------------------------------------
     def setup(self, node: Any) -> None:
@@ -141,16 +149,19 @@ class CppBridge(BasicModule):
         self._out_sub = rospy.Subscriber("/%s/BM_output" % name, String, self._on_output, queue_size=100,
                                          tcp_nodelay=True)
         self._info_sub = rospy.Subscriber("/%s/BM_info" % name, String, self._on_info, queue_size=1)
-        missing = self._wait_connected(self.connect_timeout)
+        missing = self._wait_connected(self.connect_timeout, check=True)
         if missing:
             raise BridgeError("the C++ node of module %r is not ready after %gs: %s (the bridge waits --wait seconds "
                               "for it)" % (name, self.connect_timeout, "; ".join(missing)))
         self._check_signatures()
+        self._watcher = threading.Thread(target=self._watch, name="bridge-watch", daemon=True)
+        self._watcher.start()
         rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
                       ("bmtree library, no input gap, %s" % ("takes cancels" if self.cancellable else "no cancels"))
                       if self.library else "input gap %gs, no cancels" % self._gap())
 
     def shutdown(self) -> None:
+        self._watch_stop.set()
         for s in self._subs + [self._out_sub, self._info_sub]:
             if s is not None:
                 s.unregister()
@@ -216,13 +227,22 @@ class CppBridge(BasicModule):
             out.append("%s does not publish %s to the bridge" % (node, _some(mute)))
         return out
 
-    def _wait_connected(self, timeout: float) -> List[str]:
+    def _wait_connected(self, timeout: float, check: bool = False) -> List[str]:
+        """What is still missing after ``timeout`` ([] once connected). With ``check`` (at start),
+        a library node's BM_info is compared with the definition as soon as it arrives: a
+        definition that does not match it (an output of another type: a data topic the node never
+        publishes) stops the bridge at once, every difference named, instead of after the wait."""
         end = time.monotonic() + timeout
         while True:
             try:
                 missing = self._missing()
             except OSError as exc:
                 missing = ["the ROS master does not answer: %s" % exc]
+            if check and self.library and self.cpp_node and self.cpp_node != self._checked:
+                with self._cond:
+                    informed = self.cpp_node in self._infos
+                if informed:
+                    self._check_signatures(wait=0)  # BindingError (exit 2) on a difference
             if not missing:
                 self._ready = True
                 return []
@@ -249,12 +269,12 @@ class CppBridge(BasicModule):
             self._cond.notify_all()
 
     def _signature_problem(self, fn: FunctionDefinition, info: Dict[str, Any]) -> str:
-        return signature_problem(fn, self.definition.name, info, self.cpp_node)
+        return "; ".join(signature_problems(fn, self.definition.name, info, self.cpp_node))
 
     def _check_signatures(self, wait: float = 2.0) -> None:
         """At start: the definition's functions must be the C++ node's, with the same inputs and
         outputs (BindingError naming every difference); skipped for nodes without bmtree's library."""
-        if not self.library:
+        if not self.library or self._checked == self.cpp_node:
             return
         end = time.monotonic() + wait
         with self._cond:
@@ -265,10 +285,12 @@ class CppBridge(BasicModule):
             log.warning("no BM_info from %s within %gs: its functions are not checked against %s", self.cpp_node,
                         wait, self.definition.source or self.definition.name)
             return
-        problems = [p for p in (self._signature_problem(fn, info) for fn in self.definition.functions.values()) if p]
+        problems = [p for fn in self.definition.functions.values()
+                    for p in signature_problems(fn, self.definition.name, info, self.cpp_node)]
         if problems:
             raise BindingError("%s does not match the C++ node: %s" % (
                 self.definition.source or self.definition.name, "; ".join(problems)))
+        self._checked = self.cpp_node
         extra = sorted(set(f for f in info.get("functions") or [] if isinstance(f, str)) - set(self.definition.functions))
         if extra:
             log.warning("the C++ node %s also provides %s, which %s does not list (not callable through the bridge)",
@@ -354,8 +376,9 @@ class CppBridge(BasicModule):
             if gap > 0:
                 time.sleep(gap)
             sync: Dict[str, Any] = {"function": name, "inparam_topics": in_topics}
-            if self.library:  # the original C++ utility knows no call ids
+            if self.library:  # the original C++ utility knows no call ids; the library names late inputs
                 sync["call_id"] = call.call_id
+                sync["inparam_names"] = [p.name for p in fn.inputs]
             self._in_pub.publish(self._String(json.dumps(sync)))
             if self.cancellable:  # a halted tree stops the C++ function (it answers "cancelled")
                 self.context.on_cancel(lambda: self._send_cancel(call))
@@ -380,21 +403,97 @@ class CppBridge(BasicModule):
                             "; ".join(lacking), self.output_wait))
                     self._cond.wait(self.output_wait - (now - call.output_at))
                     continue
-                if self.call_timeout and now - start >= self.call_timeout:
-                    self._ready = False
-                    self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
-                    self._owed_id = call.call_id
-                    self._send_cancel(call)  # a node that takes cancels stops and answers soon
-                    raise Failure("no BM_output from the C++ node %s within %gs (the bridge's --call-timeout): it "
-                                  "hangs or crashed" % (self.cpp_node, self.call_timeout))
-                left = self.call_timeout - (now - start) if self.call_timeout else _POLL
-                self._cond.wait(min(_POLL, left))
-                if call.output is not None or time.monotonic() - pinged < _POLL:
-                    continue
+                timed_out = bool(self.call_timeout) and now - start >= self.call_timeout
+                if not timed_out:
+                    left = self.call_timeout - (now - start) if self.call_timeout else _POLL
+                    self._cond.wait(min(_POLL, left))
+                    if call.output is not None or time.monotonic() - pinged < _POLL:
+                        continue
+            if timed_out:
+                raise Failure(self._give_up(call))
             pinged = time.monotonic()
             if self._gone():
                 self._ready = False
+                self._say_gone()
                 raise Failure("the C++ node %s exited during the call (no BM_output)" % self.cpp_node)
+
+    def _give_up(self, call: _Call) -> str:
+        """After ``--call-timeout``: cancel the call on the C++ node and say what happened (the
+        node stopped, answered too late, did not answer the cancel, or cannot take cancels)."""
+        self._ready = False
+        said = "no BM_output from the C++ node %s within %gs (the bridge's --call-timeout): %s exceeded the call " \
+               "timeout" % (self.cpp_node, self.call_timeout, call.fn.qualified)
+        if not self.cancellable:
+            self._owe(call)
+            return ("%s; the C++ node takes no cancels (it is not built with bmtree's library), so it may still run "
+                    "the call: the module is busy until its BM_output comes or the node is restarted" % said)
+        self._send_cancel(call)
+        cancelled_at = time.monotonic()
+        end = cancelled_at + _CANCEL_ANSWER
+        with self._cond:
+            while call.output is None and time.monotonic() < end:
+                self._cond.wait(end - time.monotonic())
+            out = call.output
+            if out is None:
+                self._owe(call)
+        if out is None:
+            if self._gone():
+                self._say_gone()
+                return "%s and was cancelled; then the C++ node exited" % said
+            return ("%s and was cancelled, but the C++ node did not answer within %gs of the cancel (its function "
+                    "does not look at cancelled()?): the module is busy until it answers or the node is restarted"
+                    % (said, _CANCEL_ANSWER))
+        after = max(0.0, call.output_at - cancelled_at)
+        with self._cond:
+            if self._lacking(call):  # its output values are still on their way: the next call waits for them
+                self._owed = (call.fn.qualified, self.cpp_uri, call.output_at)
+                self._owed_id = call.call_id
+        if out.get("status") == "cancelled":
+            return "%s and was cancelled; the function stopped %.2fs after the cancel" % (said, after)
+        return "%s and was cancelled; the C++ node answered %s %.2fs after the cancel, too late" % (
+            said, out.get("status") or "succeeded", after)
+
+    def _owe(self, call: _Call) -> None:
+        """``call`` was given up on while the C++ node still runs it: the node is busy until it answers."""
+        with self._cond:
+            self._owed = (call.fn.qualified, self.cpp_uri, 0.0)
+            self._owed_id = call.call_id
+            self._call = None  # its late BM_output is the owed one, not a call's
+
+    def _say_gone(self) -> None:
+        """One line in the bridge's log when its C++ node's process is gone (once per node): an error
+        if it died (killed, crashed: it is still registered), a warning if it exited (Ctrl-C, rosnode
+        kill: roscpp unregistered it)."""
+        import rosgraph
+
+        uri, node = self.cpp_uri, self.cpp_node
+        if not uri or uri == self._gone_said:
+            return
+        self._gone_said = uri
+        now: Optional[str] = ""  # the node's URI on the master now ("": not known, None: unregistered)
+        try:
+            now = rosgraph.Master(self._self_name or "/bmtree_bridge").lookupNode(node)
+        except rosgraph.masterapi.MasterError:  # "unknown node"
+            now = None
+        except (rosgraph.masterapi.MasterException, OSError):
+            pass
+        if now is None:
+            log.warning("the C++ node %s of module %r has exited (it unregistered from the master); calls are "
+                        "refused until it is started again", node, self.definition.name)
+        elif now and now != uri:
+            log.warning("the C++ node %s of module %r at %s is gone; a new node of that name runs at %s (the next "
+                        "call is sent to it)", node, self.definition.name, uri, now)
+        else:
+            log.error("the C++ node %s of module %r died (killed or crashed: nothing listens at %s%s); calls are "
+                      "refused until it is started again", node, self.definition.name, uri,
+                      ", and it is still registered with the master" if now else "")
+
+    def _watch(self) -> None:
+        """A thread: notices, between calls too, that the C++ node's process is gone (kill -9, a crash)."""
+        while not self._watch_stop.wait(_WATCH):
+            uri = self.cpp_uri
+            if uri and uri != self._gone_said and not stop_requested() and _refuses(uri):
+                self._say_gone()
 
     def _send_cancel(self, call: _Call) -> None:
         """Tell the C++ node to stop ``call`` (if it takes cancels; never raises)."""

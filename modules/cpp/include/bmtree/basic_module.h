@@ -3,7 +3,7 @@
 // Speaks the original C++ basic-module protocol (manual section 4.3) to a bridge node
 // (bmtree-bridge, or the original one): data topics /<BM>/<type> carry the values,
 // /<BM>/BM_input and /<BM>/BM_output synchronise. Header-only, C++14, no sleeps, no
-// rospack at run time. Functions run in the node's spinner thread, one at a time.
+// rospack at run time.
 //
 //   class Gripper : public bmtree::BasicModule {
 //    public:
@@ -15,33 +15,54 @@
 //   };
 //   int main(int argc, char** argv) { return bmtree::run<Gripper>(argc, argv, "gripper"); }
 //
+// Threads: a function runs in the thread that spins the node's callback queue (with run(): the
+// main thread, inside ros::spin()), one call at a time. While it runs, that thread runs no other
+// callback of the queue: your own subscriptions and timers on it wait until the function has
+// returned. Do not call ros::spinOnce() inside a function (the library's own callbacks that it would
+// run are put off until the function returns); give your own topics a ros::CallbackQueue of their
+// own (spin it with callAvailable(), or an AsyncSpinner). Service calls and publishing are fine,
+// except a call to a service this node serves on the queue the function holds (it cannot answer).
+// A custom main() with a MultiThreadedSpinner or AsyncSpinner on the global queue works too: the
+// library still runs one function at a time (a BM_input that arrives meanwhile waits for it).
+//
 // What it does beyond the original utility: its inputs are only the data messages of the node
 // that sent BM_input (connection header callerid: not its own outputs, not a third node's);
 // the i-th such message received on a topic for a call is the i-th
 // input listed on that topic, so two inputs of one type keep their values; a BM_input that
-// overtook its inputs waits for them (bounded by ~input_wait, then the last values are used,
-// as the original did); a function that throws bmtree::Failure / bmtree::Rejected (or any
-// std::exception) answers BM_output with "error" and "status" keys, which bmtree-bridge
-// reports and the original bridge ignores; an unknown function is answered with an error
-// instead of silence; /<BM>/BM_info (latched) tells a bridge that this library is on the
-// other side, so it needs no gap between the inputs and BM_input.
+// overtook its inputs waits for them, bounded by ~input_wait (1 s). A call of bmtree-bridge
+// (it carries a call_id) whose inputs did not all arrive is answered "failed" naming them, without
+// running the function; a call of the original bridge runs with the last values received, as the
+// original did, and a warning names the stale inputs. A function that throws bmtree::Failure /
+// bmtree::Rejected (or any exception) answers BM_output with "error" and "status" keys, which
+// bmtree-bridge reports and the original bridge ignores; other exceptions are logged with their
+// type. An unknown function is answered with an error instead of silence; /<BM>/BM_info (latched)
+// tells a bridge that this library is on the other side, so it needs no gap between the inputs and
+// BM_input.
 //
 // Cancels: a bridge that gives up on a call (the tree halted it, or its --call-timeout passed)
 // publishes {"call_id": ...} on /<BM>/BM_cancel. That topic is served by a thread of its own, so
-// a cancel arrives while the function runs: a long function polls cancelled() or waits with
-// sleepFor(seconds), stops the hardware and returns; its answer then says "cancelled" (the bridge
-// throws its outputs away) and the module takes calls again at once. A call cancelled before it
-// started is answered "cancelled" without running. The original bridge sends no cancels.
+// a cancel arrives while the function runs: a long function polls cancelled(), waits with
+// sleepFor(seconds), or registers onCancel(callback), stops the hardware and returns; its answer then
+// says "cancelled" (the bridge throws its outputs away) and the module takes calls again at once. A
+// call cancelled before it started is answered "cancelled" without running. The original bridge
+// sends no cancels.
 //
 // A restarted ROS master is survived (master_watch.h): the module registers its topics again.
 // stdout is line-buffered, so that prints reach a log file as they happen.
 #ifndef BMTREE_BASIC_MODULE_H
 #define BMTREE_BASIC_MODULE_H
 
+/// The library's API level, for a module that must also build against older copies (#if
+/// BMTREE_CPP_API >= 2): 2 added onCancel(), callId(), and made cancelled() and sleepFor() public.
+#define BMTREE_CPP_API 2
+
 #include <ros/ros.h>
 #include <std_msgs/String.h>
 
 #include <ros/callback_queue.h>
+#include <ros/callback_queue_interface.h>
+
+#include <boost/make_shared.hpp>
 
 #include <algorithm>
 #include <array>
@@ -50,17 +71,26 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <deque>
-#include <mutex>
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
+#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <tuple>
+#include <typeinfo>
 #include <utility>
 #include <vector>
+
+#if defined(__GNUG__)
+#include <cxxabi.h>
+#endif
 
 #include <nlohmann/json.hpp>
 
@@ -87,6 +117,38 @@ inline std::string dataTopic(const std::string& module, const std::string& datat
   return "/" + module + "/" + base;
 }
 
+class BasicModule;
+
+/// What onCancel() returns: the callback stays registered while this object lives (at most until
+/// the call ends). Keep it in a local variable declared after what the callback uses: its
+/// destructor unregisters the callback and waits for it if it is running, so the callback never
+/// sees those objects destroyed.
+class CancelHook {
+ public:
+  CancelHook() = default;
+  CancelHook(CancelHook&& other) noexcept : owner_(other.owner_), id_(other.id_) { other.owner_ = nullptr; }
+  CancelHook& operator=(CancelHook&& other) noexcept {
+    if (this != &other) {
+      reset();
+      owner_ = other.owner_;
+      id_ = other.id_;
+      other.owner_ = nullptr;
+    }
+    return *this;
+  }
+  CancelHook(const CancelHook&) = delete;
+  CancelHook& operator=(const CancelHook&) = delete;
+  ~CancelHook() { reset(); }
+  /// Unregister the callback now (waits for it if it is running in another thread).
+  inline void reset();
+
+ private:
+  friend class BasicModule;
+  CancelHook(BasicModule* owner, std::uint64_t id) : owner_(owner), id_(id) {}
+  BasicModule* owner_ = nullptr;
+  std::uint64_t id_ = 0;
+};
+
 namespace detail {
 
 /// A module's output mostly goes to a log file (roslaunch, systemd), where stdout is
@@ -95,29 +157,55 @@ namespace detail {
 inline bool lineBufferedStdout() { return std::setvbuf(stdout, nullptr, _IOLBF, 0) == 0; }
 static const bool kStdoutLineBuffered = lineBufferedStdout();
 
-/// One data topic: publisher, subscriber, and the messages received for the current call.
+/// The readable name of a type: "std::runtime_error", not "St13runtime_error".
+inline std::string typeName(const std::type_info* type) {
+  if (type == nullptr) return "an unknown type";
+#if defined(__GNUG__)
+  int status = 0;
+  char* name = abi::__cxa_demangle(type->name(), nullptr, nullptr, &status);
+  if (status == 0 && name != nullptr) {
+    std::string out(name);
+    std::free(name);
+    return out;
+  }
+  std::free(name);
+#endif
+  return type->name();
+}
+
+/// "1", "0.3": seconds as a person writes them.
+inline std::string seconds(double s) {
+  std::ostringstream out;
+  out << s;
+  return out.str();
+}
+
+/// One data topic: publisher, subscriber, and the messages received for the next call. The data
+/// is guarded by the module's state mutex (callbacks may come from several spinner threads).
 class ChannelBase {
  public:
   virtual ~ChannelBase() = default;
-  /// Messages from `publisher` received since the last call took its inputs.
+  /// Messages from `publisher` received since the last call took its inputs (mutex held).
   virtual std::size_t fresh(const std::string& publisher) const = 0;
   /// Select `n` values from `publisher` for a call (its last `n` fresh ones, the last value
-  /// received for any missing), and forget the fresh messages.
+  /// received for any missing), and forget the fresh messages (mutex held).
   virtual void select(std::size_t n, const std::string& publisher) = 0;
 };
 
 template <class M>
 class Channel : public ChannelBase {
  public:
-  Channel(ros::NodeHandle& nh, const std::string& topic, std::function<void()> on_data)
-      : on_data_(std::move(on_data)) {
+  Channel(ros::NodeHandle& nh, const std::string& topic, std::mutex& mutex, std::function<void()> on_data)
+      : mutex_(mutex), on_data_(std::move(on_data)) {
     pub_ = nh.advertise<M>(topic, 100);
     sub_ = nh.subscribe(topic, 100, &Channel::onMessage, this, ros::TransportHints().tcpNoDelay());
   }
 
   std::size_t fresh(const std::string& publisher) const override {
     std::size_t n = 0;
-    for (const auto& f : fresh_) n += f.first == publisher ? 1 : 0;
+    for (const auto& f : fresh_) {
+      if (f.first == publisher) ++n;
+    }
     return n;
   }
 
@@ -133,6 +221,7 @@ class Channel : public ChannelBase {
     fresh_.clear();
   }
 
+  /// The i-th selected value: read by the running function's thread only.
   const M& selected(std::size_t i) const { return selected_.at(i); }
 
   void publish(const M& msg) const { pub_.publish(msg); }
@@ -140,14 +229,18 @@ class Channel : public ChannelBase {
  private:
   void onMessage(const ros::MessageEvent<M const>& event) {
     if (event.getPublisherName() == ros::this_node::getName()) return;  // our own output
-    const M& msg = *event.getConstMessage();
-    last_ = msg;
-    if (fresh_.size() >= kMaxFresh) fresh_.pop_front();
-    fresh_.emplace_back(event.getPublisherName(), msg);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const M& msg = *event.getConstMessage();
+      last_ = msg;
+      if (fresh_.size() >= kMaxFresh) fresh_.pop_front();
+      fresh_.emplace_back(event.getPublisherName(), msg);
+    }
     on_data_();
   }
 
   static constexpr std::size_t kMaxFresh = 64;
+  std::mutex& mutex_;
   std::function<void()> on_data_;
   ros::Publisher pub_;
   ros::Subscriber sub_;
@@ -161,24 +254,100 @@ std::string datatypeOf() {
   return ros::message_traits::DataType<M>::value();
 }
 
+/// Calls `fn` on a callback queue (the module's, so in its spinner thread) once a deadline has
+/// passed: the end of a BM_input's wait for its inputs. A thread of its own, not a ROS timer: it
+/// may be set again from any thread, also from inside its own callback.
+class Waker {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  Waker(ros::CallbackQueueInterface* queue, std::function<void()> fn) : queue_(queue), fn_(std::move(fn)) {
+    thread_ = std::thread([this]() { loop(); });
+  }
+  ~Waker() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      quit_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+    queue_->removeByID(id());
+  }
+  Waker(const Waker&) = delete;
+  Waker& operator=(const Waker&) = delete;
+
+  /// Call back at `when` (or at an earlier time already set; a call back too early is harmless).
+  void at(Clock::time_point when) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (armed_ && at_ <= when) return;
+      at_ = when;
+      armed_ = true;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  class Call : public ros::CallbackInterface {
+   public:
+    explicit Call(const std::function<void()>* fn) : fn_(fn) {}
+    CallResult call() override {
+      (*fn_)();
+      return Success;
+    }
+
+   private:
+    const std::function<void()>* fn_;
+  };
+
+  std::uint64_t id() const { return reinterpret_cast<std::uintptr_t>(this); }  // widened, never narrowed
+
+  void loop() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!quit_) {
+      if (!armed_) {
+        cv_.wait(lock);
+      } else if (Clock::now() < at_) {
+        cv_.wait_until(lock, at_);
+      } else {
+        armed_ = false;
+        lock.unlock();
+        queue_->addCallback(boost::make_shared<Call>(&fn_), id());
+        lock.lock();
+      }
+    }
+  }
+
+  ros::CallbackQueueInterface* queue_;
+  const std::function<void()> fn_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool armed_ = false;
+  bool quit_ = false;
+  Clock::time_point at_{};
+  std::thread thread_;
+};
+
 }  // namespace detail
 
 /// Base class of a C++ basic module. Register functions with provide() in the constructor.
 class BasicModule {
  public:
+  using Clock = std::chrono::steady_clock;
+
   BasicModule(ros::NodeHandle nh, const std::string& module) : nh_(nh) {
     ros::NodeHandle("~").param<std::string>("basic_mod", module_, module);
     ros::NodeHandle("~").param<double>("input_wait", input_wait_, 1.0);
+    if (!(input_wait_ >= 0) || input_wait_ > 3600) input_wait_ = 1.0;  // NaN, negative, absurd
     out_pub_ = nh_.advertise<std_msgs::String>("/" + module_ + "/BM_output", 10);
     info_pub_ = nh_.advertise<std_msgs::String>("/" + module_ + "/BM_info", 1, true);
+    waker_.reset(new detail::Waker(nh_.getCallbackQueue(), [this]() { runReady(); }));
     in_sub_ = nh_.subscribe("/" + module_ + "/BM_input", 10, &BasicModule::onInput, this,
                             ros::TransportHints().tcpNoDelay());
-    wait_timer_ = nh_.createWallTimer(ros::WallDuration(input_wait_ > 0 ? input_wait_ : 0.001),
-                                      &BasicModule::onInputWaitOver, this, true, false);
     // cancels must get through while a function blocks the node's spinner thread
     ros::NodeHandle cancel_nh(nh_);
     cancel_nh.setCallbackQueue(&cancel_queue_);
-    cancel_sub_ = cancel_nh.subscribe("/" + module_ + "/BM_cancel", 10, &BasicModule::onCancel, this,
+    cancel_sub_ = cancel_nh.subscribe("/" + module_ + "/BM_cancel", 10, &BasicModule::onCancelMessage, this,
                                       ros::TransportHints().tcpNoDelay());
     cancel_spinner_.reset(new ros::AsyncSpinner(1, &cancel_queue_));
     cancel_spinner_->start();
@@ -188,15 +357,17 @@ class BasicModule {
   virtual ~BasicModule() {
     cancel_spinner_->stop();
     cancel_sub_.shutdown();
+    in_sub_.shutdown();
+    waker_.reset();
   }
   BasicModule(const BasicModule&) = delete;
   BasicModule& operator=(const BasicModule&) = delete;
 
   const std::string& moduleName() const { return module_; }
 
- protected:
   /// True once the running call was cancelled, or the node is shutting down (Ctrl-C, rosnode
   /// kill: a respawned node must not drive the hardware beside this one): stop and return.
+  /// Thread-safe: a helper object of the function may poll it from any thread.
   bool cancelled() const { return cancelled_.load() || !ros::ok(); }
 
   /// Wait `seconds` unless the running call is cancelled (or the node shuts down) first; true if
@@ -206,7 +377,6 @@ class BasicModule {
     std::unique_lock<std::mutex> lock(cancel_mutex_);
     auto stop = [this]() { return cancelled(); };
     if (!(seconds > 0)) return !stop();  // also NaN: no wait
-    using Clock = std::chrono::steady_clock;
     const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                         std::chrono::duration<double>(std::min(seconds, 1e9)));
     while (Clock::now() < end) {  // a shutdown notifies nobody: look at it every 50 ms
@@ -217,18 +387,57 @@ class BasicModule {
     return !stop();
   }
 
+  /// The call_id of the running call ("" outside a function, and for calls of the original
+  /// bridge, which sends none).
+  std::string callId() const {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    return running_;
+  }
+
+  /// Inside a function: call `fn` once when the running call is cancelled, in the library's cancel
+  /// thread (the one that receives BM_cancel), while the function itself goes on running in its own
+  /// thread: make what `fn` touches safe to use from two threads (an atomic, a mutex, a driver's
+  /// thread-safe stop), and return promptly (the call's answer waits for it). If the call is
+  /// cancelled already, `fn` runs at once, in the calling thread. Not called for a call that ends
+  /// uncancelled, nor on shutdown (poll cancelled() for that). Keep the returned CancelHook while
+  /// `fn` may run:
+  ///   bmtree::CancelHook hook = onCancel([this]() { driver_.halt(); });
+  /// Outside a function it throws std::logic_error.
+#if defined(__GNUG__)
+  __attribute__((warn_unused_result))
+#endif
+  CancelHook onCancel(std::function<void()> fn) {
+    if (!fn) return CancelHook();
+    std::unique_lock<std::mutex> lock(cancel_mutex_);
+    if (!in_function_) {
+      throw std::logic_error("bmtree: onCancel() is for use inside a function (it is about the running call)");
+    }
+    const std::uint64_t id = ++hook_counter_;
+    Hook& hook = hooks_[id];
+    hook.fn = std::move(fn);
+    if (cancelled_.load()) {  // too late to wait for the cancel: now, here
+      hook.fired = hook.running = true;
+      hook.thread = std::this_thread::get_id();
+      std::function<void()> now = hook.fn;
+      lock.unlock();
+      callHook(now);
+      lock.lock();
+      auto it = hooks_.find(id);
+      if (it != hooks_.end()) it->second.running = false;
+      lock.unlock();
+      cancel_cv_.notify_all();
+    }
+    return CancelHook(this, id);
+  }
+
+ protected:
   /// Register `fn` as the function `name`; its inputs are its parameters, in the definition's
   /// order; its outputs are the returned tuple's elements, named by `output_names`.
   template <class C, class... Out, class... In>
   void provide(const std::string& name, std::tuple<Out...> (C::*fn)(const In&...),
                const std::array<std::string, sizeof...(Out)>& output_names) {
     C* self = static_cast<C*>(this);
-    Function f;
-    f.input_topics = {topicFor<In>()...};
-    std::vector<std::string> output_topics = {topicFor<Out>()...};
     std::vector<std::string> names(output_names.begin(), output_names.end());
-    f.output_names = names;
-    f.output_topics = output_topics;
     for (const auto& n : names) {  // {"width"} for two outputs compiles: the missing name is ""
       if (n.empty()) {
         throw std::logic_error("provide(\"" + name + "\"): the function returns " + std::to_string(sizeof...(Out)) +
@@ -236,6 +445,12 @@ class BasicModule {
                                " non-empty output names");
       }
     }
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    Function f;
+    f.input_topics = {topicFor<In>()...};
+    std::vector<std::string> output_topics = {topicFor<Out>()...};
+    f.output_names = names;
+    f.output_topics = output_topics;
     f.run = [this, self, fn, names, output_topics](const std::vector<std::size_t>& occurrence) {
       std::tuple<Out...> out = invoke(self, fn, occurrence, std::index_sequence_for<In...>());
       publishAll(out, std::index_sequence_for<Out...>());
@@ -249,6 +464,8 @@ class BasicModule {
   }
 
  private:
+  friend class CancelHook;
+
   struct Function {
     std::vector<std::string> input_topics;
     std::vector<std::string> output_names;
@@ -258,17 +475,26 @@ class BasicModule {
   struct Pending {
     std::string function;
     std::vector<std::string> topics;
+    std::vector<std::string> names;  // the inputs' names (bmtree-bridge sends them), for messages
     std::string bridge;   // the node that sent BM_input: only its data messages are inputs
     std::string call_id;  // sent by bmtree-bridge (not by the original): what a cancel names
+    bool waiting = false;  // its wait for its inputs has begun (it was first at an idle module)
+    Clock::time_point deadline{};
+  };
+  struct Hook {
+    std::function<void()> fn;
+    bool fired = false;
+    bool running = false;
+    std::thread::id thread;
   };
 
   template <class M>
-  std::string topicFor() {
+  std::string topicFor() {  // state_mutex_ held
     std::string topic = dataTopic(module_, detail::datatypeOf<M>());
     auto it = channels_.find(topic);
     if (it == channels_.end()) {
       channels_[topic] = std::unique_ptr<detail::ChannelBase>(
-          new detail::Channel<M>(nh_, topic, [this]() { onData(); }));
+          new detail::Channel<M>(nh_, topic, state_mutex_, [this]() { runReady(); }));
       types_[topic] = detail::datatypeOf<M>();
     } else if (types_[topic] != detail::datatypeOf<M>()) {
       throw std::logic_error("types " + types_[topic] + " and " + detail::datatypeOf<M>() +
@@ -325,18 +551,24 @@ class BasicModule {
       p.topics = j.at("inparam_topics").get<std::vector<std::string>>();
       auto id = j.find("call_id");
       if (id != j.end() && id->is_string()) p.call_id = id->get<std::string>();
+      auto names = j.find("inparam_names");
+      if (names != j.end() && names->is_array() && names->size() == p.topics.size() &&
+          std::all_of(names->begin(), names->end(), [](const nlohmann::json& n) { return n.is_string(); })) {
+        p.names = names->get<std::vector<std::string>>();
+      }
     } catch (const std::exception& e) {
       ROS_ERROR("bmtree: ignored a malformed BM_input message: %s", e.what());
       return;
     }
-    pending_.push_back(std::move(p));
-    runReady(false);
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      pending_.push_back(std::move(p));
+    }
+    runReady();
   }
 
-  void onData() { runReady(false); }
-
   /// In the cancel thread: cancel the running call, or remember the id of one not started yet.
-  void onCancel(const ros::MessageEvent<std_msgs::String const>& event) {
+  void onCancelMessage(const ros::MessageEvent<std_msgs::String const>& event) {
     std::string id;
     try {
       const std_msgs::String& msg = *event.getConstMessage();
@@ -346,16 +578,74 @@ class BasicModule {
       ROS_ERROR("bmtree: ignored a malformed BM_cancel message: %s", e.what());
       return;
     }
+    bool now = false;
+    std::uint64_t serial = 0;
     {
       std::lock_guard<std::mutex> lock(cancel_mutex_);
-      if (!running_.empty() && id == running_) {
-        cancelled_.store(true);
+      if (in_function_ && !running_.empty() && id == running_) {
+        now = !cancelled_.exchange(true);
+        serial = call_serial_;
       } else {
         if (early_cancels_.size() >= kMaxEarlyCancels) early_cancels_.pop_front();
         early_cancels_.push_back(id);  // it may overtake its BM_input (another connection)
       }
     }
     cancel_cv_.notify_all();
+    if (now) runHooks(serial);
+  }
+
+  /// In the cancel thread: each onCancel() callback of the cancelled call `serial`, once.
+  void runHooks(std::uint64_t serial) {
+    for (;;) {
+      std::function<void()> fn;
+      std::uint64_t id = 0;
+      {
+        std::lock_guard<std::mutex> lock(cancel_mutex_);
+        if (!in_function_ || call_serial_ != serial) return;  // that call has ended meanwhile
+        for (auto& h : hooks_) {
+          if (!h.second.fired) {
+            h.second.fired = h.second.running = true;
+            h.second.thread = std::this_thread::get_id();
+            fn = h.second.fn;
+            id = h.first;
+            break;
+          }
+        }
+      }
+      if (id == 0) return;
+      callHook(fn);
+      {
+        std::lock_guard<std::mutex> lock(cancel_mutex_);
+        auto it = hooks_.find(id);
+        if (it != hooks_.end()) it->second.running = false;
+      }
+      cancel_cv_.notify_all();
+    }
+  }
+
+  void callHook(const std::function<void()>& fn) {
+    try {
+      fn();
+    } catch (const std::exception& e) {
+      ROS_ERROR("bmtree: an onCancel() callback threw %s: %s", detail::typeName(&typeid(e)).c_str(), e.what());
+    } catch (...) {
+#if defined(__GNUG__)
+      const std::type_info* type = abi::__cxa_current_exception_type();
+#else
+      const std::type_info* type = nullptr;
+#endif
+      ROS_ERROR("bmtree: an onCancel() callback threw %s", detail::typeName(type).c_str());
+    }
+  }
+
+  /// CancelHook's destructor: forget hook `id`, after it has run if it runs in another thread now.
+  void removeHook(std::uint64_t id) {
+    std::unique_lock<std::mutex> lock(cancel_mutex_);
+    cancel_cv_.wait(lock, [this, id]() {
+      auto it = hooks_.find(id);
+      return it == hooks_.end() || !it->second.running || it->second.thread == std::this_thread::get_id();
+    });
+    hooks_.erase(id);
   }
 
   /// Mark `call` running (cancels naming it now reach the function); true if it was cancelled
@@ -364,6 +654,8 @@ class BasicModule {
     std::lock_guard<std::mutex> lock(cancel_mutex_);
     cancelled_.store(false);
     running_ = call.call_id;
+    in_function_ = true;
+    ++call_serial_;
     if (call.call_id.empty()) return false;
     auto it = std::find(early_cancels_.begin(), early_cancels_.end(), call.call_id);
     if (it == early_cancels_.end()) return false;
@@ -373,71 +665,151 @@ class BasicModule {
 
   /// The call has returned: true if it was cancelled meanwhile.
   bool stopRunning() {
-    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    std::unique_lock<std::mutex> lock(cancel_mutex_);
+    cancel_cv_.wait(lock, [this]() {  // an onCancel() callback still running in the cancel thread
+      return std::none_of(hooks_.begin(), hooks_.end(),
+                          [](const std::pair<const std::uint64_t, Hook>& h) { return h.second.running; });
+    });
+    hooks_.clear();
+    in_function_ = false;
     running_.clear();
     return cancelled_.exchange(false);
   }
 
-  void onInputWaitOver(const ros::WallTimerEvent&) { runReady(true); }
+  /// What runReady() hands to execute(): a call whose inputs are selected.
+  struct Ready {
+    Pending call;
+    bool known = false;
+    Function function;
+    std::vector<std::size_t> missing;  // positions of the inputs that did not arrive in time
+  };
 
-  /// Run the oldest pending call once its inputs arrived (or, with `force`, the wait is over).
-  void runReady(bool force) {
-    while (!pending_.empty()) {
-      const Pending& p = pending_.front();
-      std::map<std::string, std::size_t> count;
-      for (const auto& t : p.topics) ++count[t];
-      bool complete = true;
-      for (const auto& c : count) {
-        auto it = channels_.find(c.first);
-        if (it != channels_.end() && it->second->fresh(p.bridge) < c.second) complete = false;
-      }
-      if (!complete && !force) {
-        if (!waiting_) {
-          waiting_ = true;
-          wait_timer_.stop();
-          wait_timer_.start();
+  /// Run the pending calls in order, each once its inputs arrived or its wait for them is over.
+  /// Any thread (the spinner's, also re-entered through a ros::spinOnce() inside a function, or
+  /// several of a multi-threaded spinner): while one function runs, the others only queue.
+  void runReady() {
+    for (;;) {
+      Ready ready;
+      Clock::time_point wake_at{};
+      bool wake = false;
+      {
+        std::lock_guard<std::mutex> lock(state_mutex_);
+        if (executing_ || pending_.empty()) return;  // the running function's thread goes on here after it
+        Pending& p = pending_.front();
+        std::map<std::string, std::size_t> count;
+        for (const auto& t : p.topics) ++count[t];
+        std::map<std::string, std::size_t> got;
+        bool complete = true;
+        for (const auto& c : count) {
+          auto it = channels_.find(c.first);
+          got[c.first] = it != channels_.end() ? it->second->fresh(p.bridge) : c.second;
+          if (got[c.first] < c.second) complete = false;
         }
+        const Clock::time_point now = Clock::now();
+        if (!complete) {
+          if (!p.waiting) {
+            p.waiting = true;
+            p.deadline = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(input_wait_));
+          }
+          if (now < p.deadline) {
+            wake = true;
+            wake_at = p.deadline;
+          }
+        }
+        if (!wake) {
+          ready.call = std::move(pending_.front());
+          pending_.pop_front();
+          std::map<std::string, std::size_t> seen;
+          for (std::size_t i = 0; i < ready.call.topics.size(); ++i) {
+            const std::string& t = ready.call.topics[i];
+            if (seen[t]++ >= got[t]) ready.missing.push_back(i);  // the k-th value of a topic came if k < got
+          }
+          for (const auto& c : count) {  // its inputs are spent, whatever happens to the call
+            auto it = channels_.find(c.first);
+            if (it != channels_.end()) it->second->select(c.second, ready.call.bridge);
+          }
+          auto f = functions_.find(ready.call.function);
+          ready.known = f != functions_.end();
+          if (ready.known) ready.function = f->second;
+          executing_ = true;
+        }
+      }
+      if (wake) {
+        waker_->at(wake_at);
         return;
       }
-      waiting_ = false;
-      wait_timer_.stop();
-      force = false;
-      Pending call = pending_.front();
-      pending_.pop_front();
-      execute(call, count);
+      execute(ready);
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      executing_ = false;
     }
   }
 
-  void execute(const Pending& call, const std::map<std::string, std::size_t>& count) {
-    nlohmann::json reply;
-    auto f = functions_.find(call.function);
-    if (startRunning(call)) {
-      for (const auto& c : count) {  // its inputs are spent all the same
-        auto ch = channels_.find(c.first);
-        if (ch != channels_.end()) ch->second->select(c.second, call.bridge);
+  /// "input 'target'", "inputs 'target', 'duration'", "input 2 (on /arm/float64)".
+  static std::string inputsNamed(const Pending& call, const std::vector<std::size_t>& positions) {
+    std::string out = positions.size() == 1 ? "input " : "inputs ";
+    for (std::size_t k = 0; k < positions.size(); ++k) {
+      const std::size_t i = positions[k];
+      if (k > 0) out += ", ";
+      if (i < call.names.size()) {
+        out += "'" + call.names[i] + "'";
+      } else {
+        out += std::to_string(i + 1) + " (on " + call.topics.at(i) + ")";
       }
+    }
+    return out;
+  }
+
+  static std::string callName(const Pending& call) {
+    return call.function + (call.call_id.empty() ? std::string(" (no call id)") : " (call " + call.call_id + ")");
+  }
+
+  void execute(const Ready& ready) {
+    const Pending& call = ready.call;
+    nlohmann::json reply;
+    if (startRunning(call)) {
       reply = failure("cancelled", "cancelled before it started");
-    } else if (f == functions_.end()) {
+    } else if (!ready.known) {
       reply = failure("rejected", "module " + module_ + " has no function " + call.function);
-    } else if (call.topics != f->second.input_topics) {
+    } else if (call.topics != ready.function.input_topics) {
       reply = failure("rejected", "function " + call.function + " takes its inputs on " +
-                                      nlohmann::json(f->second.input_topics).dump() + ", not " +
+                                      nlohmann::json(ready.function.input_topics).dump() + ", not " +
                                       nlohmann::json(call.topics).dump());
+    } else if (!ready.missing.empty() && !call.call_id.empty()) {
+      // never run a function (a motion) on the previous call's values or on zero messages
+      const std::string error = inputsNamed(call, ready.missing) + " did not arrive within input_wait (" +
+                                detail::seconds(input_wait_) + "s): " + call.function + " was not run";
+      ROS_WARN("bmtree: %s: %s", callName(call).c_str(), error.c_str());
+      reply = failure("failed", error);
     } else {
-      for (const auto& c : count) channels_.at(c.first)->select(c.second, call.bridge);
+      if (!ready.missing.empty()) {  // the original bridge: it ran on the last values, and so do we
+        ROS_WARN("bmtree: %s: %s did not arrive within input_wait (%ss): it runs with the last value received "
+                 "on %s (a zero message if none), as the original library did",
+                 callName(call).c_str(), inputsNamed(call, ready.missing).c_str(),
+                 detail::seconds(input_wait_).c_str(), ready.missing.size() == 1 ? "its topic" : "their topics");
+      }
       std::vector<std::size_t> occurrence;
       std::map<std::string, std::size_t> seen;
       for (const auto& t : call.topics) occurrence.push_back(seen[t]++);
       try {
-        reply = f->second.run(occurrence);
+        reply = ready.function.run(occurrence);
       } catch (const Rejected& e) {
+        ROS_WARN("bmtree: %s rejected: %s", callName(call).c_str(), e.what());
         reply = failure("rejected", e.what());
       } catch (const Failure& e) {
+        ROS_WARN("bmtree: %s failed: %s", callName(call).c_str(), e.what());
         reply = failure("failed", e.what());
       } catch (const std::exception& e) {
-        reply = failure("failed", std::string("exception: ") + e.what());
+        const std::string type = detail::typeName(&typeid(e));
+        ROS_ERROR("bmtree: %s threw %s: %s", callName(call).c_str(), type.c_str(), e.what());
+        reply = failure("failed", type + ": " + e.what());
       } catch (...) {  // a vendor library may throw anything: the node must answer and live on
-        reply = failure("failed", "exception: an exception that is not a std::exception");
+#if defined(__GNUG__)
+        const std::string type = detail::typeName(abi::__cxa_current_exception_type());
+#else
+        const std::string type = "an unknown type";
+#endif
+        ROS_ERROR("bmtree: %s threw %s, which is not a std::exception", callName(call).c_str(), type.c_str());
+        reply = failure("failed", type + ": an exception that is not a std::exception");
       }
     }
     if (stopRunning() && reply.value("status", "") != "cancelled") {
@@ -467,23 +839,34 @@ class BasicModule {
   ros::Publisher out_pub_;
   ros::Publisher info_pub_;
   ros::Subscriber in_sub_;
-  ros::WallTimer wait_timer_;
-  bool waiting_ = false;
+  // the spinner side (state_mutex_ guards what BM_input and the data topics change, and executing_)
+  std::mutex state_mutex_;
+  bool executing_ = false;
   std::map<std::string, std::unique_ptr<detail::ChannelBase>> channels_;
   std::map<std::string, std::string> types_;
   std::map<std::string, Function> functions_;
   std::deque<Pending> pending_;
-  // the cancel thread's side (cancel_mutex_ guards running_ and early_cancels_)
+  std::unique_ptr<detail::Waker> waker_;
+  // the cancel thread's side (cancel_mutex_ guards running_, in_function_, hooks_, early_cancels_)
   ros::CallbackQueue cancel_queue_;
   ros::Subscriber cancel_sub_;
   std::unique_ptr<ros::AsyncSpinner> cancel_spinner_;
-  std::mutex cancel_mutex_;
+  mutable std::mutex cancel_mutex_;
   std::condition_variable cancel_cv_;
   std::atomic<bool> cancelled_{false};
   std::string running_;
+  bool in_function_ = false;
+  std::uint64_t call_serial_ = 0;  // one more for each call that starts
+  std::map<std::uint64_t, Hook> hooks_;
+  std::uint64_t hook_counter_ = 0;
   std::deque<std::string> early_cancels_;
   detail::MasterWatch master_watch_;  // its thread ends before the rest goes
 };
+
+inline void CancelHook::reset() {
+  if (owner_ != nullptr) owner_->removeHook(id_);
+  owner_ = nullptr;
+}
 
 /// The node's name: `module`, or the new module name of a `_basic_mod:=NAME` argument, so that
 /// two copies of one module renamed that way do not knock each other off the master (an
