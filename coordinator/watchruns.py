@@ -7,6 +7,7 @@ next one once the shown one has ended, and the watch can say how to watch them.
 """
 from __future__ import annotations
 
+import typing
 from collections import OrderedDict
 from typing import Any, Dict, List, Optional
 
@@ -31,7 +32,7 @@ class OtherRuns:
     """Per run id: its tree record, whether it ended, and its records since its latest snapshot."""
 
     def __init__(self) -> None:
-        self._runs: OrderedDict[str, Dict[str, Any]] = OrderedDict()
+        self._runs: typing.OrderedDict[str, Dict[str, Any]] = OrderedDict()
 
     def _entry(self, run: str) -> Dict[str, Any]:
         entry = self._runs.get(run)

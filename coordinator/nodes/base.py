@@ -202,8 +202,9 @@ def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str,
 
     t = TYPES[type_name]
     out: List[Tuple[int, str]] = []
-    for value, arg, include in types.bound[ref.key].get(at.file, ()):
-        v = int(value) if type_name == "count" and isinstance(value, float) and value.is_integer() else value
+    for given, arg, include in types.bound[ref.key].get(at.file, ()):
+        whole = type_name == "count" and isinstance(given, float) and given.is_integer()
+        v = int(given) if whole else given
         long = isinstance(v, list) and limit is not None and len(v) > limit
         if not long and (isinstance(v, list) if t.ok is None else t.ok(v)):
             continue
@@ -219,7 +220,7 @@ def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str,
             risk, fix = "a run that does not set the input fails here; ", fix.replace("the input", "it")
         said = ("has %d elements (%s), more than max %d: %sraise max: to %d, or %s" % (
             len(v), origin, limit, risk, len(v), fix) if long else
-            "is %s (%s), not %s: %s%s" % (brief(value), origin, t.expect or "a list", risk, fix))
+            "is %s (%s), not %s: %s%s" % (brief(given), origin, t.expect or "a list", risk, fix))
         out.append((0, "%s%s %s %s" % (warn, label, ref, said)))
     return out
 
