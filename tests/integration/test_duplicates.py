@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 
 from modules.discovery import live_modules
+from tests.conftest import until
 from tests.integration.faultkit import PROBE_CLASS, PROBE_JSON, start_probe
 
 
@@ -20,8 +21,12 @@ def test_a_node_kicked_out_by_its_name_says_so_and_keeps_the_new_announcement(ro
     assert first.wait(30) == 3
     assert "another node registered with this node's name /bm_dup" in _log(ros_graph, "bm_dup")
     ros_graph.wait_node("/bm_dup")
-    live = live_modules()
-    assert "probe" in live and live["probe"].node == "/bm_dup" and live["probe"].uri != before.uri
+
+    def announced() -> bool:   # (the new node registers, then announces: a moment apart under load)
+        live = live_modules()
+        return "probe" in live and live["probe"].node == "/bm_dup" and live["probe"].uri != before.uri
+
+    until(announced, 20, lambda: _log(ros_graph, "bm_dup"))
 
 
 def test_a_second_node_for_a_running_module_refuses_to_start(ros_graph):
