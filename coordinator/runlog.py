@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
 from comm.errors import InvalidInput
+from comm.nodelife import registering
 from coordinator.runstream import Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
@@ -187,8 +188,9 @@ class RunLogWriter(Sink):
 
     def flush(self) -> None:
         if self._batch:
-            self._queue.put(self._batch)
-            self._batch = []
+            with registering():   # a Ctrl-C between the put and the reset would write the batch twice
+                self._queue.put(self._batch)
+                self._batch = []
 
     def _write_loop(self) -> None:
         while True:
