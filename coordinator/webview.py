@@ -15,6 +15,7 @@ printed. ``watch --web`` keeps serving the run's end after it, while no page has
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import socket
@@ -127,7 +128,13 @@ class WebServer:
                     return
                 self._json(200, server.control(cmd))
 
-        self.httpd = _Server((bind, port), Handler)
+        try:
+            self.httpd = _Server((bind, port), Handler)
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                raise
+            raise OSError("port %d on %s is taken (another bmtree watch --web or replay --web?): give --port 0 "
+                          "for any free port, or another --port" % (port, bind)) from None
         host, real_port = self.httpd.server_address[:2]
         self.url = "http://%s:%d/" % ("127.0.0.1" if host in ("0.0.0.0", "") else host, real_port)
         #: how other machines reach the page when it listens on every address (ROS_IP or

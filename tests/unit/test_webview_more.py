@@ -183,3 +183,16 @@ def test_a_failed_runs_replay_knows_the_failure_that_ended_it(sim_defs, tmp_path
         assert _get(server, "state?at=%.2f" % (whole["duration"] + 0.005))["end"]["status"] == "FAILURE"
     finally:
         server.close()
+
+
+def test_a_taken_port_says_which_and_how_to_get_a_free_one():
+    """A second ``watch --web`` on one host said only ``[Errno 98] Address already in use``."""
+    first = WebServer(WatchState(), "127.0.0.1", 0, out=io.StringIO())
+    try:
+        port = first.httpd.server_address[1]
+        with pytest.raises(OSError) as caught:
+            WebServer(WatchState(), "127.0.0.1", port, out=io.StringIO())
+        assert str(caught.value) == ("port %d on 127.0.0.1 is taken (another bmtree watch --web or replay --web?): "
+                                     "give --port 0 for any free port, or another --port" % port)
+    finally:
+        first.close()
