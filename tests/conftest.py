@@ -50,3 +50,15 @@ def until(check, timeout=10.0, said=None):
     while not check():
         assert time.monotonic() < end, "condition not met within %gs%s" % (timeout, "\n" + said() if said else "")
         time.sleep(0.02)
+
+
+def one_file_trees(tmp_path, bmtree_tree, definitions):
+    """``make(root_yaml, inputs_yaml="", **kwargs)`` -> a TreeTest of a one-file tree ``t.yaml`` (with
+    ``definitions``): the ``tree`` fixture of the language tests, each with its own modules."""
+
+    def make(root: str, inputs: str = "", **kwargs):
+        path = tmp_path / "t.yaml"
+        path.write_text("format: 1\n" + ("inputs:\n" + inputs if inputs else "") + "root:\n" + root)
+        return bmtree_tree(str(path), definitions=definitions, **kwargs)
+
+    return make

@@ -11,6 +11,7 @@ from coordinator.schema import json_schema
 from coordinator.testing import hang, reject, succeed
 from modules.definition import load_definitions, parse_definition
 from modules.sim import SIM_DIR
+from tests.conftest import one_file_trees
 
 ARM = parse_definition({
     "Basic Module": "arm",
@@ -50,13 +51,7 @@ GRASP = """
 @pytest.fixture
 def tree(tmp_path, bmtree_tree):
     """``tree(root_yaml, inputs_yaml="")`` -> a TreeTest of a one-file tree with the arm module."""
-
-    def make(root: str, inputs: str = ""):
-        path = tmp_path / "t.yaml"
-        path.write_text("format: 1\n" + ("inputs:\n" + inputs if inputs else "") + "root:\n" + root)
-        return bmtree_tree(str(path), definitions=DEFS)
-
-    return make
+    return one_file_trees(tmp_path, bmtree_tree, DEFS)
 
 
 def errors_of(tmp_path, root: str):

@@ -20,7 +20,7 @@ from coordinator.testing.kit import Coverage
 from coordinator.treeast import walk
 from modules.definition import load_definitions, parse_definition
 from modules.sim import SIM_DIR
-from tests.conftest import TREES
+from tests.conftest import TREES, one_file_trees
 from tests.unit.test_check_messages import check
 from tests.unit.test_recording import _args, recorded
 
@@ -47,13 +47,7 @@ DEFS = dict(load_definitions([SIM_DIR]), arm=ARM)
 @pytest.fixture
 def tree(tmp_path, bmtree_tree):
     """``tree(root_yaml, inputs_yaml="", **kwargs)`` -> a TreeTest of a one-file tree with the arm module."""
-
-    def make(root: str, inputs: str = "", **kwargs):
-        path = tmp_path / "t.yaml"
-        path.write_text("format: 1\n" + ("inputs:\n" + inputs if inputs else "") + "root:\n" + root)
-        return bmtree_tree(str(path), definitions=DEFS, **kwargs)
-
-    return make
+    return one_file_trees(tmp_path, bmtree_tree, DEFS)
 
 
 def bad(tmp_path, root: str) -> List[str]:

@@ -14,7 +14,7 @@ from coordinator.language import load_tree
 from coordinator.testing import fail, succeed
 from modules.definition import load_definitions
 from modules.sim import SIM_DIR
-from tests.conftest import DATA, TREES
+from tests.conftest import DATA, TREES, one_file_trees
 
 FIND_APPLE = os.path.join(TREES, "find_apple.yaml")
 INVITE = os.path.join(TREES, "invite_to_dining_room.yaml")
@@ -24,13 +24,7 @@ DEFS = load_definitions([SIM_DIR, os.path.join(DATA, "modules_lang")])
 @pytest.fixture
 def tree(tmp_path, bmtree_tree):
     """``tree(root_yaml, inputs_yaml="")`` -> a TreeTest of a one-file tree with the test modules."""
-
-    def make(root: str, inputs: str = "", **kwargs):
-        path = tmp_path / "t.yaml"
-        path.write_text("format: 1\n" + ("inputs:\n" + inputs if inputs else "") + "root:\n" + root)
-        return bmtree_tree(str(path), definitions=DEFS, **kwargs)
-
-    return make
+    return one_file_trees(tmp_path, bmtree_tree, DEFS)
 
 
 def errors_of(tmp_path, text: str):
