@@ -27,7 +27,8 @@ from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["CallRecord", "RecordStatus", "RunContext", "WAKE", "plain"]
+__all__ = ["CallRecord", "LATE_ANSWER", "RecordStatus", "RunContext", "WAKE", "late_answer_text",
+           "plain"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -81,6 +82,12 @@ class CallRecord:
     function: Optional[FunctionDefinition] = None
     result: Optional[FunctionResult] = None
     owner: Any = None             # the behaviour that made the call
+    # an answer that came after the call had ended unanswered (timed out, halted, module lost), other than
+    # the ``cancelled`` that answers the coordinator's cancel: the module ran the call (or refused it) after all
+    late_status: Optional[RecordStatus] = None
+    late_at: Optional[float] = None   # when it came (clock time, as ``started``)
+    late_error: str = ""
+    late_result: Optional[FunctionResult] = None
 
     @property
     def inputs(self) -> Dict[str, Any]:
@@ -98,6 +105,29 @@ class CallRecord:
         if self.ended is None:
             return None
         return (self.answered if self.answered is not None else self.ended) - self.started
+
+
+LATE_ANSWER = "late_answer"
+"""The ``what`` of the notice of a late answer (:func:`late_answer_text`)."""
+
+_ENDED: Dict[str, str] = {RecordStatus.TIMEOUT: "timed out", RecordStatus.HALTED: "halted",
+                          RecordStatus.MODULE_LOST: "given up as module_lost"}
+_MEANING: Dict[str, str] = {RecordStatus.SUCCEEDED: "the module did run it", RecordStatus.FAILED: "the module did run it",
+                            RecordStatus.REJECTED: "the module did not run it"}
+
+
+def late_answer_text(rec: CallRecord, start: float) -> str:
+    """The notice of ``rec``'s late answer, times from the run's ``start``: ``navigation.go_to (call
+    1b26…, timed out at 6.00s) answered succeeded at 7.40s: the module did run it``."""
+    ended = (rec.ended if rec.ended is not None else start) - start
+    at = (rec.late_at if rec.late_at is not None else start) - start
+    answered = "answered %s%s" % (rec.late_status, " (%s)" % rec.late_error if rec.late_error else "")
+    if rec.status == RecordStatus.HALTED:
+        answered += " after it was cancelled,"
+    meaning = _MEANING.get(str(rec.late_status), "")
+    return "%s (call %s, %s at %.2fs) %s at %.2fs%s" % (rec.target, rec.call_id,
+                                                      _ENDED.get(str(rec.status), "ended %s" % rec.status), ended,
+                                                      answered, at, ": " + meaning if meaning else "")
 
 
 class RunContext:
@@ -130,6 +160,7 @@ class RunContext:
         self.unstored: typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]] = OrderedDict()
         self._asked: Dict[str, typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]]] = {}
         self.lost: Dict[str, Tuple[str, str]] = {}  # Blackboard name -> (module.function, call_id) it lost
+        self.started = clock.now()  # the run's start (the runner sets it at its first tick): for notice texts
 
     # values ------------------------------------------------------------------------
     def lookup(self, key: str) -> Any:
@@ -233,9 +264,8 @@ class RunContext:
             if rec is None:
                 self.dropped.append(item)
                 ended = self._ended.get(item.call_id or "")
-                if ended is not None:  # expected: the answer to a cancel, or one that came too late
-                    log.debug("a late answer (%s) to call %s of %s, which had ended %s", item.status, item.call_id,
-                              ended.target, ended.status)
+                if ended is not None:  # the answer to a cancel, or one that came too late
+                    self._late(ended, item)
                     return
                 log.warning("dropped a result that matches no pending call (call_id %s, module %s, function %s, "
                             "outputs %s, from node %s)", item.call_id, item.basic_mod, item.function,
@@ -274,6 +304,29 @@ class RunContext:
                 lost = BlackboardAnswer(request_id=request_id, error="Blackboard node lost: %s" % item.reason)
                 self._confirmed(lost)
                 self.answers.setdefault(request_id, lost)
+
+    def _late(self, rec: CallRecord, result: FunctionResult) -> None:
+        """An answer to ``rec``, which had ended unanswered: ``cancelled`` answers the coordinator's cancel
+        (expected); any other is kept on the record and told as a ``late_answer`` notice, since the module
+        ran the call (or refused it) after all, and a ``retry`` may have sent it again meanwhile."""
+        fn = rec.function
+        if fn is not None and (result.basic_mod not in (None, fn.module) or result.function not in (None, fn.name)):
+            log.warning("ignored a result of %s.%s carrying the id of call %s to %s", result.basic_mod,
+                        result.function, result.call_id, fn.qualified)
+            return
+        if result.status == RecordStatus.CANCELLED or rec.late_status is not None:
+            log.debug("a late answer (%s) to call %s of %s, which had ended %s", result.status, result.call_id,
+                      rec.target, rec.status)
+            return
+        rec.late_status = RecordStatus(result.status)
+        rec.late_at = self.clock.now()
+        rec.late_error = result.error or ""
+        rec.late_result = result
+        notice = Notice(LATE_ANSWER, late_answer_text(rec, self.started), rec.call_id)
+        log.info("%s", notice.text)
+        self.notices.append(notice)
+        if self.observers:
+            notify(self.observers, "on_notice", notice, rec.late_at)
 
     def correlate(self, result: FunctionResult) -> Optional[CallRecord]:
         """The pending call a result answers (DESIGN §2, README "Correlation").

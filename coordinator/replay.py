@@ -14,15 +14,16 @@ import os
 import re
 import sys
 import types
-from typing import Any, Callable, Dict, List, NamedTuple, Optional, TextIO, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Set, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
 
+from coordinator.context import LATE_ANSWER
 from coordinator.reasons import FailureTrail, originates
 from coordinator.runevents import Notice, RunObserver, control_line
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
-from coordinator.runner import Display, call_line, short_json, stop_label
+from coordinator.runner import Display, call_line, late_line, short_json, stop_label
 
 __all__ = ["Replay", "find_run", "cmd_runs", "cmd_replay"]
 
@@ -441,17 +442,25 @@ def _report(replay: Replay, out: TextIO) -> None:
     ended, _others = replay.failures()
     failing = replay.failing_call(ended)[0] if ended is not None else None
     _stop_tick, _what, label = _stop(replay)
+    late = {str(n.get("call_id")): n for n in replay.notices if n.get("what") == LATE_ANSWER and n.get("call_id")}
+    listed: Set[str] = set()  # the calls whose late answer is listed under them
     out.write("calls:\n")
     for c in replay.finished:
         status, error = label(c)
         out.write(call_line(float(c.get("started") or 0.0), c.get("target"), status, float(c.get("duration") or 0.0),
                             error, failing.get("inputs") if failing is not None
                             and failing.get("call_id") == c.get("call_id") else None) + "\n")
+        answer = late.get(str(c.get("call_id")))  # the answer that came after the call had ended
+        if answer is not None:
+            listed.add(str(c.get("call_id")))
+            out.write(late_line(str(answer.get("text"))) + "\n")
     for c in replay.pending.values():
         out.write("  +%7.3fs  %-26s %-11s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
-    if replay.notices:
+    graph = [n for n in replay.notices  # late answers are listed under their calls
+             if n.get("what") != LATE_ANSWER or str(n.get("call_id")) not in listed]
+    if graph:
         out.write("the ROS graph:\n")
-        for n in replay.notices:
+        for n in graph:
             out.write("  +%7.3fs  %s\n" % (float(n.get("t") or 0.0), n.get("text")))
     if replay.control:
         out.write("control:\n")

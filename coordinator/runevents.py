@@ -26,10 +26,13 @@ Change = Tuple[Any, Status, Status]  # (behaviour, old status, new status)
 @dataclass
 class Notice:
     """Something that happened to the ROS graph under the run, which explains what follows
-    (the master went away, came back), delivered by the transport like a result."""
+    (the master went away, came back), delivered by the transport like a result; or an answer
+    that came after its call had ended (``late_answer``, made by the run context: the module ran a
+    call the run had given up on, and a ``retry`` may have sent it again)."""
 
-    what: str   # master_down, master_back, other_run
+    what: str   # master_down, master_back, other_run, blackboard_down, blackboard_back, late_answer
     text: str
+    call_id: str = ""   # the call a late answer answers
 
 
 class RunObserver:
@@ -69,7 +72,8 @@ class RunObserver:
         """A control command was answered (``bmtree run --control``): command, args, ok, answer, by."""
 
     def on_notice(self, notice: Notice, now: float) -> None:
-        """The transport noticed something about the ROS graph (a :class:`Notice`)."""
+        """The transport noticed something about the ROS graph, or a call was answered after it had
+        ended (a :class:`Notice`)."""
 
 
 def control_line(record: Dict[str, Any]) -> str:

@@ -16,13 +16,13 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, Tuple
 import py_trees
 from py_trees.common import Status
 
-from coordinator.context import WAKE, CallRecord, RunContext
+from coordinator.context import WAKE, CallRecord, RunContext, late_answer_text
 from coordinator.reasons import FailureExplainer
 from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
 from coordinator.running import while_running
 
-__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line", "short_json",
-           "stop_label", "summary_lines"]
+__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line", "late_line",
+           "short_json", "stop_label", "summary_lines"]
 
 
 @dataclass
@@ -105,6 +105,12 @@ def call_line(started: float, target: Any, status: Any, duration: Optional[float
     return line.rstrip()
 
 
+def late_line(text: str) -> str:
+    """Under its call in an end-of-run summary (live and ``bmtree replay``): the answer that came after
+    the call had ended (``text``: its notice, which says when). Not a call's line: no ``+`` time."""
+    return " " * 14 + "late answer: " + text
+
+
 def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
     """(status, error) shown for a call halted because the run was stopped from outside, instead of
     the call's own "halted by the tree": ``interrupted`` for Ctrl-C, the limit for ``max_duration``."""
@@ -127,6 +133,8 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
             status, error = stop_label(result.status == Status.INVALID, result.reason)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
+        if c.late_at is not None:
+            lines.append(late_line(late_answer_text(c, result.started)))
     return lines
 
 
@@ -255,7 +263,7 @@ class TreeRunner:
         ctx = self.ctx
         ctx.transport.connect(ctx.inbox.put)
         self.tree.setup()
-        start = ctx.clock.now()
+        start = ctx.started = ctx.clock.now()  # the notices of late answers say times from here
         if ctx.observers:
             notify(ctx.observers, "on_start", self.tree_file, self.root, ctx)
         reason = ""

@@ -238,8 +238,11 @@ class RunStream(RunObserver):
 
     def on_notice(self, notice: Any, now: float) -> None:
         if self._open:
-            self._emit("events", {"v": VERSION, "type": "notice", "run": self.run_id, "t": self._t(now),
-                                  "what": notice.what, "text": notice.text})
+            record = {"v": VERSION, "type": "notice", "run": self.run_id, "t": self._t(now),
+                      "what": notice.what, "text": notice.text}
+            if getattr(notice, "call_id", ""):
+                record["call_id"] = notice.call_id
+            self._emit("events", record)
 
     def on_control(self, record: Any, now: float) -> None:
         if self._open:
