@@ -36,7 +36,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from comm.rpc import PidLine, proxy, wait_closed
 
-__all__ = ["MasterWatch", "watch_master"]
+__all__ = ["MasterWatch", "watch_master", "current_watch"]
 
 log = logging.getLogger("bmtree.master")
 
@@ -63,6 +63,7 @@ class MasterWatch:
         self.on_restart: List[Callable[[], None]] = []  # after registering again
         self.on_down: List[Callable[[], None]] = []     # when the master stops answering
         self.restarts = 0
+        self.down = False  # the master does not answer now (as far as this watch knows)
         self._pid: Optional[int] = None
         self._line = PidLine(self.master_uri, timeout, "/bmtree_masterwatch")
         self._stop = threading.Event()
@@ -109,18 +110,18 @@ class MasterWatch:
                 if not down:
                     log.warning("the ROS master at %s does not answer; waiting for it to come back", self.master_uri)
                     self._call(self.on_down)
-                down = True
+                down = self.down = True
                 continue
             if down or pid != self._pid:
                 try:
                     self.register_again()
                 except Exception as exc:  # the master went away again: retry next period
                     log.warning("could not register again with the ROS master: %s", exc)
-                    down = True
+                    down = self.down = True
                     continue
                 self._pid = pid
                 self.restarts += 1
-            down = False
+            down = self.down = False
 
     @staticmethod
     def _call(hooks: List[Callable[[], None]]) -> None:
@@ -158,6 +159,11 @@ class MasterWatch:
 
 
 _WATCH: Optional[MasterWatch] = None
+
+
+def current_watch() -> Optional[MasterWatch]:
+    """The process's MasterWatch, if :func:`watch_master` made one."""
+    return _WATCH
 
 
 def watch_master(period: float = 0.5) -> MasterWatch:

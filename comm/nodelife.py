@@ -22,14 +22,24 @@ from __future__ import annotations
 
 import contextlib
 import faulthandler
+import logging
 import os
 import select
 import signal
 import sys
 import threading
+import time
 from typing import Any, Callable, Dict, Iterator, List, Optional
 
-__all__ = ["Interrupts", "StopSignals", "registering", "stop_requested"]
+__all__ = ["Interrupts", "StopSignals", "registering", "stop_requested", "leave_graph", "bound_master_questions",
+           "LEAVE_BOUND"]
+
+log = logging.getLogger("bmtree.nodelife")
+
+#: seconds a signal re-sent after another still counts as the same stop (a parent killed with
+#: threads re-sends ``PR_SET_PDEATHSIG`` as each of its threads ends; a person's second Ctrl-C
+#: comes later)
+BURST = 0.25
 
 _installed: Optional[StopSignals] = None
 
@@ -42,6 +52,7 @@ class StopSignals:
         global _installed
         _installed = self
         self._stopped = False
+        self.signalled_at: Optional[float] = None  # monotonic time of the (first) stop signal
         self._read_fd, self._write_fd = os.pipe()
         os.set_blocking(self._write_fd, False)
         self.signal: Optional[int] = None
@@ -59,6 +70,8 @@ class StopSignals:
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.signal = signum
+        if self.signalled_at is None:
+            self.signalled_at = time.monotonic()
         self._wake()
 
     def _wake(self) -> None:
@@ -99,12 +112,13 @@ class StopSignals:
         import rosgraph
 
         from comm.nodeopts import node_params
+        from comm.rpc import master_answers
 
         if not node_params(sys.argv[1:], None):  # None: the arguments only, the master is not asked
             return True
         said = False
         while not self._stopped:
-            if rosgraph.is_master_online():
+            if master_answers(1.0):  # bounded: a master stopped or unreachable must not hold a stop
                 return True
             if not said:
                 sys.stderr.write("waiting for the ROS master at %s (this node's _name:=value parameters go "
@@ -173,12 +187,18 @@ class Interrupts:
     rospy registering a topic with the master must not be cut short half-way: the master would
     keep a registration that the process never unregisters (every later run and watch then
     waits for a node that is gone). Inside ``registering()`` the signal is noted and raised
-    when the block ends. :meth:`restore` puts the previous handlers back.
+    when the block ends. A registration waits for a master that does not answer (stopped, or its
+    machine unreachable) for as long as it does not: a second signal there (not one re-sent in
+    the same burst) ends the process at once with ``exit_code``. :meth:`restore` puts the previous
+    handlers back.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, exit_code: int = 3) -> None:
         global _interrupts
+        self.exit_code = exit_code
+        self.last_signal: Optional[float] = None  # monotonic time of the last stop signal
         self._depth = 0
+        self._patient = 0  # depth of held(again_exits=False)
         self._pending = False
         self._previous: Dict[int, Any] = {}
         #: called (in the signal handler: take no lock) when a signal is held inside ``registering()``
@@ -189,7 +209,14 @@ class Interrupts:
         _interrupts = self
 
     def _on_signal(self, signum: int, frame: Any) -> None:
+        now = time.monotonic()
+        again = self.last_signal is not None and now - self.last_signal >= BURST
+        if self.last_signal is None or again:
+            self.last_signal = now
         if self._depth:
+            if self._pending and again and not self._patient:
+                _exit_now("interrupted again while registering with the ROS master at %s: exiting at once "
+                          "(what this process registered stays there)" % _master_uri(), self.exit_code)
             self._pending = True
             for hook in list(self.on_held):
                 hook()
@@ -197,15 +224,20 @@ class Interrupts:
         raise KeyboardInterrupt
 
     @contextlib.contextmanager
-    def held(self) -> Iterator[None]:
+    def held(self, again_exits: bool = True) -> Iterator[None]:
+        """A block that a stop signal does not cut short (raised when it ends); with
+        ``again_exits``, a second one ends the process at once (a registration that waits for a
+        master that does not answer); without, it is held too (a block that cannot hang)."""
         if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
             yield
             return
         self._depth += 1
+        self._patient += 0 if again_exits else 1
         try:
             yield
         finally:
             self._depth -= 1
+            self._patient -= 0 if again_exits else 1
             if not self._depth and self._pending:
                 self._pending = False
                 raise KeyboardInterrupt
@@ -225,3 +257,150 @@ def registering() -> Any:
     """A block in which a process's :class:`Interrupts` hold a stop signal until the block ends
     (wrap rospy's ``init_node``, ``Publisher`` and ``Subscriber`` in it); a plain block otherwise."""
     return _interrupts.held() if _interrupts is not None else contextlib.nullcontext()
+
+
+def _master_uri() -> str:
+    return os.environ.get("ROS_MASTER_URI", "http://localhost:11311/")
+
+
+def _exit_now(text: str, code: int) -> None:
+    """End the process from a signal handler: one line to stderr's descriptor (the main thread may
+    be inside a write to ``sys.stderr``), no clean-up (it could wait for the master again)."""
+    try:
+        sys.stdout.flush()
+    except Exception:  # interrupted inside a write of its own
+        pass
+    try:
+        os.write(2, (text + "\n").encode("utf-8", "replace"))
+    except OSError:
+        pass
+    os._exit(code)
+
+
+#: seconds the master has to answer each question of a process that leaves the graph
+LEAVE_BOUND = 2.0
+#: seconds after which leaving is given up whatever it waits for (a lock that a thread stuck
+#: in a master question holds)
+LEAVE_LIMIT = 10.0
+#: what a master that does not answer keeps of a process that left without unregistering
+LEFT_BEHIND = ("should it answer again, it keeps this node's registrations until `rosnode cleanup`, a restarted "
+               "master has none; bmtree passes over nodes that do not answer")
+
+
+def leave_graph(steps: Callable[[], None], say: Callable[[str], None], master_down: bool = False,
+                stopped_at: Optional[float] = None, bound: float = LEAVE_BOUND) -> bool:
+    """Leave the ROS graph: ``steps`` (unregister this process's topics, shut rospy down), bounded.
+
+    rospy asks the master with no timeout, and a master that does not answer (its machine off
+    the network, its process stopped) held a leaving process for minutes, Ctrl-C and SIGTERM
+    included. Here rospy's questions to the master give up after ``bound`` seconds, and once one
+    went unanswered (or at once with ``master_down``, when it is known not to answer) the others
+    fail at once: the process says so in one line and leaves without unregistering. The process's
+    :class:`~comm.masterwatch.MasterWatch` is stopped first (it would register again what is
+    being unregistered).
+
+    ``steps`` run in a thread of their own; the main thread waits for them and notes SIGINT and
+    SIGTERM meanwhile: a second stop (one after ``stopped_at``, the monotonic time of the signal
+    that stopped the process, if one did) ends the wait at once. Signals re-sent within
+    :data:`BURST` seconds count once. True when every question was answered.
+    """
+    from comm.masterwatch import current_watch
+
+    watch = current_watch()
+    if watch is not None:
+        master_down = master_down or watch.down
+        watch.stop()
+    proxies = bound_master_questions(bound, sticky=True, dead=master_down)
+    done = threading.Event()
+
+    def work() -> None:
+        try:
+            steps()
+        except Exception as exc:  # a master that went away: what is left is the process's end
+            log.debug("leaving the ROS graph: %s", exc)
+        finally:
+            done.set()
+
+    last = [stopped_at]
+    count = [0]
+
+    def on_signal(signum: int, frame: Any) -> None:
+        now = time.monotonic()
+        if last[0] is None or now - last[0] >= BURST:
+            last[0] = now
+            count[0] += 1
+
+    previous: Dict[int, Any] = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, on_signal)
+    why = ""
+    try:
+        threading.Thread(target=work, name="bmtree-leave", daemon=True).start()
+        start = time.monotonic()
+        failed_at: Optional[float] = None
+        told = False
+        while not done.wait(0.05):
+            now = time.monotonic()
+            if count[0] >= (1 if stopped_at is not None else 2):
+                why = "stopped"
+                break
+            if count[0] and not told:
+                say("leaving the ROS graph (unregistering from the master); a second Ctrl-C leaves at once ...")
+                told = True
+            if failed_at is None and any(p.failed for p in proxies):
+                failed_at = now
+            if (failed_at is not None and now - failed_at > bound) or now - start > LEAVE_LIMIT:
+                why = "stuck"
+                break
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    unanswered = master_down or any(p.failed for p in proxies)
+    if why:
+        _abandon()
+    if why == "stopped":
+        say("stopped again: leaving without unregistering from the ROS master at %s (%s)" % (_master_uri(),
+                                                                                           LEFT_BEHIND))
+    elif unanswered:
+        say("the ROS master at %s does not answer: leaving without unregistering (%s)" % (_master_uri(),
+                                                                                        LEFT_BEHIND))
+    elif why:
+        say("leaving the ROS graph did not end within %g s: leaving as it is" % LEAVE_LIMIT)
+    return not why and not unanswered
+
+
+def bound_master_questions(timeout: float, sticky: bool = False, dead: bool = False) -> List[Any]:
+    """Give rospy's questions to the master (registering, unregistering, parameters) a timeout:
+    a :class:`comm.rpc.MasterProxy` in place of rospy's proxy of the master, which rospy looks up
+    (``rospy.core.xmlrpcapi(master_uri)``) for every question; before ``init_node`` too. The
+    proxies put in place; [] without rospy."""
+    try:
+        import rosgraph
+        import rospy.core
+        from rospy.impl.registration import RegManager
+
+        cache = rospy.core._xmlrpc_cache
+        lock = rospy.core._xmlrpc_lock
+    except (ImportError, AttributeError):
+        return []
+    from comm.rpc import MasterProxy
+
+    managers = [getattr(h, "__self__", None) for h in getattr(rospy.core, "_preshutdown_hooks", [])]
+    uris = {rosgraph.get_master_uri()} | {m.master_uri for m in managers if isinstance(m, RegManager) and m.master_uri}
+    proxies = []
+    with lock:
+        for uri in uris:
+            cache[uri] = MasterProxy(uri, timeout, sticky, dead)
+            proxies.append(cache[uri])
+    return proxies
+
+
+def _abandon() -> None:
+    """Leaving was given up: rospy's exit handler must not ask the master again (no timeout)."""
+    try:
+        import rospy.core
+
+        rospy.core._shutdown_flag = True
+    except ImportError:
+        pass

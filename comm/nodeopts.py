@@ -15,6 +15,7 @@ import os
 import xmlrpc.client
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
+from comm.address import warn_own_address
 from comm.rpc import proxy
 
 __all__ = ["myargv", "private_namespace", "parse_node_args", "node_params", "fill_from_params", "seconds", "factor",
@@ -165,9 +166,14 @@ def parse_node_args(parser: argparse.ArgumentParser, argv: Sequence[str], defaul
 
     Positional arguments made optional (``nargs="?"``) can come from parameters too. A
     parameter with a wrong type (``_keep:=many``) is a usage error, exit 2, like a bad option.
+    The node starts next: an advertised address the other nodes cannot reach (a loopback
+    ``ROS_IP`` while the master is on another machine) is warned of here, once per process
+    (:func:`comm.address.warn_own_address`).
     """
     plain = myargv(argv)
-    return fill_from_params(parser, parser.parse_args(plain), plain, _private_params(argv, default_name, timeout))
+    args = fill_from_params(parser, parser.parse_args(plain), plain, _private_params(argv, default_name, timeout))
+    warn_own_address()
+    return args
 
 
 def node_params(argv: Sequence[str], default_name: Optional[str], timeout: float = 2.0) -> Dict[str, Any]:

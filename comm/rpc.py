@@ -1,14 +1,21 @@
 """XML-RPC to ROS nodes and the master with a timeout: a hung peer must not hang the caller."""
 from __future__ import annotations
 
+import errno
 import http.client
 import selectors
 import socket
+import threading
 import urllib.parse
 import xmlrpc.client
 from typing import Any, Mapping, Optional, Set, Tuple
 
-__all__ = ["proxy", "node_alive", "PidLine", "wait_closed"]
+__all__ = ["proxy", "node_alive", "PidLine", "wait_closed", "MASTER_TIMEOUT", "master_api", "master_answers",
+           "MasterProxy"]
+
+#: seconds a question to the master may take: a master whose machine dropped off the network, or
+#: whose process is stopped, answers nothing, and rosgraph's own proxy waits for ever
+MASTER_TIMEOUT = 3.0
 
 
 class _TimeoutTransport(xmlrpc.client.Transport):
@@ -32,8 +39,59 @@ def node_alive(uri: str, timeout: float = 1.0) -> bool:
     try:
         code, _, _ = proxy(uri, timeout).getPid("/bmtree")
         return code == 1
-    except (OSError, socket.timeout, xmlrpc.client.Error):
+    except (OSError, socket.timeout, xmlrpc.client.Error, http.client.HTTPException):
         return False
+
+
+def master_api(caller_id: str, timeout: float = MASTER_TIMEOUT, master_uri: Optional[str] = None) -> Any:
+    """A ``rosgraph.Master`` whose every query gives up after ``timeout`` seconds (``socket.timeout``,
+    an OSError, as a refused connection is)."""
+    import rosgraph
+
+    master = rosgraph.Master(caller_id, master_uri=master_uri)
+    master.handle = proxy(master.master_uri, timeout)
+    return master
+
+
+def master_answers(timeout: float, master_uri: Optional[str] = None) -> bool:
+    """True if the master answers ``getPid`` within ``timeout`` seconds. ``rosgraph.is_master_online``
+    has no timeout (a master that is unreachable or stopped holds it for minutes, or for ever) and
+    swallows KeyboardInterrupt; a Ctrl-C here is raised."""
+    import rosgraph
+
+    try:
+        code, _, _ = proxy(master_uri or rosgraph.get_master_uri(), timeout).getPid("/bmtree")
+        return code == 1
+    except (OSError, http.client.HTTPException, xmlrpc.client.Error):
+        return False
+
+
+class MasterProxy(xmlrpc.client.ServerProxy):
+    """A proxy of the master for rospy's cache (``rospy.core._xmlrpc_cache``, which every master
+    question of rospy goes through; rospy's own has no timeout): a question gives up after
+    ``timeout`` seconds, raising an OSError (rospy retries a registration then, for as long as it
+    is not shut down). With ``sticky`` (a process leaving the graph), once one went unanswered
+    (or at once with ``dead``: the master is known not to answer) every later one fails at once,
+    so unregistering N topics from a master that does not answer costs ``timeout`` seconds, not
+    N times rospy's none. Serialized by a lock, as rospy's own."""
+
+    def __init__(self, uri: str, timeout: float, sticky: bool = False, dead: bool = False):
+        super().__init__(uri, transport=_TimeoutTransport(timeout))
+        self._lock = threading.Lock()
+        self.sticky = sticky
+        self.failed = dead  # a question went unanswered (with ``sticky``: every later one fails)
+
+    def _ServerProxy__request(self, methodname: str, params: Any) -> Any:
+        with self._lock:
+            if self.failed and self.sticky:  # (errno, text): rospy's unregistering unpacks a socket error so
+                raise OSError(errno.ETIMEDOUT, "the ROS master did not answer an earlier question")
+            try:
+                return xmlrpc.client.ServerProxy._ServerProxy__request(  # type: ignore[attr-defined]
+                    self, methodname, params)
+            except (OSError, http.client.HTTPException) as exc:
+                self.failed = True
+                raise OSError(getattr(exc, "errno", None) or errno.ETIMEDOUT, "the ROS master did not answer (%s)"
+                              % (exc or type(exc).__name__)) from exc
 
 
 KEEPALIVE = (("TCP_KEEPIDLE", 5), ("TCP_KEEPINTVL", 2), ("TCP_KEEPCNT", 3))  # a dead peer noticed in ~11 s

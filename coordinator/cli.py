@@ -141,8 +141,10 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 # modules ---------------------------------------------------------------------------------
-def _print_module(d: ModuleDefinition, where: str) -> None:
+def _print_module(d: ModuleDefinition, where: str, at: str = "") -> None:
     print("%s  (%s)" % (d.name, where))
+    if at:
+        print("    at %s" % at)
     if d.brief:
         print("    %s" % d.brief)
     for fn in d.functions.values():
@@ -155,16 +157,23 @@ def _print_module(d: ModuleDefinition, where: str) -> None:
 
 def cmd_modules(args: argparse.Namespace) -> int:
     if args.live:
-        from modules.discovery import live_modules
+        from comm.address import node_address_problem, warn_own_address
+        from modules.discovery import listed_modules
 
         if not master_up(args.wait):
             err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
             return EXIT_ENV
-        live = live_modules()
-        if not live:
+        warn_own_address()
+        live, unreachable = listed_modules()
+        if not live and not unreachable:
             print("no modules running on %s" % os.environ.get("ROS_MASTER_URI", "?"))
         for m in live.values():
-            _print_module(m.definition, "node %s%s" % (m.node, ", original module" if m.legacy else ""))
+            _print_module(m.definition, "node %s%s" % (m.node, ", original module" if m.legacy else ""), m.uri)
+            why = node_address_problem(m.node, m.uri, "")  # answers here, but not the others (loopback)
+            if why:
+                print("    warning: %s" % why)
+        for name, (m, why) in unreachable.items():  # it runs, but its address cannot be reached from here
+            print("%s  (node %s, unreachable)\n    %s" % (name, m.node, why))
         return EXIT_OK
     defs = load_definitions(args.paths) if args.paths else definitions_from(None)
     for d in defs.values():

@@ -76,19 +76,31 @@ def check_master_uri() -> None:
                                  "http://localhost:11311/" % uri)
 
 
+#: seconds one question to the master may take while bmtree waits for it (one that is stopped, or
+#: whose machine is unreachable, answers nothing: rosgraph's own check waited minutes, Ctrl-C ignored)
+MASTER_QUESTION = 1.0
+
+
 def master_up(timeout: float) -> bool:
+    """True once the master answers; False when it did not within ``timeout`` seconds (at most
+    about a second more: every question is bounded). A Ctrl-C meanwhile is raised."""
     import time
 
     import rosgraph
 
+    from comm.rpc import master_answers
+
     check_master_uri()
+    uri = rosgraph.get_master_uri()
     end = time.monotonic() + timeout
     while True:
-        if rosgraph.is_master_online():
+        left = end - time.monotonic()
+        if master_answers(min(MASTER_QUESTION, max(left, 0.5)), uri):
             return True
-        if time.monotonic() >= end:
+        left = end - time.monotonic()
+        if left <= 0:
             return False
-        time.sleep(0.2)
+        time.sleep(min(0.2, left))
 
 
 def wait_master(timeout: float) -> bool:

@@ -12,16 +12,16 @@ is not connected yet (a ROS pitfall).
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
 from blackboard.client import blackboard_listeners
 from comm import TOPIC_CALL, TOPIC_RESULT
+from comm.address import node_address_problem, own_address_problem
 from comm.addressing import PING_FUNCTION
 from comm.errors import EnvironmentProblem
 from comm.messages import FunctionCall, new_id
 from modules.definition import ModuleDefinition
-from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_announcement, node_alive
+from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_announcement, probe_nodes
 
 if TYPE_CHECKING:
     from coordinator.ros_transport import RosTransport
@@ -66,6 +66,10 @@ class _Preflight:
         self.pinged: Dict[str, float] = {}
         self.first_ping: Dict[str, float] = {}
         self._diffs: Dict[str, Tuple[ModuleDefinition, List[str]]] = {}  # module -> (live definition, problems)
+        # this process's own address, when the others cannot reach it: what a missing connection is then
+        self.own = own_address_problem()
+        self.unreachable = (": subscribers cannot reach this process at %s: set ROS_IP" % self.own.where
+                            if self.own is not None else "")
 
     def definition_problems(self, live: LiveModule) -> List[str]:
         """Computed once per announced definition, not once per look."""
@@ -93,8 +97,8 @@ class _Preflight:
             return []
         call_pub = tr._route(name)
         if live.uri not in results or not call_pub.impl.has_connection(live.node):
-            return ["module %r (node %s) is not connected to %s and %s yet" % (
-                name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
+            return ["module %r (node %s) is not connected to %s and %s yet%s" % (
+                name, live.node, call_pub.resolved_name, TOPIC_RESULT, self.unreachable)]
         if name not in tr._routes and now - self.first_ping.setdefault(name, now) >= PING_PATIENCE:
             return []
         if now - self.pinged.get(name, -1e9) >= PING_EVERY:
@@ -144,7 +148,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             if name in announced:
                 found = state.announced_problems(announced[name], name in answered, now, results)
             elif name in originals:
-                found = _legacy_problems(tr, name, *originals[name])
+                found = _legacy_problems(tr, name, *originals[name], state.unreachable)
             elif name in given:
                 found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
                          % (given[name], name, TOPIC_CALL)]
@@ -160,22 +164,21 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
         # modules' results under their call): it must hear the first call too
         for bb in blackboards:
             if not tr._shared("call").impl.has_connection(bb):
-                problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s" % (bb, TOPIC_CALL)]
+                problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s%s" % (
+                    bb, TOPIC_CALL, state.unreachable)]
         if not problems:
             tr.node_modules = {m.node: n for n, m in announced.items() if n in wanted}
             tr.node_modules.update({node: n for n, (node, _uri) in originals.items()})
             _announce_legacy({n: node for n, (node, _uri) in originals.items()}, definitions or {})
             return
         if notify is not None and start + NOTIFY_AFTER <= time.monotonic() <= end - NOTIFY_AFTER / 2:
-            problems.update(_dead([announced[n] for n in problems if n in announced]))  # killed, not slow
+            _explain(problems, announced)  # killed, or misaddressed, not slow
             notify("waiting up to %.3g s more (--wait): %s ..." % (
                 max(0.0, end - time.monotonic()), "; ".join(p for name in sorted(problems) for p in problems[name])))
             notify = None
         if time.monotonic() >= end:
-            from coordinator.ros_transport import address_problem
-
-            problems.update(_dead([announced[n] for n in problems if n in announced]))
-            hint = address_problem()
+            _explain(problems, announced)
+            hint = str(state.own or "")
             at = where or {}
             raise EnvironmentProblem("; ".join(["%s: %s" % (at[name], p) if name in at else p
                                                 for name in sorted(problems) for p in problems[name]]
@@ -184,28 +187,61 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             tr._cond.wait(POLL)
 
 
-def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
-    """Which announced modules are not running at all (a node killed hard leaves its
-    announcement behind), all asked at once."""
-    if not modules:
+def _explain(problems: Dict[str, List[str]], announced: Mapping[str, LiveModule]) -> None:
+    """Say in ``problems`` which of the modules and Blackboard nodes waited for are gone, and which
+    cannot be reached because of their address, rather than not connected yet."""
+    problems.update(_dead([announced[n] for n in problems if n in announced]))
+    problems.update(_misaddressed_blackboards([n[1:] for n in problems if n.startswith("~")]))
+
+
+def _misaddressed_blackboards(nodes: List[str]) -> Dict[str, List[str]]:
+    """The Blackboard nodes waited for whose registered address cannot be reached (a wrong ROS_IP on
+    their machine): keyed as in :func:`wait_ready`'s problems."""
+    if not nodes:
         return {}
-    with ThreadPoolExecutor(max_workers=min(32, len(modules))) as pool:
-        alive = list(pool.map(lambda m: node_alive(m.uri, 1.0), modules))
-    return {m.name: ["module %r is not running (node %s announced it but does not answer)" % (m.name, m.node)]
-            for m, up in zip(modules, alive) if not up}
-
-
-def _legacy_problems(tr: RosTransport, name: str, node: str, uri: str) -> List[str]:
-    if tr._shared("call").impl.has_connection(node) and tr._subs[0].impl.has_connection(uri):
-        return []
-    return ["original module %r (node %s) is not connected to %s and %s yet" % (name, node, TOPIC_CALL,
-                                                                               TOPIC_RESULT)]
-
-
-def _system_state() -> Tuple[Any, Any]:
     import rosgraph
 
     master = rosgraph.Master("/bmtree_ready")
+    uris = {}
+    for node in nodes:
+        try:
+            uris[node] = master.lookupNode(node)
+        except (rosgraph.masterapi.Error, OSError):
+            continue
+    out = {}
+    for (node, uri), failure in zip(uris.items(), probe_nodes(list(uris.values()), 1.0)):
+        why = node_address_problem(node, uri, failure)
+        if why:
+            out["~" + node] = ["the Blackboard node cannot be reached: %s" % why]
+    return out
+
+
+def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
+    """Which announced modules are not running at all (a node killed hard leaves its announcement
+    behind: its connections are refused), and which run but cannot be reached because of the
+    address their node registered (a wrong ROS_IP on its machine, :func:`comm.address.node_address_problem`),
+    all asked at once."""
+    out: Dict[str, List[str]] = {}
+    for m, failure in zip(modules, probe_nodes([m.uri for m in modules], 1.0)):
+        why = node_address_problem(m.node, m.uri, failure)
+        if why:
+            out[m.name] = ["module %r cannot be reached: %s" % (m.name, why)]
+        elif failure:
+            out[m.name] = ["module %r is not running (node %s announced it but does not answer)" % (m.name, m.node)]
+    return out
+
+
+def _legacy_problems(tr: RosTransport, name: str, node: str, uri: str, unreachable: str = "") -> List[str]:
+    if tr._shared("call").impl.has_connection(node) and tr._subs[0].impl.has_connection(uri):
+        return []
+    return ["original module %r (node %s) is not connected to %s and %s yet%s" % (name, node, TOPIC_CALL,
+                                                                                 TOPIC_RESULT, unreachable)]
+
+
+def _system_state() -> Tuple[Any, Any]:
+    from comm.rpc import master_api
+
+    master = master_api("/bmtree_ready")  # bounded: a master that does not answer raises OSError
     _, subs, _ = master.getSystemState()
     return master, subs
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import os
 import socket
 import threading
 import time
@@ -33,6 +32,7 @@ from comm import (
     TOPIC_RESULT,
     sync_publisher,
 )
+from comm.address import own_address_problem
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
 from comm.errors import EnvironmentProblem, ProtocolError
 from comm.limits import check_depth
@@ -47,7 +47,7 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.nodelife import registering
-from comm.rpc import PidLine, wait_closed
+from comm.rpc import PidLine, master_api, wait_closed
 from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
 from coordinator.runevents import Notice
 from coordinator.runstream import CHANNELS, Sink
@@ -62,29 +62,14 @@ __all__ = ["RosTransport", "RosStreamSink", "StartupGuard", "MasterGone", "diff_
 log = logging.getLogger("bmtree.coordinator")
 
 SEND_QUEUE = 10000  # messages queued per subscriber connection before the oldest is dropped
+LIVENESS_QUESTION = 2.0  # s a liveness lookup may wait for the master (then: not known now)
 
 
 def address_problem() -> str:
-    """Why nodes may be unable to connect back to this process (empty when nothing is wrong).
-
-    rospy advertises ``http://HOST:PORT/`` with HOST from ``ROS_IP``/``ROS_HOSTNAME`` or else the
-    machine's hostname; a name that does not resolve (minimal images, containers, chroots) leaves
-    every publisher and subscriber of this process unreachable.
-    """
-    import rosgraph.network
-
-    host = rosgraph.network.get_host_name()
-    if os.environ.get("ROS_IP"):
-        return ""
-    try:
-        socket.getaddrinfo(host, None)
-        return ""
-    except (OSError, UnicodeError):
-        pass
-    what = "ROS_HOSTNAME=%s" % host if os.environ.get("ROS_HOSTNAME") else "this machine's name %r" % host
-    return ("%s does not resolve, so other nodes cannot connect back to this process: set ROS_IP to "
-            "this machine's address on the ROS network (export ROS_IP=127.0.0.1 when every node runs "
-            "here) or ROS_HOSTNAME to a name the other machines resolve" % what)
+    """Why nodes may be unable to connect back to this process (empty when nothing is wrong): this
+    process's advertised address does not resolve, is loopback while the master's is not, or is not
+    an address of this machine (:func:`comm.address.own_address_problem`)."""
+    return str(own_address_problem() or "")
 
 
 class MasterGone(EnvironmentProblem):
@@ -98,10 +83,17 @@ def _end_registration_retries() -> None:
     master in a loop that only ``rospy.is_shutdown()`` ends, holding rospy's topic lock. Raising
     the shutdown flag ends it; rospy's shutdown hooks are not run, as their unregistering asks the
     master with no timeout (a master that does not answer would hang the process there), and there
-    is nothing to unregister from a master that is gone."""
+    is nothing to unregister from a master that is gone. rospy's other questions to the master (its
+    proxy bounded at start-up: :func:`comm.nodelife.bound_master_questions`) fail at once from now
+    on. No lock taken: called from a signal handler too."""
     import rospy.core
 
+    from comm.rpc import MasterProxy
+
     rospy.core._shutdown_flag = True
+    for proxy in list(getattr(rospy.core, "_xmlrpc_cache", {}).values()):
+        if isinstance(proxy, MasterProxy):
+            proxy.sticky = proxy.failed = True
 
 
 class StartupGuard:
@@ -128,6 +120,7 @@ class StartupGuard:
         self.say = say
         self.period = period
         self.timeout = timeout
+        self.recheck = 1.0  # s between questions while the master answers (a start-up is short)
         self.master_uri = master_uri or rosgraph.get_master_uri()
         self.down = False  # the master does not answer now
         self.expired = False  # ... and did not answer again within ``limit``: start-up is over
@@ -183,7 +176,9 @@ class StartupGuard:
                     self.down = False
                     self.say("the ROS master at %s answers again; starting goes on" % self.master_uri)
                 if down_since is None and line.fileno() >= 0:
-                    if wait_closed({"master": line}, 60.0, self._wake_r)[0]:
+                    # asked again every second anyway: a master that is stopped, or whose machine
+                    # dropped off the network, keeps the connection open and answers nothing
+                    if wait_closed({"master": line}, self.recheck, self._wake_r)[0]:
                         return
                 elif self._stop.wait(self.period):
                     return
@@ -377,7 +372,7 @@ class RosTransport(Transport):
         """The node serving ``module`` (announced, else a legacy node named after it), or the Blackboard's."""
         import rosgraph
 
-        master = rosgraph.Master("/bmtree_liveness")
+        master = master_api("/bmtree_liveness", LIVENESS_QUESTION)  # a master that does not answer: OSError
         if module == BLACKBOARD:  # the live node publishing answers and acknowledgements
             pubs, _, _ = master.getSystemState()
             pubs_of = {t: list(n) for t, n in pubs}
@@ -404,7 +399,7 @@ class RosTransport(Transport):
         import rosgraph
 
         try:
-            return rosgraph.Master("/bmtree_liveness").lookupNode(node)
+            return master_api("/bmtree_liveness", LIVENESS_QUESTION).lookupNode(node)
         except rosgraph.masterapi.MasterError:
             return None
 
@@ -639,9 +634,7 @@ class RosStreamSink(Sink):
         A subscriber whose node does not answer its XML-RPC (``getPid``) is left out: a viewer or
         run killed outright stays registered with the master for ever, and would otherwise cost
         every later run the whole wait for a connection that never comes."""
-        import rosgraph
-
-        master = rosgraph.Master("/bmtree_stream")
+        master = master_api("/bmtree_stream")
         end = time.monotonic() + timeout
         dead: Set[str] = set()
         alive: Set[str] = set()

@@ -6,10 +6,10 @@ import logging
 import os
 import sys
 import time
-from typing import Any, Dict, List, Set
+from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
-from comm.nodelife import Interrupts, registering
+from comm.nodelife import Interrupts, leave_graph
 from coordinator.cliutil import (
     EXIT_ENV,
     EXIT_FAILED,
@@ -142,10 +142,11 @@ def _other_runs() -> List[str]:
     import rosgraph
     import rospy
 
+    from comm.rpc import master_api
     from coordinator.watch import STREAM_NS
     from modules.discovery import node_alive
 
-    master = rosgraph.Master(rospy.get_name())
+    master = master_api(rospy.get_name())
     try:
         pubs, _, _ = master.getSystemState()
     except (OSError, rosgraph.masterapi.MasterException):
@@ -251,8 +252,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     graph = None
     transport = None
     runner = None
-    interrupts = Interrupts()  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
+    interrupts = Interrupts(EXIT_ENV)  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
     guard = None
+    stopped_at = None  # when a stop signal stopped the run: a second one leaves the graph at once
     try:
         deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
         if not args.sim:
@@ -357,12 +359,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         files.report(print)
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
+        stopped_at = interrupts.last_signal
         sent = runner is not None and runner.result is not None and bool(runner.result.calls)
         err("interrupted: running calls were cancelled" if sent else
             "interrupted during start-up: nothing was called" if runner is None else
             "interrupted before any call was sent")
         if runner is not None and runner.result is not None and tree is not None:
-            with registering():  # what it did and where its log is, before a second Ctrl-C
+            with interrupts.held(again_exits=False):  # what it did and where its log is, before a second Ctrl-C
                 _report(runner.result, tree.name)
                 files.report(print)
         return EXIT_ENV
@@ -370,8 +373,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if guard is not None:
             guard.stop()
         try:
-            with registering():  # a second Ctrl-C must not cut the unregistering short
-                _leave_graph(transport, master_gone=guard is not None and (guard.expired or guard.down))
+            with interrupts.held(again_exits=False):  # until the leave takes the signals (bounded)
+                _leave_graph(transport, master_gone=guard is not None and (guard.expired or guard.down),
+                             stopped_at=stopped_at)
         except KeyboardInterrupt:
             pass
         interrupts.restore()
@@ -380,33 +384,39 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _start_guard(limit: float, interrupts: Interrupts) -> Any:
-    """A master that stops answering during start-up gets ``limit`` s (``--wait``) to come back."""
+    """A master that stops answering during start-up gets ``limit`` s (``--wait``) to come back.
+
+    rospy's questions to the master get a timeout first (before ``init_node``): one that a master
+    stopped or cut off never answers would hold the start-up, and a stop signal, for ever."""
+    from comm.nodelife import bound_master_questions
+    from comm.rpc import MASTER_TIMEOUT
     from coordinator.ros_transport import StartupGuard
 
+    bound_master_questions(MASTER_TIMEOUT)
     return StartupGuard(limit, err, interrupts).start()
 
 
-def _leave_graph(transport: Any, master_gone: bool = False) -> None:
+def _leave_graph(transport: Any, master_gone: bool = False, stopped_at: Optional[float] = None) -> None:
     """Unregister everything this process registered with the master (also when a stop signal
-    came before the transport was made: ``init_node`` may have registered already). With
-    ``master_gone`` (it does not answer since it stopped during start-up) nothing is asked of it:
-    rospy's unregistering has no timeout."""
+    came before the transport was made: ``init_node`` may have registered already), bounded
+    (:func:`comm.nodelife.leave_graph`): a master that does not answer within a few seconds, or
+    ``master_gone`` (it stopped answering during start-up), is left without unregistering, said in
+    one line; a second stop signal (after the one at ``stopped_at``, if any) leaves at once."""
+    import rospy
+
     from coordinator.watch import quiet_unregistering
 
-    if master_gone:
-        if transport is not None:
-            transport.watchdog.stop()
-        return
-    with quiet_unregistering():  # a master that is gone: one warning per topic, for nothing left to undo
+    if transport is None and not rospy.core.is_initialized():
+        return  # nothing registered
+
+    def steps() -> None:
         if transport is not None:
             transport.close()
-        try:
-            import rospy
+        if rospy.core.is_initialized():
+            rospy.signal_shutdown("bmtree run finished")
 
-            if rospy.core.is_initialized():
-                rospy.signal_shutdown("bmtree run finished")
-        except Exception as exc:  # the master is gone: nothing is left to unregister
-            log.debug("leaving the ROS graph: %s", exc)
+    with quiet_unregistering():  # a master that is gone: one warning per topic, for nothing left to undo
+        leave_graph(steps, err, master_down=master_gone, stopped_at=stopped_at)
 
 
 def _user_module(spec: str) -> Any:

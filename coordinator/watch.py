@@ -20,7 +20,7 @@ import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from comm.liveness import NodeWatch
-from comm.nodelife import StopSignals
+from comm.nodelife import StopSignals, leave_graph
 from comm.nodeopts import PORT, seconds
 from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
@@ -191,12 +191,16 @@ class RunLiveness:
                 self.watcher.apply(gone_record(self.state, node, reason, alive))
 
 
-def no_run_message(namespace: str, waited: float, only: str = "", others: Optional[List[Dict[str, Any]]] = None) -> str:
-    """Why ``bmtree watch`` found nothing to show, and where a run that already ended is."""
+def no_run_message(namespace: str, waited: float, only: str = "", others: Optional[List[Dict[str, Any]]] = None,
+                   address: str = "") -> str:
+    """Why ``bmtree watch`` found nothing to show, and where a run that already ended is.
+    ``address``: why the watch's own address cannot be reached (:func:`comm.address.own_address_problem`),
+    so that a run's stream never connects to it."""
     seen = ", ".join("%s (%s)" % (o.get("run"), o.get("name")) for o in others or [])
-    return ("error: %s on %s/tree after %gs (is 'bmtree run' running on this master?)%s. A run that has already "
+    return ("error: %s on %s/tree after %gs (is 'bmtree run' running on this master?%s)%s. A run that has already "
             "ended is recorded on the machine that ran it: 'bmtree runs' lists them, 'bmtree replay last' (or RUN) "
             "shows one" % ("no run %s" % only if only else "no run", namespace, waited,
+                           " If it is, it cannot reach this watch: %s" % address if address else "",
                            "; the runs seen: %s" % seen if seen else ""))
 
 
@@ -209,6 +213,9 @@ def cmd_watch(args: argparse.Namespace) -> int:
     if not master_up(args.wait):
         err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
         return EXIT_ENV
+    from comm.address import warn_own_address
+
+    own = warn_own_address()  # "warning: ROS_IP=127.0.0.1 is a loopback address ..."
     state = WatchState(only=getattr(args, "run", None) or "")
     tty = sys.stdout.isatty() and not args.plain
     printer = None if tty or args.web else LinePrinter(sys.stdout)
@@ -265,7 +272,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             if view is not None:
                 view.stop(final=False)
                 view = None
-            err(no_run_message(args.namespace, args.wait, state.only, state.others.summary()))
+            err(no_run_message(args.namespace, args.wait, state.only, state.others.summary(), str(own or "")))
             return EXIT_ENV
         while wait(lambda s: s.end is not None, 1e9):  # (False: a stop)
             if printer is not None:  # the latched end can overtake the last ticks
@@ -297,12 +304,15 @@ def cmd_watch(args: argparse.Namespace) -> int:
             view.stop()
         if server is not None:
             server.close()
-        with quiet_unregistering():
+        def steps() -> None:
             if client is not None:
                 client.close()
             if watcher is not None:
                 watcher.close()
             rospy.signal_shutdown("bmtree watch finished")
+
+        with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
+            leave_graph(steps, err, stopped_at=signals.signalled_at)
 
 
 class _OutOfSync(logging.Filter):

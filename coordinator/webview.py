@@ -18,7 +18,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-import socket
 import sys
 import threading
 import time
@@ -26,6 +25,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable, Dict, Optional, TextIO
 from urllib.parse import parse_qs, urlparse
 
+from comm.address import advertised
 from comm.nodelife import stop_requested
 from coordinator.runstream import to_json
 from coordinator.watchstate import WatchState
@@ -137,11 +137,11 @@ class WebServer:
                           "for any free port, or another --port" % (port, bind)) from None
         host, real_port = self.httpd.server_address[:2]
         self.url = "http://%s:%d/" % ("127.0.0.1" if host in ("0.0.0.0", "") else host, real_port)
-        #: how other machines reach the page when it listens on every address (ROS_IP or
-        #: ROS_HOSTNAME, as the machine's ROS nodes are reached, else its host name)
+        #: how other machines reach the page when it listens on every address: as they reach this
+        #: machine's ROS nodes (ROS_HOSTNAME, ROS_IP, else its host name)
         self.remote_url = ""
         if host in ("0.0.0.0", ""):
-            name = os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or socket.getfqdn()
+            name = advertised().host
             if name and name not in ("localhost", "127.0.0.1") and not name.startswith("localhost."):
                 self.remote_url = "http://%s:%d/" % (name, real_port)
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="bmtree-web", daemon=True)

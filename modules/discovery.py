@@ -5,7 +5,9 @@ A module writes ``/bmtree/modules/<name>`` = ``{"node": ..., "definition": <JSON
 and removes it when it stops cleanly (``uri`` and the topics are absent in the
 announcements of older bmtree modules). A module killed hard leaves its parameter
 behind, so a listing also pings the node's XML-RPC API, every node at once: a module
-whose node does not answer is not listed.
+whose node does not answer is not listed, unless the reason is its address (a wrong
+``ROS_IP`` on its machine, :func:`comm.address.node_address_problem`): it runs, but
+cannot be reached from here (:func:`listed_modules`).
 """
 from __future__ import annotations
 
@@ -13,18 +15,19 @@ import json
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
 
 import rosgraph
 
+from comm.address import node_address_problem, reach
 from comm.addressing import valid_topic
 from comm.errors import ProtocolError
 from comm.limits import check_depth
 from comm.rpc import node_alive
 from modules.definition import DefinitionError, ModuleDefinition, parse_definition
 
-__all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "announced_modules", "announcement", "legacy_announcement",
-           "node_alive"]
+__all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "listed_modules", "announced_modules", "announcement",
+           "legacy_announcement", "node_alive", "probe_nodes"]
 
 PARAM_ROOT = "/bmtree/modules"
 
@@ -121,12 +124,35 @@ def announced_modules(master_uri: Optional[str] = None) -> Dict[str, LiveModule]
     return found
 
 
+def probe_nodes(uris: Iterable[str], timeout: float = 1.0) -> List[str]:
+    """:func:`comm.address.reach` of every URI, all at once: "" for each node that answers, else why not."""
+    uris = list(uris)
+    if not uris:
+        return []
+    with ThreadPoolExecutor(max_workers=min(32, len(uris))) as pool:
+        return list(pool.map(lambda uri: reach(uri, timeout), uris))
+
+
+def listed_modules(master_uri: Optional[str] = None, timeout: float = 1.0
+                   ) -> Tuple[Dict[str, LiveModule], Dict[str, Tuple[LiveModule, str]]]:
+    """The announced modules whose node answers, and those whose node runs but cannot be reached
+    from here because of its address (name -> (module, why): :func:`comm.address.node_address_problem`);
+    a module whose node is gone is in neither. Raises OSError-like errors if there is no master."""
+    found = announced_modules(master_uri)
+    failures = dict(zip(found, probe_nodes([m.uri for m in found.values()], timeout)))
+    unreachable: Dict[str, Tuple[LiveModule, str]] = {}
+    for name, m in found.items():
+        why = node_address_problem(m.node, m.uri, failures[name], master_uri) if failures[name] else ""
+        if why:
+            unreachable[name] = (m, why)
+    return {name: m for name, m in found.items() if not failures[name]}, unreachable
+
+
 def live_modules(master_uri: Optional[str] = None, timeout: float = 1.0) -> Dict[str, LiveModule]:
     """Modules running now on the master: the announced ones whose node answers, all asked
     at once (raises OSError-like errors if there is no master)."""
     found = announced_modules(master_uri)
     if not found:
         return found
-    with ThreadPoolExecutor(max_workers=min(32, len(found))) as pool:
-        alive = dict(zip(found, pool.map(lambda m: node_alive(m.uri, timeout), found.values())))
-    return {name: m for name, m in found.items() if alive[name]}
+    answers = probe_nodes([m.uri for m in found.values()], timeout)
+    return {name: m for (name, m), failure in zip(found.items(), answers) if not failure}

@@ -21,6 +21,7 @@ import sys
 from typing import Any, Callable, Dict, List, Optional
 
 from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
+from comm.address import warn_own_address
 from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, surely_not_for
 from comm.errors import ProtocolError
 from comm.liveness import Watchdog
@@ -408,6 +409,7 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
         sys.stderr.write("error: %s\n" % exc)
         return 2
     stop = StopSignals()
+    warn_own_address()  # an address the others cannot reach: rospy would start as if all were well
     if not stop.init_node(node_name or name_format % definition.name, anonymous=False):
         return 0
     log_to_rosout()

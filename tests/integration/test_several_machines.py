@@ -13,12 +13,12 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tempfile
 
 import pytest
 
-from coordinator.graph import end_processes
 from tests.conftest import TREES
+from tests.integration.netnskit import Hosts, can_create_namespaces, ip, machines
+from tests.integration.netnskit import bmtree as _bmtree
 
 TAG = "bmt%d" % (os.getpid() % 100000)
 NS = {"master": TAG + "m", "modules": TAG + "n", "coord": TAG + "c"}
@@ -26,102 +26,20 @@ ADDR = {"master": "10.200.0.1", "modules": "10.200.0.2", "coord": "10.200.0.3"}
 URI = "http://%s:11311/" % ADDR["master"]
 
 
-def _ip(*args, check=True):
-    out = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
-    if check and out.returncode != 0:
-        raise OSError("ip %s: %s" % (" ".join(args), out.stderr.strip()))
-    return out
-
-
-def _can_create_namespaces():
-    """'' if this machine lets the test create network namespaces, else the reason."""
-    if os.geteuid() != 0:
-        return "creating network namespaces needs root (CAP_SYS_ADMIN and CAP_NET_ADMIN); running as uid %d" % (
-            os.geteuid())
-    probe = TAG + "p"
-    try:
-        _ip("netns", "add", probe)
-    except (OSError, FileNotFoundError) as exc:
-        return "this machine cannot create network namespaces: %s" % exc
-    _ip("netns", "del", probe, check=False)
-    return ""
-
-
-def _delete_all():
-    for ns in NS.values():
-        _ip("netns", "del", ns, check=False)
-
-
 @pytest.fixture
 def network():
-    reason = _can_create_namespaces()
+    reason = can_create_namespaces(TAG + "p")
     if reason:
         pytest.skip("three machines are simulated with network namespaces, which this machine cannot create: %s" % reason)
-    _delete_all()
-    try:
-        for ns in NS.values():
-            _ip("netns", "add", ns)
-            _ip("-n", ns, "link", "set", "lo", "up")
-        m = NS["master"]
-        _ip("-n", m, "link", "add", "br0", "type", "bridge")
-        _ip("-n", m, "addr", "add", ADDR["master"] + "/24", "dev", "br0")
-        _ip("-n", m, "link", "set", "br0", "up")
-        for role in ("modules", "coord"):
-            inner, outer = "eth0", "to_" + role
-            _ip("-n", NS[role], "link", "add", inner, "type", "veth", "peer", "name", outer, "netns", m)
-            _ip("-n", NS[role], "addr", "add", ADDR[role] + "/24", "dev", inner)
-            _ip("-n", NS[role], "link", "set", inner, "up")
-            _ip("-n", m, "link", "set", outer, "master", "br0")
-            _ip("-n", m, "link", "set", outer, "up")
+    with machines(NS, ADDR):
         yield NS
-    finally:
-        _delete_all()
-
-
-class Hosts:
-    """Processes started in the namespaces (each ended by its pid)."""
-
-    def __init__(self):
-        self.home = tempfile.mkdtemp(prefix="bmtree-netns-")
-        self.procs = []
-
-    def env(self, role):
-        env = dict(os.environ, ROS_MASTER_URI=URI, ROS_IP=ADDR[role], ROS_HOME=os.path.join(self.home, role),
-                   PYTHONUNBUFFERED="1")
-        env.pop("ROS_HOSTNAME", None)
-        env.pop("ROS_LOG_DIR", None)
-        return env
-
-    def argv(self, role, *args):
-        return ["ip", "netns", "exec", NS[role], *args]
-
-    def start(self, role, *args):
-        log = open(os.path.join(self.home, "%s-%d.out" % (role, len(self.procs))), "w")
-        proc = subprocess.Popen(self.argv(role, *args), env=self.env(role), stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL)
-        proc.log_path = log.name
-        log.close()
-        self.procs.append(proc)
-        return proc
-
-    def run(self, role, *args, timeout=180):
-        return subprocess.run(self.argv(role, *args), env=self.env(role), capture_output=True, text=True,
-                              timeout=timeout, stdin=subprocess.DEVNULL)
-
-    def close(self):
-        """SIGINT to all at once, then wait: a node cut off from the master cannot unregister in time."""
-        end_processes(self.procs, 10)
 
 
 @pytest.fixture
 def hosts(network):
-    h = Hosts()
+    h = Hosts(NS, ADDR, URI)
     yield h
     h.close()
-
-
-def _bmtree(*args):
-    return [sys.executable, "-m", "coordinator", *args]
 
 
 def test_modules_blackboard_and_coordinator_on_three_hosts(hosts, slow_world, tmp_path):
@@ -130,7 +48,7 @@ def test_modules_blackboard_and_coordinator_on_three_hosts(hosts, slow_world, tm
     # the namespaces really are separate hosts: no loopback shortcut, only the little network
     ping = hosts.run("coord", "ping", "-c", "1", "-W", "5", ADDR["modules"]) if shutil.which("ping") else None
     assert ping is None or ping.returncode == 0, ping.stdout + ping.stderr
-    assert ADDR["modules"] not in _ip("-4", "addr").stdout  # not on this machine's own network
+    assert ADDR["modules"] not in ip("-4", "addr").stdout  # not on this machine's own network
 
     hosts.start("master", shutil.which("rosmaster"), "--core", "-p", "11311", "-w", "3")
     hosts.start("master", sys.executable, "-m", "blackboard.node", "--db", ":memory:")
@@ -166,7 +84,7 @@ def test_modules_blackboard_and_coordinator_on_three_hosts(hosts, slow_world, tm
     for line in run.stdout:
         lines.append(line)
         if "RUNNING" in line and "drive to the kitchen" in line:
-            _ip("-n", NS["modules"], "link", "set", "eth0", "down")  # the cable is pulled
+            ip("-n", NS["modules"], "link", "set", "eth0", "down")  # the cable is pulled
             break
     rest = run.communicate(timeout=120)[0]
     text = "".join(lines) + rest
