@@ -1,34 +1,73 @@
 """A synchronous Blackboard client for scripts: ``BlackboardClient().get(["apple"])``."""
 from __future__ import annotations
 
+import http.client
 import threading
 import time
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional, Tuple
 
 from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL
 from comm.errors import ProtocolError
 from comm.messages import BlackboardAnswer, BlackboardRequest
 
-__all__ = ["BlackboardClient", "BlackboardError", "blackboard_listeners"]
+__all__ = ["BlackboardClient", "BlackboardError", "blackboard_listeners", "blackboard_nodes", "silent_blackboards"]
 
 
 def blackboard_listeners(caller: str = "/bmtree_ready", timeout: float = 0.5) -> List[str]:
     """The running Blackboard nodes on the master: those that take requests and listen to the
     calls (a node killed outright stays registered, so each is asked for its pid)."""
+    return blackboard_nodes(caller, timeout)[0]
+
+
+def blackboard_nodes(caller: str = "/bmtree_ready", timeout: float = 0.5
+                     ) -> Tuple[List[str], Dict[str, Tuple[str, str]]]:
+    """The Blackboard nodes registered on the master: those that answer here, and those that do
+    not (node -> (its URI, why not: :func:`comm.address.reach`)). Each master question gives up
+    after :data:`comm.rpc.MASTER_TIMEOUT` seconds (``socket.timeout``, an OSError)."""
     import rosgraph
 
-    from comm.rpc import node_alive
+    from comm.address import reach
+    from comm.rpc import MASTER_TIMEOUT, master_api
 
-    master = rosgraph.Master(caller)
+    master = master_api(caller, MASTER_TIMEOUT)
     subs_of = {t: set(n) for t, n in master.getSystemState()[1]}
-    out = []
+    live: List[str] = []
+    silent: Dict[str, Tuple[str, str]] = {}
     for node in sorted(subs_of.get(TOPIC_BB_REQUEST, set()) & subs_of.get(TOPIC_CALL, set())):
         try:
-            if node_alive(master.lookupNode(node), timeout):
-                out.append(node)
+            uri = master.lookupNode(node)
         except rosgraph.masterapi.MasterError:
             continue
-    return out
+        try:
+            failure = reach(uri, timeout)
+        except http.client.HTTPException:  # answered, not as a ROS node
+            failure = "not a ROS node"
+        if failure:
+            silent[node] = (uri, failure)
+        else:
+            live.append(node)
+    return live, silent
+
+
+def silent_blackboards(silent: Dict[str, Tuple[str, str]], master_uri: Optional[str] = None) -> str:
+    """What to say of the Blackboard nodes that are registered but do not answer here
+    (:func:`blackboard_nodes`): "" when there are none. A refused connection: the process is gone
+    (killed outright, its registration left behind); a timeout, no route: its address (a wrong
+    ``ROS_IP`` on its machine, :func:`comm.address.node_address_problem`)."""
+    from comm.address import REFUSED, node_address_problem
+
+    out = []
+    for node, (uri, failure) in sorted(silent.items()):
+        why = node_address_problem(node, uri, failure, master_uri)
+        if why:
+            out.append("the Blackboard node %s is registered but cannot be reached: %s" % (node, why))
+            continue
+        if failure == REFUSED:
+            why = "nothing listens at %s, so its process is gone (killed outright, its registration left behind)" % uri
+        else:
+            why = "%s at %s (is its process stuck?)" % (failure, uri)
+        out.append("the Blackboard node %s is registered but does not answer from here: %s" % (node, why))
+    return "; ".join(out)
 
 
 class BlackboardError(Exception):

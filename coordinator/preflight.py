@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any, Callable, Dict, Iterable, List, Mapping, Optional, Set, Tuple
 
-from blackboard.client import blackboard_listeners
+from blackboard.client import blackboard_nodes, silent_blackboards
 from comm import TOPIC_CALL, TOPIC_RESULT
 from comm.address import node_address_problem, own_address_problem
 from comm.addressing import PING_FUNCTION
@@ -126,6 +126,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
     announced: Dict[str, LiveModule] = {}
     originals: Dict[str, Tuple[str, str]] = {}
     blackboards: List[str] = []
+    silent: Dict[str, Tuple[str, str]] = {}  # Blackboard nodes registered that do not answer here
     next_look = 0.0
     while True:
         now = time.monotonic()
@@ -138,7 +139,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             originals.update(legacy_nodes([n for n in wanted if n not in announced and n not in originals
                                            and n not in given]))
             originals.update(_given_nodes(given))
-            blackboards = blackboard_listeners()
+            blackboards, silent = blackboard_nodes()
             tr._set_routes([announced[n] for n in wanted if n in announced])
             next_look = now + ANNOUNCEMENTS_EVERY
         problems: Dict[str, List[str]] = {}
@@ -159,7 +160,8 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             if found:
                 problems[name] = found
         if blackboard and (tr._pubs["request"].get_num_connections() < 1 or tr._subs[2].get_num_connections() < 1):
-            problems[""] = ["the Blackboard node is not running or not connected"]
+            problems[""] = [(not blackboards and silent_blackboards(silent))
+                            or "the Blackboard node is not running or not connected"]
         # a Blackboard node learns the pending calls from /master/output (to store original
         # modules' results under their call): it must hear the first call too
         for bb in blackboards:
@@ -201,7 +203,9 @@ def _misaddressed_blackboards(nodes: List[str]) -> Dict[str, List[str]]:
         return {}
     import rosgraph
 
-    master = rosgraph.Master("/bmtree_ready")
+    from comm.rpc import master_api
+
+    master = master_api("/bmtree_ready")
     uris = {}
     for node in nodes:
         try:

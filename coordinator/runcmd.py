@@ -45,13 +45,17 @@ def _warn_without_blackboard() -> None:
     """A tree that never recalls runs without a Blackboard node, but its results are then kept nowhere."""
     import rosgraph
 
-    from blackboard.client import blackboard_listeners
+    from blackboard.client import blackboard_nodes, silent_blackboards
 
     try:
-        if blackboard_listeners():
+        answering, silent = blackboard_nodes()
+        if answering:
             return
     except (OSError, rosgraph.masterapi.Error) as exc:  # the master went away meanwhile: the run will say so
         log.debug("asking for the Blackboard node: %s", exc)
+        return
+    if silent:   # registered, but not reachable from here: saying "none is running" would be false
+        err("warning: %s: the results of this run's calls are not stored" % silent_blackboards(silent))
         return
     err("warning: no Blackboard node is running on this master: the results of this run's calls are not stored "
         "(start one: bmtree-blackboard, or roslaunch bmtree blackboard.launch)")

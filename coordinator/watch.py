@@ -368,8 +368,12 @@ def cmd_control(args: argparse.Namespace) -> int:
     try:
         reply = client.send(dict(cmd, to=args.node) if args.node else cmd, args.wait)
     finally:
-        client.close()
-        rospy.signal_shutdown("bmtree control finished")
+        def steps() -> None:
+            client.close()
+            rospy.signal_shutdown("bmtree control finished")
+
+        with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
+            leave_graph(steps, err)
     if reply.get("ok"):
         print(reply.get("answer"))
         return EXIT_OK

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
@@ -23,7 +24,7 @@ from comm.address import node_address_problem, reach
 from comm.addressing import valid_topic
 from comm.errors import ProtocolError
 from comm.limits import check_depth
-from comm.rpc import node_alive
+from comm.rpc import MASTER_TIMEOUT, node_alive, proxy
 from modules.definition import DefinitionError, ModuleDefinition, parse_definition
 
 __all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "listed_modules", "announced_modules", "announcement",
@@ -93,11 +94,22 @@ def _limit(value: Any) -> Optional[float]:
     return float(value) if ok else None
 
 
-def announced_modules(master_uri: Optional[str] = None) -> Dict[str, LiveModule]:
+def announced_modules(master_uri: Optional[str] = None, timeout: float = MASTER_TIMEOUT) -> Dict[str, LiveModule]:
     """Every module announced on the master, alive or not: one master query (plus one per
-    announcement of an older bmtree, which lacks ``uri``). Raises OSError-like errors if
-    there is no master."""
-    master = rosgraph.Master("/bmtree_discovery", master_uri=master_uri)
+    announcement of an older bmtree, which lacks ``uri``), each bounded by ``timeout`` seconds.
+    Raises OSError-like errors if there is no master, ``socket.timeout`` (an OSError) saying so
+    if it does not answer (its process stopped, its machine off the network)."""
+    uri = master_uri or rosgraph.get_master_uri()
+    master = rosgraph.Master("/bmtree_discovery", master_uri=uri)
+    master.handle = proxy(uri, timeout)  # as comm.rpc.master_api: rosgraph's own proxy waits for ever
+    try:
+        return _announced(master)
+    except socket.timeout as exc:
+        raise socket.timeout("the ROS master at %s did not answer within %g s (is its process stopped, or its "
+                             "machine off the network?)" % (uri, timeout)) from exc
+
+
+def _announced(master: Any) -> Dict[str, LiveModule]:
     try:
         params = master.getParam(PARAM_ROOT)
     except rosgraph.masterapi.MasterError:
