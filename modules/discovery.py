@@ -24,7 +24,7 @@ from comm.address import node_address_problem, reach
 from comm.addressing import valid_topic
 from comm.errors import ProtocolError
 from comm.limits import check_depth
-from comm.rpc import MASTER_TIMEOUT, node_alive, proxy
+from comm.rpc import MASTER_TIMEOUT, master_api, node_alive
 from modules.definition import DefinitionError, ModuleDefinition, parse_definition
 
 __all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "listed_modules", "announced_modules", "announcement",
@@ -100,8 +100,7 @@ def announced_modules(master_uri: Optional[str] = None, timeout: float = MASTER_
     Raises OSError-like errors if there is no master, ``socket.timeout`` (an OSError) saying so
     if it does not answer (its process stopped, its machine off the network)."""
     uri = master_uri or rosgraph.get_master_uri()
-    master = rosgraph.Master("/bmtree_discovery", master_uri=uri)
-    master.handle = proxy(uri, timeout)  # as comm.rpc.master_api: rosgraph's own proxy waits for ever
+    master = master_api("/bmtree_discovery", timeout, uri)
     try:
         return _announced(master)
     except socket.timeout as exc:

@@ -167,8 +167,8 @@ def test_announcement_names_the_topics_and_bad_topics_are_ignored(monkeypatch):
     older = {"node": "/bm_c", "definition": good["definition"]}
 
     class Master:
-        def __init__(self, *a, **k):
-            pass
+        def __init__(self, *a, master_uri=None, **k):
+            self.master_uri = master_uri or "http://127.0.0.1:3/"
 
         def getParam(self, key):
             return {"scale00": good, "hostile": hostile, "older": older, "junk": {"node": 3}}
