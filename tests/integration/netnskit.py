@@ -25,6 +25,16 @@ def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     return out
 
 
+def need_namespaces(tag: str) -> None:
+    """Skip the test where machines cannot be simulated: creating network namespaces needs root and
+    iproute2 (a CI container without them); ``tag``: the caller's namespace prefix."""
+    import pytest
+
+    reason = can_create_namespaces(tag + "p")
+    if reason:
+        pytest.skip("machines are simulated with network namespaces, which this machine cannot create: %s" % reason)
+
+
 def can_create_namespaces(probe: str) -> str:
     """'' if this machine lets the test create network namespaces, else the reason (``probe``: a
     namespace name of the caller's own, created and deleted)."""

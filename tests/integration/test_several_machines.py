@@ -17,7 +17,7 @@ import sys
 import pytest
 
 from tests.conftest import TREES
-from tests.integration.netnskit import Hosts, can_create_namespaces, ip, machines
+from tests.integration.netnskit import Hosts, ip, machines, need_namespaces
 from tests.integration.netnskit import bmtree as _bmtree
 
 TAG = "bmt%d" % (os.getpid() % 100000)
@@ -28,9 +28,7 @@ URI = "http://%s:11311/" % ADDR["master"]
 
 @pytest.fixture
 def network():
-    reason = can_create_namespaces(TAG + "p")
-    if reason:
-        pytest.skip("three machines are simulated with network namespaces, which this machine cannot create: %s" % reason)
+    need_namespaces(TAG)
     with machines(NS, ADDR):
         yield NS
 

@@ -18,7 +18,7 @@ import time
 import pytest
 
 from tests.conftest import DATA
-from tests.integration.netnskit import Hosts, bmtree, can_create_namespaces, machines
+from tests.integration.netnskit import Hosts, bmtree, machines, need_namespaces
 
 TAG = "bmw%d" % (os.getpid() % 100000)
 NS = {"master": TAG + "m", "modules": TAG + "n", "coord": TAG + "c"}
@@ -28,9 +28,7 @@ URI = "http://%s:11311/" % ADDR["master"]
 
 @pytest.fixture
 def hosts():
-    reason = can_create_namespaces(TAG + "p")
-    if reason:
-        pytest.skip("machines are simulated with network namespaces, which this machine cannot create: %s" % reason)
+    need_namespaces(TAG)
     with machines(NS, ADDR):
         h = Hosts(NS, ADDR, URI)
         try:

@@ -10,7 +10,6 @@ import pytest
 
 from coordinator.errors import TreeErrors
 from coordinator.language import load_tree
-from coordinator.nodes import REGISTRY
 from coordinator.schema import json_schema
 from coordinator.testing import Coverage, TreeTest, fail, succeed
 from tests.conftest import TREES
@@ -330,7 +329,6 @@ root:
     }, lines
 
 
-@pytest.mark.skipif("fail" not in REGISTRY, reason="the fail leaf is not in this tree yet")
 def test_coverage_of_a_fail_leaf_and_an_include_that_never_succeeds(tmp_path):
     write(tmp_path, "give_up.yaml", "format: 1\nroot:\n  fail: \"the arm has a problem\"\n")
     lines = coverage_lines(tmp_path, """format: 1
