@@ -49,6 +49,7 @@ FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
     "min": ((1, 8), "number", "number"),
     "max": ((1, 8), "number", "number"),
     "at": ((2, 2), "", ""),
+    "join": ((1, 2), "", "string"),
 }
 
 
@@ -402,6 +403,8 @@ def _apply(name: str, args: List[Any]) -> Any:
     a = args[0]
     if name == "at":
         return _at(a, args[1])
+    if name == "join":
+        return _join(a, args[1] if len(args) > 1 else ", ")
     if name == "len":
         if kind_of(a) not in ("string", "list"):
             raise ExprError("len() takes a string or a list, got %s" % _described(a))
@@ -419,6 +422,16 @@ def _apply(name: str, args: List[Any]) -> Any:
     return min(args) if name == "min" else max(args)
 
 
+def _join(seq: Any, sep: Any) -> str:
+    """``join(names)``, ``join(names, " and ")``: a list's elements as text, for a robot to say."""
+    seq, sep = unwrap(seq), unwrap(sep)
+    if kind_of(seq) != "list":
+        raise ExprError("join() takes a list first, got %s" % _described(seq))
+    if not isinstance(sep, str):
+        raise ExprError("join() takes text as separator, got %s" % _described(sep))
+    return check_text_size(sep.join(text_of(x) for x in seq))
+
+
 def _at(seq: Any, i: Any) -> Any:
     """``at(xs, i)``: the element of ``xs`` at position ``i`` (0 the first, -1 the last), where ``i`` is
     worked out when the node runs (``xs[0]`` takes a fixed position only)."""
@@ -434,7 +447,8 @@ def _at(seq: Any, i: Any) -> Any:
 
 
 def text_of(v: Any) -> str:
-    """A value as a template or ``str()`` writes it (``3`` for 3.0, ``true``, ``null``)."""
+    """A value as a template or ``str()`` writes it (``3`` for 3.0, ``true``, ``null``; a list, a mapping
+    or a message in YAML's flow style: ``[kitchen, hall]``, ``{x: 1, y: 2.5, z: 0}``)."""
     v = unwrap(v)
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -442,6 +456,12 @@ def text_of(v: Any) -> str:
         return "null"
     if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
         return str(int(v))
+    if isinstance(v, (list, tuple)):   # YAML's flow style, as a tree writes one: [kitchen, hall]
+        return "[%s]" % ", ".join(text_of(x) for x in v)
+    if isinstance(v, dict):
+        return "{%s}" % ", ".join("%s: %s" % (k, text_of(x)) for k, x in v.items())
+    if hasattr(v, "__slots__") and hasattr(v, "_type"):   # a message of several fields
+        return text_of({k: getattr(v, k) for k in v.__slots__})
     return str(v)
 
 
@@ -503,6 +523,13 @@ def _static(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tu
             if len(kinds) > 1 and kinds[1] not in (None, "number"):
                 errors.append((at, "at() takes a number as position, not a %s" % kinds[1]))
             return None   # an element: its kind is not known here
+        if name == "join":
+            kinds = [_static(arg, key_kind, errors) for arg in args]
+            if kinds[0] not in (None, "list"):
+                errors.append((at, "join() takes a list first, not a %s" % kinds[0]))
+            if len(kinds) > 1 and kinds[1] not in (None, "string"):
+                errors.append((at, "join() takes text as separator, not a %s" % kinds[1]))
+            return "string"
         want = FUNCTIONS[name][1]
         for arg in args:
             k = _static(arg, key_kind, errors)
