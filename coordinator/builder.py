@@ -7,7 +7,7 @@ import py_trees
 
 from coordinator.context import RunContext
 from coordinator.errors import UsageError
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, top_of
 
 __all__ = ["build", "build_tree"]
 
@@ -27,7 +27,8 @@ def build(node: TreeNode, ctx: RunContext) -> py_trees.behaviour.Behaviour:
 
 
 def build_tree(tree: TreeFile, ctx: RunContext, inputs: Optional[Dict[str, Any]] = None) -> py_trees.behaviour.Behaviour:
-    """The root behaviour; the tree's declared inputs are set on the tree blackboard first."""
+    """The root behaviour (with ``cleanup:``, the ``WithCleanup`` above root and cleanup); the tree's declared
+    inputs are set on the tree blackboard first."""
     missing = [k for k in tree.required_inputs if k not in (inputs or {})]
     if missing:
         raise UsageError("tree input%s %s must be given" % ("s" if len(missing) > 1 else "",
@@ -36,4 +37,4 @@ def build_tree(tree: TreeFile, ctx: RunContext, inputs: Optional[Dict[str, Any]]
     values.update(inputs or {})
     for k, v in ctx.resolve(values).items():
         ctx.write(k, v)
-    return build(tree.root, ctx)
+    return build(top_of(tree), ctx)

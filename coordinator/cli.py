@@ -94,9 +94,10 @@ def offline_tree(path: str, defs: Dict[str, ModuleDefinition]) -> Any:
     from coordinator.context import RunContext
     from coordinator.language import load_tree
     from coordinator.transport import NullTransport
+    from coordinator.treeast import top_of
 
     tree = load_tree(path, defs)
-    return tree, build(tree.root, RunContext(NullTransport(), RealClock(), defs))
+    return tree, build(top_of(tree), RunContext(NullTransport(), RealClock(), defs))
 
 
 def _label_cases(root: Any) -> Set[str]:
@@ -331,7 +332,8 @@ def make_parser() -> argparse.ArgumentParser:
     dump.set_defaults(func=cmd_blackboard)
     t = sub.add_parser("test", help="run YAML test scenarios against mocked modules",
                        epilog="The scenario file format: docs/scenarios.md (top level: tree, modules, scenarios; "
-                              "expect: status, calls (or calls: {in_order: [...]}), blackboard, reason, duration).")
+                              "expect: status, calls (or calls: {in_order: [...]}), blackboard, reason, duration, "
+                              "cleanup).")
     t.add_argument("scenarios", nargs="+", metavar="SCENARIO.yaml")
     t.add_argument("--coverage", action="store_true",
                    help="then report which nodes of the trees ran and which outcomes they reached")

@@ -20,7 +20,7 @@ from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 from coordinator.errors import TreeError
 from coordinator.nodes.base import Flow
 from coordinator.refs import Computed, Ref
-from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of, top_of
 from coordinator.values import Binding, KeyTypes, ref_type
 
 __all__ = ["check_flow", "check_types", "key_types"]
@@ -31,7 +31,7 @@ def check_flow(tree: TreeFile, given: FrozenSet[str] = frozenset()) -> List[Tree
     errors: List[TreeError] = []
     avail = frozenset(k for k, v in tree.inputs.items() if v is not REQUIRED) | given | tree.required_inputs
     flow = Flow(errors, tree)
-    flow.of(tree.root, avail)
+    flow.of(top_of(tree), avail)
     if flow.missed:   # the keys written anywhere tell a misspelt key from one written too late
         flow.report(set(key_types(tree)) | avail)
     return errors
@@ -43,7 +43,7 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     tree inputs that nothing else writes are given (``bound``; ``given``: inputs the caller sets, whose
     defaults are not used)."""
     types = KeyTypes((k, {None}) for k in tree.inputs)
-    nodes = nodes_of(tree.root) if nodes is None else nodes
+    nodes = nodes_of(top_of(tree)) if nodes is None else nodes
     kinds = kinds_in(nodes)
     binders = [n for n in nodes if n.nodekind.own_binds] if any(nk.own_binds for nk in kinds) else []
     inputs = set(tree.inputs)   # the keys that are inputs of a file
@@ -140,7 +140,7 @@ def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     """References that cannot fit the input they are passed to (``given``: inputs the caller sets); a
     ``warning: `` among them is one (the tree's default of an input that cannot be used as it is)."""
     errors: List[TreeError] = []
-    nodes = nodes_of(tree.root) if nodes is None else nodes
+    nodes = nodes_of(top_of(tree)) if nodes is None else nodes
     types = key_types(tree, nodes, given)
     for n in nodes:
         nk = n.nodekind

@@ -10,11 +10,12 @@ import os
 from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
+from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_key_problems
 from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
 from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
-from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint
+from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, top_key_hint
 from coordinator.parsehints import LEAF_OPTIONS, closest, misplaced, nearby, nest_hint, unquoted
 from coordinator.refs import RefError
 from coordinator.treeast import (
@@ -24,6 +25,7 @@ from coordinator.treeast import (
     gc_paused,
     kinds_in,
     nodes_of,
+    top_of,
     used_modules,
     walk,
 )
@@ -39,7 +41,7 @@ FORMAT = 1
 MAX_TREE_DEPTH = 100
 MAX_INCLUDE_DEPTH = 32       # files in a chain of includes
 MAX_REPEATED_NODES = 100000  # nodes that includes of an already-read file add (each include is a copy)
-_TOP_KEYS = ("format", "name", "description", "inputs", "root")
+_TOP_KEYS = ("format", "name", "description", "inputs", "root") + CLEANUP_TOP_KEYS
 _INPUT_KEYS = ("default", "description")
 _COMMON = ("name",)
 # 'timeout' is a decorator, and an option of call/recall/wait_event: it is the kind only alone
@@ -117,7 +119,7 @@ class Parser:
             return None
         for k in data:
             if k not in _TOP_KEYS:
-                self.err(data.key_pos[k], "unknown top-level key %r%s" % (k, did_you_mean(k, _TOP_KEYS)))
+                self.err(data.key_pos[k], "unknown top-level key %r%s" % (k, top_key_hint(k) or did_you_mean(k, _TOP_KEYS)))
         for key in ("name", "description"):
             if key in data and not isinstance(data[key], str):
                 self.err(data.val_pos[key], "'%s' must be a string" % key)
@@ -135,13 +137,13 @@ class Parser:
         self.files[path] = tree
         self.stack = stack + (path,)
         try:
-            root = self.node(data["root"], data.val_pos["root"])
+            root = tree.root = self.node(data["root"], data.val_pos["root"])
+            parse_cleanup(self, data, tree)   # cleanup: and cleanup_timeout: (coordinator/cleanupparse.py)
         finally:
             self.stack = stack
         if root is None:
             del self.files[path]
             return None
-        tree.root = root
         return tree
 
     def _repeat(self, tree: TreeFile, at: Optional[Pos]) -> Optional[TreeFile]:
@@ -474,12 +476,14 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         tree = parser.load_file(path, None)
         errors = list(parser.errors)
         if tree is not None:
-            nodes = nodes_of(tree.root)
+            nodes = nodes_of(top_of(tree))
             errors.extend(check_flow(tree, frozenset(given)))
+            reserved, reserved_warned = reserved_key_problems(tree, list(parser.files.values()), nodes)
+            errors.extend(reserved)
             typed = check_types(tree, nodes, frozenset(given))
             warned = {e for e in typed if e.message.startswith("warning: ")}
             errors.extend(e for e in typed if e not in warned)
-            found = sorted(set(parser.warnings) | set(warnings(nodes)) | warned,
+            found = sorted(set(parser.warnings) | set(warnings(nodes)) | warned | set(reserved_warned),
                            key=lambda e: (e.pos.file, e.pos.line, e.pos.column, e.message))
             if not errors:
                 tree.warnings = found

@@ -11,7 +11,8 @@ from typing import Any, Dict, Optional, Tuple
 
 from coordinator.yamlsrc import LMap
 
-__all__ = ["OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "kind_hint", "one_child", "option_hint", "takes"]
+__all__ = ["OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "kind_hint", "one_child", "option_hint", "takes",
+           "top_key_hint"]
 
 _BT, _PT, _SM = "BehaviorTree.CPP", "py_trees", "SMACH"
 _MEMORY = "sequence, whose memory: true (its default) does not tick again a child that succeeded"
@@ -112,6 +113,21 @@ def kind_hint(name: Any) -> str:
         return " (%s)" % found[1]
     same = [k for k in REGISTRY if _norm(k) == _norm(name)]   # ForEach, WAIT
     return " (did you mean %r?)" % same[0] if same else ""
+
+
+# top-level keys others write for what runs after the task however it ended (SMACH's "preempted" handling,
+# a ``finally``): bmtree's ``cleanup:``
+_CLEANUP_NAMES = frozenset(("cleanup", "finally", "onstop", "onhalt", "onpreempt", "onpreempted", "preempted",
+                            "onexit", "teardown", "shutdown", "onabort", "onend", "onfinish", "always", "ensure"))
+
+
+def top_key_hint(key: Any) -> str:
+    """`` (did you mean 'cleanup'? …)`` for a top-level key written for a clean-up (``clean_up``,
+    ``finally``, ``on_stop``, ``on_halt``), else ''."""
+    if _norm(key) in _CLEANUP_NAMES:
+        return (" (did you mean 'cleanup'? cleanup: holds the node run once after root ends, however it ended: "
+                "succeeded, failed or stopped)")
+    return ""
 
 
 def takes(kind: str, allowed: Tuple[str, ...]) -> str:

@@ -144,8 +144,21 @@ class FailureExplainer(RunObserver):
         """The latest failure no ancestor recovered from."""
         return self.trail.root_cause()
 
-    def reason(self, root: Any) -> str:
-        o = self.root_cause()
+    def root_cause_under(self, top: Any) -> Optional[Origin]:
+        """The latest failure at or under ``top`` that no node at or under ``top`` recovered from: a
+        tree's root, or its cleanup (whose failure a root that succeeded does not recover from)."""
+        under = set(top.iterate())
+        trail = self.trail
+        for o in reversed(trail.origins):
+            if o.behaviour in under and not any(a in under and trail.succeeded.get(a, -1) > o.seq
+                                                for a in trail.ancestors(o.behaviour)):
+                return o
+        return None
+
+    def reason(self, root: Any, under: bool = False) -> str:
+        """Why ``root`` failed (``under``: only failures at or under it count: the root of a tree with
+        ``cleanup:``, or the cleanup)."""
+        o = self.root_cause_under(root) if under else self.root_cause()
         if o is None:
             return _deepest_feedback(root)
         b = o.behaviour
@@ -165,6 +178,8 @@ def _where(b: Any) -> str:
     """The nearest ancestor's name that says something: not a bare kind (an unnamed ``sequence``)."""
     for a in _ancestors(b):
         node = getattr(a, "bmtree_node", None)
+        if node is not None and node.kind == "with_cleanup":   # above root and cleanup: the tree's name
+            break
         if node is None or a.name != node.kind:
             return a.name
     return ""

@@ -156,6 +156,7 @@ class Replay:
         for i, p in self.parent.items():
             self.kids.setdefault(p, []).append(i)
         self.args = _IncludeArgs(self.nodes)
+        self.main, self.cleanup_ids = _root_and_cleanup(self.nodes, self.kids)
         self.pending: Dict[str, Dict[str, Any]] = {}
         self.finished: List[Dict[str, Any]] = []
         self.events: List[Dict[str, Any]] = []
@@ -246,10 +247,13 @@ class Replay:
     def stop_tick(self) -> Optional[int]:
         """The tick record of a stop from outside (Ctrl-C, ``max_duration``: the root halted while
         running, not ended by the tree), or None."""
-        root = self.kids.get(None, [None])[0]
+        root = self.main
         ticks = [i for i, r in enumerate(self.log.records) if r.get("type") == "tick"]
         if not ticks or self.log.end is None:
             return None
+        if self.cleanup_ids:  # with cleanup: the stop halted root, the cleanup's ticks came after it
+            return next((i for i in ticks if any(c[0] == root and c[1] == "INVALID"
+                                                 for c in self.log.records[i].get("changes") or [])), None)
         last = self.log.records[ticks[-1]].get("changes") or []
         return ticks[-1] if any(c[0] == root and c[1] == "INVALID" for c in last) else None
 
@@ -303,11 +307,12 @@ class Replay:
         ended = None
         end = self.log.end
         if end is not None and end.get("status") == "FAILURE" and self.stop_tick() is None:
-            cause = trail.root_cause()
+            cause = next((o for o in reversed(trail.origins)  # root's, never its cleanup's
+                          if o.behaviour not in self.cleanup_ids and trail.recovered_by(o) is None), None)
             ended = found[cause.seq] if cause is not None else None
         others = []
         for o in trail.origins:
-            if ended is not None and o.seq >= ended.seq:
+            if (ended is not None and o.seq >= ended.seq) or o.behaviour in self.cleanup_ids:
                 continue
             by = trail.recovered_by(o)
             f = found[o.seq]
@@ -356,11 +361,45 @@ class Replay:
                 rec.get("target"), float(rec.get("t") or 0.0), json.dumps(rec.get("inputs"), ensure_ascii=False),
                 self._where(rec.get("node"))))
 
+    def stop_time(self, stop: Optional[int]) -> float:
+        """When the run was stopped from outside (the stop's tick ``stop``): with a cleanup, that tick's
+        time (the cleanup ran after it); else when the run was last alive."""
+        if stop is not None and self.cleanup_ids:
+            return float(self.log.records[stop].get("t") or 0.0)
+        return self.log.last_alive
+
     def _where(self, node_id: Any) -> str:
         n = self.nodes.get(node_id) if isinstance(node_id, int) else None
         if n is None:
             return "?"
         return "'%s' %s:%s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"))
+
+
+def _root_and_cleanup(nodes: Dict[int, Dict[str, Any]], kids: Dict[Any, List[int]]) -> Tuple[Any, Set[int]]:
+    """The recorded tree's root, and the ids of its cleanup (none without ``cleanup:``)."""
+    top = kids.get(None, [None])[0]
+    below = kids.get(top, [])
+    if nodes.get(top, {}).get("kind") != "with_cleanup" or len(below) != 2:
+        return top, set()
+    under, todo = set(), [below[1]]
+    while todo:
+        n = todo.pop()
+        under.add(n)
+        todo.extend(kids.get(n, []))
+    return below[0], under
+
+
+def _cleanup_said(end: Optional[Dict[str, Any]]) -> List[str]:
+    """The cleanup's line of the report (from the end record), as the live summary says it."""
+    said = (end or {}).get("cleanup")
+    if not isinstance(said, dict):
+        return []
+    status = said.get("status")
+    if status is None:
+        return ["cleanup (root %s): did not run" % said.get("ended")]
+    word = {"SUCCESS": "succeeded", "FAILURE": "FAILED"}.get(str(status), "cut short")
+    why = ": %s" % said.get("reason") if said.get("reason") and status != "SUCCESS" else ""
+    return ["cleanup (root %s): %s in %.2f s%s" % (said.get("ended"), word, float(said.get("duration") or 0.0), why)]
 
 
 def find_run(ref: str, directory: Optional[str] = None) -> str:
@@ -410,8 +449,9 @@ def _stop(replay: Replay) -> Tuple[Optional[int], str, Callable[[Dict[str, Any]]
     interrupted = end.get("status") == "INVALID"
     what = ""
     if stop is not None:  # the stop's own time: the last tick before it may be long before
-        what = "%s at %.3fs" % ("interrupted" if interrupted else "stopped", log.last_alive)
-    after = max((i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop), default=-1)
+        what = "%s at %.3fs" % ("interrupted" if interrupted else "stopped", replay.stop_time(stop))
+    after = max((i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop
+                 and (stop is None or i < stop)), default=-1)
     stopped_calls = set()
     if stop is not None:
         stopped_calls = {str(r.get("call_id")) for r in log.records[after + 1:stop]
@@ -445,7 +485,11 @@ def _report(replay: Replay, out: TextIO) -> None:
     late = {str(n.get("call_id")): n for n in replay.notices if n.get("what") == LATE_ANSWER and n.get("call_id")}
     listed: Set[str] = set()  # the calls whose late answer is listed under them
     out.write("calls:\n")
-    for c in replay.finished:
+    cleanup = [c for c in replay.finished if c.get("node") in replay.cleanup_ids]
+    for c in [c for c in replay.finished if c.get("node") not in replay.cleanup_ids] + [None] + cleanup:
+        if c is None:
+            out.write("".join(line + "\n" for line in _cleanup_said(end)))
+            continue
         status, error = label(c)
         out.write(call_line(float(c.get("started") or 0.0), c.get("target"), status, float(c.get("duration") or 0.0),
                             error, failing.get("inputs") if failing is not None
@@ -495,7 +539,8 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
         replay.to_tick(ended.index)
         out.write("the failure that ended the run, at %.3fs: %s\n" % (ended.t, where(ended)))
     elif stop is not None or end.get("status") in ("FAILURE", "INVALID") or not end:
-        ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop]
+        ticks = [i for i, r in enumerate(log.records) if r.get("type") == "tick" and i != stop
+                 and (stop is None or i < stop)]
         last = ticks[-1] if ticks else 0
         replay.until(lambda rec: replay.index > last)
         if not end:
@@ -504,7 +549,7 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
             when = "its last tick"
         else:
             why = "%s%s" % (end.get("reason") or "the run ended %s" % end.get("status"),
-                            " (at %.3fs)" % log.last_alive if stopped else "")
+                            " (at %.3fs)" % replay.stop_time(stop) if stopped else "")
             when = "its last tick before %s" % ("it was stopped" if stopped else "its end")
         out.write("no leaf's failure ended this run: %s\nthe state at %s, at %.3fs:\n" % (why, when, replay.t))
     elif others:

@@ -64,10 +64,10 @@ def _warn_without_blackboard() -> None:
 def call_limit_warnings(tree: Any, limits: Dict[str, float], default_timeout: float) -> List[str]:
     """Call leaves that would wait longer than their module itself does (a bridge's --call-timeout):
     the call would fail then, blaming the module, before the tree's timeout."""
-    from coordinator.treeast import walk
+    from coordinator.treeast import top_of, walk
 
     out = []
-    for n in walk(tree.root):
+    for n in walk(top_of(tree)):
         fn = getattr(n.spec, "function", None) if n.nodekind.name == "call" else None
         limit = limits.get(fn.module) if fn is not None else None
         if fn is None or not limit:
@@ -82,10 +82,10 @@ def call_limit_warnings(tree: Any, limits: Dict[str, float], default_timeout: fl
 
 def first_uses(tree: Any) -> Dict[str, str]:
     """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
-    from coordinator.treeast import walk
+    from coordinator.treeast import top_of, walk
 
     out: Dict[str, str] = {}
-    for n in walk(tree.root):
+    for n in walk(top_of(tree)):
         for m in n.nodekind.modules(n):
             out.setdefault(m, str(n.value_pos or n.pos))
     return out
@@ -365,7 +365,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         stopped_at = interrupts.last_signal
         sent = runner is not None and runner.result is not None and bool(runner.result.calls)
-        err("interrupted: running calls were cancelled" if sent else
+        cleaned = runner is not None and runner.result is not None and runner.result.cleanup_status is not None
+        err("interrupted: running calls were cancelled, then the cleanup ran" if cleaned else
+            "interrupted: running calls were cancelled" if sent else
             "interrupted during start-up: nothing was called" if runner is None else
             "interrupted before any call was sent")
         if runner is not None and runner.result is not None and tree is not None:

@@ -30,7 +30,9 @@ class Notice:
     that came after its call had ended (``late_answer``, made by the run context: the module ran a
     call the run had given up on, and a ``retry`` may have sent it again)."""
 
-    what: str   # master_down, master_back, other_run, blackboard_down, blackboard_back, late_answer
+    # master_down, master_back, other_run, blackboard_down, blackboard_back, late_answer; cleanup (a run
+    # stopped from outside runs its tree's cleanup), cleanup_failed (the cleanup failed or was cut short)
+    what: str
     text: str
     call_id: str = ""   # the call a late answer answers
 

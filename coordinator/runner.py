@@ -10,19 +10,22 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
 
+from comm.nodelife import BURST
 from coordinator.context import WAKE, CallRecord, RunContext, late_answer_text
+from coordinator.nodes.task import WithCleanup
 from coordinator.reasons import FailureExplainer
-from coordinator.runevents import Change, RunObserver, StatusWatcher, control_line, notify
+from coordinator.runevents import Change, Notice, RunObserver, StatusWatcher, control_line, notify
 from coordinator.running import while_running
 
-__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line", "late_line",
-           "short_json", "stop_label", "summary_lines"]
+__all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line",
+           "cleanup_lines", "late_line", "short_json", "stop_label", "summary_lines"]
 
 
 @dataclass
@@ -37,10 +40,23 @@ class RunResult:
     started: float = 0.0  # the clock's time at the first tick (call times are on the same clock)
     failed_call: Optional[CallRecord] = None  # the call of the failure the reason names (its inputs are shown)
     stopped_at: Optional[float] = None  # when it was stopped from outside (Ctrl-C, max_duration), clock time
+    # a tree with ``cleanup:``: how root ended (succeeded, failed, stopped), how the cleanup ended (None: it
+    # has none, or it never started), why it failed or was cut short, its calls, when it started (clock time)
+    ended: str = ""
+    cleanup_status: Optional[Status] = None
+    cleanup_reason: str = ""
+    cleanup_calls: List[CallRecord] = field(default_factory=list)
+    cleanup_started: Optional[float] = None
+    cleanup_duration: Optional[float] = None
 
     @property
     def succeeded(self) -> bool:
         return self.status == Status.SUCCESS
+
+    @property
+    def cleanup_failed(self) -> bool:
+        """The tree's cleanup did not succeed (failed, hit its time limit, was cut short)."""
+        return self.cleanup_status is not None and self.cleanup_status != Status.SUCCESS
 
 
 class StatusHistory(py_trees.visitors.VisitorBase):
@@ -126,16 +142,33 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
     if result.reason and not result.succeeded:
         lines.append("reason: %s" % result.reason)
     lines.append("calls:")
-    for c in result.calls:
+    cleanup = {id(c) for c in result.cleanup_calls}
+    for c in [c for c in result.calls if id(c) not in cleanup] + [None] + list(result.cleanup_calls):
+        if c is None:
+            lines.extend(cleanup_lines(result))
+            continue
         status, error = c.status, c.error
         if (result.stopped_at is not None and str(status) == "halted" and c.ended is not None
-                and c.ended >= result.stopped_at):
+                and c.ended >= result.stopped_at and id(c) not in cleanup):
             status, error = stop_label(result.status == Status.INVALID, result.reason)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:
             lines.append(late_line(late_answer_text(c, result.started)))
     return lines
+
+
+def cleanup_lines(result: RunResult) -> List[str]:
+    """The cleanup's line of an end-of-run summary (its calls follow it): how it ended, after which ending
+    of root; nothing for a tree without ``cleanup:``."""
+    if result.cleanup_status is None and not result.ended:
+        return []
+    if result.cleanup_status is None:
+        return ["cleanup (root %s): did not run" % result.ended]
+    said = {"SUCCESS": "succeeded", "FAILURE": "FAILED", "INVALID": "cut short"}[result.cleanup_status.value]
+    took = " in %.2f s" % result.cleanup_duration if result.cleanup_duration is not None else ""
+    why = ": %s" % result.cleanup_reason if result.cleanup_reason and result.cleanup_failed else ""
+    return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)]
 
 
 class Display(RunObserver):
@@ -259,13 +292,19 @@ class TreeRunner:
 
     def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None) -> RunResult:
         """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()``
-        gives a reason (asked after each tick; the test kit's tick limits); stopped is FAILURE."""
+        gives a reason (asked after each tick; the test kit's tick limits); stopped is FAILURE.
+
+        With ``cleanup:`` (the root behaviour is a :class:`WithCleanup`) the cleanup runs once after
+        root ended, also when it was stopped (root halted first), bounded by its own time limit; a
+        stop signal (KeyboardInterrupt) during it ends it at once. The result is root's."""
         ctx = self.ctx
         ctx.transport.connect(ctx.inbox.put)
         self.tree.setup()
         start = ctx.started = ctx.clock.now()  # the notices of late answers say times from here
         if ctx.observers:
             notify(ctx.observers, "on_start", self.tree_file, self.root, ctx)
+        task = self.root if isinstance(self.root, WithCleanup) else None
+        main = task.root if task is not None else self.root
         reason = ""
         stopped_at: Optional[float] = None
         failed_call: Optional[CallRecord] = None
@@ -273,58 +312,179 @@ class TreeRunner:
             while True:
                 if self.gate is None or self.gate.may_tick():
                     self.tick()
-                if self.root.status in (Status.SUCCESS, Status.FAILURE):
+                if task is None and self.root.status in (Status.SUCCESS, Status.FAILURE):
                     break
-                if max_duration is not None and ctx.clock.now() - start >= max_duration:
-                    reason = "stopped after %g s" % max_duration
-                elif stop_when is not None:
-                    reason = stop_when()
-                if reason:
-                    reason += while_running(self.root)
-                    stopped_at = ctx.clock.now()
-                    self.root.stop(Status.INVALID)
-                    self._tell([])
+                if task is not None and task.done:
                     break
-                wait = self.period
-                if max_duration is not None:  # wake at the limit, not at the next period after it
-                    wait = min(wait, max(0.0, start + max_duration - ctx.clock.now()))
-                item = ctx.clock.wait(ctx.inbox, wait)
-                while item is not None:
-                    if item is not WAKE:
-                        ctx.dispatch(item)
-                    try:
-                        item = ctx.inbox.get_nowait()
-                    except Exception:
-                        item = None
-        except BaseException:
-            why = "interrupted" + while_running(self.root)
+                if task is not None and task.phase == "between":  # root ended by itself: its reason, then cleanup
+                    if task.root_status == Status.FAILURE:
+                        reason = self.explainer.reason(main, under=True)
+                        failed_call = self._failed_call(main)
+                    self._begin_cleanup(task, "succeeded" if task.root_status == Status.SUCCESS else "failed",
+                                        reason)
+                    continue
+                if task is None or task.phase == "root":
+                    if max_duration is not None and ctx.clock.now() - start >= max_duration:
+                        reason = "stopped after %g s" % max_duration
+                    elif stop_when is not None:
+                        reason = stop_when()
+                    if reason:
+                        reason += while_running(main)
+                        stopped_at = ctx.clock.now()
+                        if task is None:
+                            self.root.stop(Status.INVALID)
+                            self._tell([])
+                            break
+                        task.stop_root()
+                        self._tell([])
+                        self._begin_cleanup(task, "stopped", reason)
+                        continue
+                elif self._cleanup_over_time(task):
+                    break
+                self._wait(self._until(start, max_duration, task))
+        except BaseException as exc:
+            cut = task is not None and isinstance(exc, KeyboardInterrupt) and not task.done
+            if cut and task is not None and task.phase == "cleanup":  # root had ended: the cleanup ends at once
+                self._end_cleanup(task, Status.INVALID, "interrupted" + while_running(task.cleanup))
+                return self._finish(start, task, reason, failed_call, stopped_at)
+            why = "interrupted" + while_running(main)
             stopped_at = ctx.clock.now()
-            self.root.stop(Status.INVALID)
-            self._tell([])
-            self.result = RunResult(status=Status.INVALID, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                                    blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=why,
-                                    history=self.history, started=start, stopped_at=stopped_at)
+            if cut and task is not None and task.phase in ("root", "between"):
+                self._cleanup_after_stop(task, why)
+            else:
+                self.root.stop(Status.INVALID)
+                self._tell([])
+            self.result = self._result(Status.INVALID, start, why, None, stopped_at, task)
             if ctx.observers:
                 notify(ctx.observers, "on_end", self.result)
             raise
-        status = self.root.status
-        if reason:  # stopped by max_duration: the task did not get done
+        return self._finish(start, task, reason, failed_call, stopped_at)
+
+    def _finish(self, start: float, task: Optional[WithCleanup], reason: str, failed_call: Optional[CallRecord],
+                stopped_at: Optional[float]) -> RunResult:
+        """The result of a run that ended (the root's ending; stopped by max_duration: FAILURE)."""
+        status = task.root_status if task is not None else self.root.status
+        if reason and stopped_at is not None:  # stopped by max_duration: the task did not get done
             status = Status.FAILURE
-        elif status == Status.FAILURE:
+        elif status == Status.FAILURE and task is None:
             reason = self.explainer.reason(self.root)
             failed_call = self._failed_call()
-        result = RunResult(status=status, duration=ctx.clock.now() - start, calls=list(ctx.calls),
-                           blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
-                           started=start, failed_call=failed_call, stopped_at=stopped_at)
+        result = self._result(status, start, reason, failed_call, stopped_at, task)
         self.result = result
-        if ctx.observers:
-            notify(ctx.observers, "on_end", result)
+        if self.ctx.observers:
+            notify(self.ctx.observers, "on_end", result)
         return result
 
-    def _failed_call(self) -> Optional[CallRecord]:
+    def _result(self, status: Status, start: float, reason: str, failed_call: Optional[CallRecord],
+                stopped_at: Optional[float], task: Optional[WithCleanup]) -> RunResult:
+        ctx = self.ctx
+        now = ctx.clock.now()
+        result = RunResult(status=status, duration=now - start, calls=list(ctx.calls),
+                           blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
+                           started=start, failed_call=failed_call, stopped_at=stopped_at)
+        if task is not None:
+            self._cleanup_said(task)
+            under = set(task.cleanup.iterate())
+            result.ended = task.ended
+            result.cleanup_status, result.cleanup_reason = task.cleanup_status, task.cleanup_reason
+            result.cleanup_calls = [c for c in result.calls if c.owner in under]
+            result.cleanup_started = task.cleanup_started
+            if task.cleanup_started is not None:
+                result.cleanup_duration = (task.cleanup_ended if task.cleanup_ended is not None else now) \
+                    - task.cleanup_started
+        return result
+
+    def _until(self, start: float, max_duration: Optional[float], task: Optional[WithCleanup]) -> float:
+        """How long to wait for something to happen: the period, or less to wake at a limit."""
+        wait = self.period
+        now = self.ctx.clock.now()
+        if task is not None and task.phase == "cleanup" and task.cleanup_started is not None:
+            return min(wait, max(0.0, task.cleanup_started + task.limit - now))
+        if max_duration is not None:  # wake at the limit, not at the next period after it
+            wait = min(wait, max(0.0, start + max_duration - now))
+        return wait
+
+    def _wait(self, wait: float) -> None:
+        """Wait up to ``wait`` seconds for messages, then hand over all that came."""
+        ctx = self.ctx
+        item = ctx.clock.wait(ctx.inbox, wait)
+        while item is not None:
+            if item is not WAKE:
+                ctx.dispatch(item)
+            try:
+                item = ctx.inbox.get_nowait()
+            except Exception:
+                item = None
+
+    # the cleanup ------------------------------------------------------------------------
+    def _notice(self, what: str, text: str) -> None:
+        if self.ctx.observers:
+            notify(self.ctx.observers, "on_notice", Notice(what, text), self.ctx.clock.now())
+
+    def _begin_cleanup(self, task: WithCleanup, ended: str, reason: str, signalled: bool = False) -> None:
+        task.begin_cleanup(ended, reason)
+        if ended == "stopped":  # the operator waits for the run to end: say why it goes on
+            self._notice("cleanup", "%s: running the cleanup (at most %g s%s)" % (
+                reason or "stopped", task.limit, "; Ctrl-C again ends it at once" if signalled else ""))
+
+    def _end_cleanup(self, task: WithCleanup, status: Status, reason: str) -> None:
+        """The cleanup cut short (its time limit, a second stop): halted, its calls cancelled."""
+        task.cleanup_cut = True
+        task.end_cleanup(status, reason)
+        self._tell([])
+
+    def _cleanup_said(self, task: WithCleanup) -> None:
+        """Once: a cleanup that failed by itself gets its reason (the root cause in it, as a run's); one that
+        failed or was cut short is told (a notice: the display, the run stream and log, watch, replay)."""
+        if task.cleanup_status in (None, Status.SUCCESS) or task.cleanup_told:
+            return
+        task.cleanup_told = True
+        if task.cleanup_status == Status.FAILURE and not task.cleanup_cut:
+            task.cleanup_reason = self.explainer.reason(task.cleanup, under=True) or task.cleanup_reason
+        self._notice("cleanup_failed", "the cleanup %s (root %s): %s; the run's result stays root's" % (
+            "failed" if task.cleanup_status == Status.FAILURE else "was cut short", task.ended,
+            task.cleanup_reason or "no reason given"))
+
+    def _cleanup_over_time(self, task: WithCleanup) -> bool:
+        """True (the cleanup halted) once the cleanup ran its time limit."""
+        if task.phase != "cleanup" or task.cleanup_started is None:
+            return False
+        if self.ctx.clock.now() - task.cleanup_started < task.limit:
+            return False
+        self._end_cleanup(task, Status.FAILURE, "did not end within %g s (cleanup_timeout)%s"
+                          % (task.limit, while_running(task.cleanup)))
+        return True
+
+    def _cleanup_after_stop(self, task: WithCleanup, why: str) -> None:
+        """A run stopped by a signal (KeyboardInterrupt): root halted, then the cleanup ticked until it
+        ends or runs its time limit; a second stop (not one of the same burst, within ``BURST`` s) ends
+        it at once."""
+        stopped = time.monotonic()
+        while not task.done:
+            try:
+                if task.phase in ("root", "between"):  # (again, if a signal of the burst cut this short)
+                    task.stop_root()
+                    self._tell([])
+                    self._begin_cleanup(task, "stopped", why, signalled=True)
+                    continue
+                if self.gate is None or self.gate.may_tick():
+                    self.tick()
+                if task.done or self._cleanup_over_time(task):
+                    break
+                self._wait(self._until(0.0, None, task))
+            except KeyboardInterrupt:
+                if time.monotonic() - stopped < BURST:  # the same stop, signalled again (a process group)
+                    continue
+                if task.phase in ("root", "between"):
+                    task.stop_root()
+                    task.begin_cleanup("stopped", why)
+                self._end_cleanup(task, Status.INVALID, "interrupted again" + while_running(task.cleanup))
+
+    def _failed_call(self, top: Any = None) -> Optional[CallRecord]:
         """The latest call made at or under the node where the failure the reason names started
-        (the failed call itself, or the call a timeout halted) before that failure."""
-        o = self.explainer.root_cause()
+        (the failed call itself, or the call a timeout halted) before that failure (``top``: only a
+        failure at or under it, the root of a tree with a cleanup)."""
+        o = self.explainer.root_cause() if top is None else self.explainer.root_cause_under(top)
         if o is None:
             return None
         under = set(o.behaviour.iterate())

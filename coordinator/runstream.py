@@ -251,9 +251,15 @@ class RunStream(RunObserver):
     def on_end(self, result: Any) -> None:
         if not self._open:
             return
-        self._emit("end", {"v": VERSION, "type": "end", "run": self.run_id, "t": self._t(self._clock.now()),
-                           "status": result.status.value, "reason": result.reason, "ticks": result.ticks,
-                           "duration": round(result.duration, 6), "calls": len(result.calls)})
+        record = {"v": VERSION, "type": "end", "run": self.run_id, "t": self._t(self._clock.now()),
+                  "status": result.status.value, "reason": result.reason, "ticks": result.ticks,
+                  "duration": round(result.duration, 6), "calls": len(result.calls)}
+        if getattr(result, "ended", ""):   # a tree with cleanup: how root ended, how its cleanup did
+            cleanup = getattr(result, "cleanup_status", None)
+            record["cleanup"] = {"ended": result.ended, "status": cleanup.value if cleanup is not None else None,
+                                 "reason": result.cleanup_reason, "calls": len(result.cleanup_calls),
+                                 "duration": round(result.cleanup_duration or 0.0, 6)}
+        self._emit("end", record)
         self._open = False
         for s in self.sinks:
             s.flush()

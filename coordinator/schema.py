@@ -46,6 +46,11 @@ def json_schema() -> Dict[str, Any]:
                            {"type": "object", "additionalProperties": False,
                             "properties": {"default": {}, "description": {"type": "string"}}}]}},
             "root": {"$ref": "#/definitions/node"},
+            "cleanup": {"$ref": "#/definitions/node",
+                        "description": "run once after root ends, however it ended (succeeded, failed, stopped); "
+                                       "reads the keys ended and ended_reason"},
+            "cleanup_timeout": {"type": "number", "exclusiveMinimum": 0,
+                                "description": "seconds the cleanup may run (default 30)"},
         },
         "definitions": defs,
     }

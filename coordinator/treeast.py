@@ -10,7 +10,7 @@ from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Set, Tuple
 from coordinator.errors import Pos, TreeError
 from coordinator.yamlsrc import OnDemandPos, settle
 
-__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "kinds_in", "nodes_of", "used_modules", "walk"]
+__all__ = ["REQUIRED", "TreeFile", "TreeNode", "gc_paused", "kinds_in", "nodes_of", "top_of", "used_modules", "walk"]
 
 
 class TreeNode(OnDemandPos):
@@ -65,6 +65,16 @@ class TreeFile:
     root: TreeNode
     required_inputs: FrozenSet[str] = frozenset()
     warnings: List[TreeError] = field(default_factory=list)   # found by the checks; the tree still runs
+    cleanup: Optional[TreeNode] = None    # ``cleanup:``: run after the root however it ended (run tree only)
+    cleanup_timeout: float = 30.0         # ``cleanup_timeout:``: seconds the cleanup may run
+    top: Optional[TreeNode] = None        # with a cleanup: the node above root and cleanup (nodes/task.py)
+    reserved_inputs: Dict[str, Pos] = field(default_factory=dict)   # inputs named as cleanup's keys: where
+
+
+def top_of(tree: TreeFile) -> TreeNode:
+    """The node a run of ``tree`` starts from: its root, or with ``cleanup:`` the node above both
+    (every whole-tree walk goes from here; an include runs only the root of the file it includes)."""
+    return tree.top if tree.top is not None else tree.root
 
 
 REQUIRED = object()  # an input without a default
@@ -130,7 +140,7 @@ def used_modules(tree: TreeFile) -> Tuple[Set[str], bool]:
     """The modules a tree calls or waits on, and whether it asks the Blackboard node."""
     mods: Set[str] = set()
     recall = False
-    for n in walk(tree.root):
+    for n in walk(top_of(tree)):
         mods.update(n.nodekind.modules(n))
         recall = recall or n.nodekind.uses_blackboard_node
     return mods, recall

@@ -268,6 +268,10 @@ class LinePrinter:
             lines.append("[%7.3fs] control   %s" % (t, control_line(rec)))
         elif kind == "end":
             line = "[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else "")
+            said = rec.get("cleanup") if isinstance(rec.get("cleanup"), dict) else None
+            if said is not None:  # a tree with cleanup: how it ended (the run's status stays root's)
+                line += "; cleanup (root %s): %s%s" % (said.get("ended"), said.get("status") or "did not run",
+                                                       ": %s" % said["reason"] if said.get("reason") else "")
             ticks = rec.get("ticks")
             for c in state.pending.values() if rec.get("gone") else ():
                 line += "\n[%7.3fs] maybe still running (run gone): %s since %.3fs %s" % (

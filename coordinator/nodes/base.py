@@ -10,14 +10,14 @@ from __future__ import annotations
 import abc
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Set, Tuple
 
 import py_trees
 
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
-from coordinator.treeast import TreeFile, TreeNode, nodes_of
+from coordinator.treeast import TreeFile, TreeNode, nodes_of, top_of
 
 if TYPE_CHECKING:  # pragma: no cover
     from coordinator.context import RunContext
@@ -250,6 +250,9 @@ def where(pos: Pos, seen_from: Pos) -> str:
     return "line %d" % pos.line if pos.file == seen_from.file else "%s:%d" % (pos.file, pos.line)
 
 
+_CLEANUP_KEYS = ("ended", "ended_reason")   # coordinator.nodes.task.CLEANUP_KEYS (which imports this module)
+
+
 class Flow:
     """The data-flow walk (``coordinator.dataflow``): kinds call back into it for their children.
 
@@ -266,6 +269,7 @@ class Flow:
         self.files: List[TreeFile] = [tree] if tree is not None else []
         self._writers: Optional[Dict[str, Dict[TreeNode, None]]] = None
         self._file_writes: Dict[int, Dict[str, TreeNode]] = {}
+        self.cleanup_nodes: Set[TreeNode] = set()   # the nodes of the tree's cleanup: (nodes/task.py)
 
     def need(self, node: TreeNode, keys: Iterable[str], avail: FrozenSet[str]) -> None:
         missing = [k for k in keys if k not in avail]
@@ -279,7 +283,13 @@ class Flow:
         anywhere = frozenset(written)
         for node, k, avail in self.missed:
             at = node.nodekind.read_pos(node, k) or node.pos
-            if k in anywhere:
+            if k in _CLEANUP_KEYS and node not in self.cleanup_nodes:
+                message = ("reads %r, which bmtree sets only for the tree's cleanup: (how root ended): a node "
+                           "outside the cleanup cannot read it" % k)
+            elif k in anywhere and node in self.cleanup_nodes:
+                message = ("reads %r, which the cleanup cannot count on: it runs however root ended, also when "
+                           "root was stopped before writing it (%s)" % (k, self._written_at(node, k, at)))
+            elif k in anywhere:
                 message = "reads %r, which is not written on every path before this node (%s)" % (
                     k, self._written_at(node, k, at))
             else:
@@ -291,6 +301,8 @@ class Flow:
 
     def _written_at(self, node: TreeNode, key: str, at: Pos) -> str:
         hint = "write it earlier on every path or declare it under 'inputs:'"
+        if node in self.cleanup_nodes:
+            hint = "write it in the cleanup first, or declare it under 'inputs:' with a default"
         writers = self.writers(key)
         if not writers:
             return hint
@@ -316,7 +328,7 @@ class Flow:
         first use: only a problem needs them."""
         if self._writers is None:
             self._writers = {}
-            for n in nodes_of(self.tree.root) if self.tree is not None else ():
+            for n in nodes_of(top_of(self.tree)) if self.tree is not None else ():
                 nk = n.nodekind
                 written = nk.writes(n) if nk.own_writes else None
                 for k in written if written else ():

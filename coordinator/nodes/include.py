@@ -59,6 +59,10 @@ class IncludeKind(NodeKind):
         if sub is None:
             return spec
         spec.tree = sub
+        if sub.cleanup is not None:   # only the run tree's cleanup runs (coordinator/cleanupparse.py)
+            from coordinator.cleanupparse import included_cleanup_warning
+
+            p.warn(at, included_cleanup_warning(sub))
         for k in spec.args:
             if k not in sub.inputs:
                 p.err(args_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, sub.inputs)

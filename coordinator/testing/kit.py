@@ -27,7 +27,7 @@ from coordinator.language import load_tree
 from coordinator.nodes.base import NEVER, Flow
 from coordinator.runner import RunResult, TreeRunner
 from coordinator.testing.mocks import InProcessTransport, Mocks
-from coordinator.treeast import TreeFile, TreeNode, walk
+from coordinator.treeast import TreeFile, TreeNode, top_of, walk
 from modules.definition import DefinitionError, ModuleDefinition
 from modules.search import default_definitions
 
@@ -88,6 +88,31 @@ class TreeRun:
                 name, did_you_mean(name, self._by_name), ", ".join(sorted(self._by_name))))
         return self._by_name[name]
 
+    @property
+    def ended(self) -> str:
+        """With ``cleanup:``: how root ended, as the cleanup's ``ended`` key says it (succeeded, failed,
+        stopped); "" without one."""
+        return self.result.ended
+
+    @property
+    def cleanup_status(self) -> Optional[str]:
+        """With ``cleanup:``: how the cleanup ended (``"SUCCESS"``, ``"FAILURE"``, ``"INVALID"`` when cut
+        short by a second stop); None without one (or when it never ran)."""
+        status = self.result.cleanup_status
+        return status.value if status is not None else None
+
+    @property
+    def cleanup_reason(self) -> str:
+        """Why the cleanup failed or was cut short ("" when it succeeded)."""
+        return self.result.cleanup_reason
+
+    def cleanup_calls(self, target: Optional[str] = None) -> List[CallRecord]:
+        """The calls the cleanup made (all, or those of ``module.function``); they are among
+        :meth:`calls` too."""
+        __tracebackhide__ = True
+        mine = {id(c) for c in self.result.cleanup_calls}
+        return [c for c in self.calls(target) if id(c) in mine]
+
     def said(self) -> List[str]:
         """Convenience for the speech module: every ``text`` passed to ``speech.say``."""
         return [c.inputs.get("text") for c in self.result.calls if c.target == "speech.say"]
@@ -106,7 +131,9 @@ class Coverage:
     def add_tree(self, tree: TreeFile) -> None:
         self._roots.setdefault(tree.root.pos.file, tree)
         seen: Dict[str, List[TreeNode]] = {}
-        for node in walk(tree.root):
+        for node in walk(top_of(tree)):
+            if node is tree.top:   # the node above root and cleanup: not written in the file
+                continue
             seen.setdefault(node.pos.file, [])
             if node not in seen[node.pos.file]:
                 seen[node.pos.file].append(node)
@@ -159,7 +186,7 @@ class _Endings(Flow):
         self.possible = possible
 
     def walk(self) -> None:
-        self.outcome(self.root.root, frozenset(self.root.inputs))
+        self.outcome(top_of(self.root), frozenset(self.root.inputs))
 
     def outcome(self, node: TreeNode, avail: FrozenSet[str]) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         ok, failed = super().outcome(node, avail)
@@ -175,7 +202,7 @@ class _CoverageVisitor(py_trees.visitors.VisitorBase):
 
     def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
         node = getattr(behaviour, "bmtree_node", None)
-        if node is not None and behaviour.status != Status.INVALID:
+        if node is not None and behaviour.status != Status.INVALID and node.kind != "with_cleanup":
             self.reached[node.pos].add(behaviour.status.value)
 
 

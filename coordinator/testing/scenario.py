@@ -67,7 +67,9 @@ from coordinator.testing.mocks import (
 from coordinator.testing.scenariokeys import (
     ScenarioDefinitions,
     check_calls,
+    check_cleanup,
     check_duration,
+    cleanup_problems,
     duration_of,
     event_problem,
     expected_calls,
@@ -93,7 +95,8 @@ DEFAULT_MAX_TICKS_PER_INSTANT = 10000
 """Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
 _SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS
-_EXPECT_KEYS = ("status", "calls", "blackboard", "reason", "duration")
+_EXPECT_COMMON = ("status", "calls", "blackboard", "reason", "duration")   # what "expect is a mapping with" names
+_EXPECT_KEYS = _EXPECT_COMMON + ("cleanup",)   # cleanup: for a tree with cleanup:
 _TOP_KEYS = ("tree", "modules", "scenarios")
 _EVENT_KEYS = ("at", "event", "params", "after", "nth")
 _OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
@@ -201,6 +204,8 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
     mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
     expect = _expectations(sc, at, out)
     calls = expected_calls(expect, at, defs, out.add)
+    if expect:
+        check_cleanup(expect, at, tree, out.add)
     limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
               "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
               "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
@@ -309,7 +314,7 @@ def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> 
 
 def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
     """A scenario's ``expect``, checked (its problems to ``out``)."""
-    expect = _mapping(sc, "expect", at, "expect is a mapping with " + ", ".join(_EXPECT_KEYS), out)
+    expect = _mapping(sc, "expect", at, "expect is a mapping with " + ", ".join(_EXPECT_COMMON), out)
     if not expect:
         return expect
     _check_keys(expect, _EXPECT_KEYS, "expect", out)
@@ -483,6 +488,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
         in_order = isinstance(expect["calls"], dict)
         problems.extend(expect_calls_in_order(run, s.calls) if in_order else expect_calls(run, s.calls))
     problems.extend(expect_duration(run.duration, duration_of(expect)))
+    problems.extend(cleanup_problems(expect, run.result))
     if "reason" in expect and str(expect["reason"]) not in run.reason:
         problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
                         else "no reason (the run %s), expected one containing %r" % (

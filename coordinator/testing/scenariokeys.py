@@ -5,6 +5,8 @@
 - ``expect: calls``, a list (exactly these calls) or ``{in_order: [...]}`` (these calls in this
   order, others may come between), each call checked against the definitions;
 - ``expect: duration``, ``{at_least: S, at_most: S}`` in simulated seconds;
+- ``expect: cleanup``, ``success`` or ``failure``: how the tree's ``cleanup:`` ended (its calls are
+  among ``calls``);
 - ``events``: an event's params, every one the definition lists (they get no defaults).
 
 Each problem goes to ``add(pos, message)``, where it is written; every one is reported.
@@ -25,8 +27,9 @@ from coordinator.yamlsrc import LList, LMap, pos_of
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions
 from modules.search import default_definitions
 
-__all__ = ["CALLS_FORMS", "DURATION_KEYS", "ScenarioDefinitions", "check_calls", "check_duration", "duration_of",
-           "event_problem", "expected_calls", "function_of", "listed_calls", "modules_key"]
+__all__ = ["CALLS_FORMS", "CLEANUP_ENDINGS", "DURATION_KEYS", "ScenarioDefinitions", "check_calls", "check_cleanup",
+           "check_duration", "cleanup_problems", "duration_of", "event_problem", "expected_calls", "function_of",
+           "listed_calls", "modules_key"]
 
 Add = Callable[[Pos, str], None]
 DURATION_KEYS = ("at_least", "at_most")
@@ -47,6 +50,36 @@ def function_of(defs: Mapping[str, ModuleDefinition], target: Any) -> Tuple[Any,
         return definition.function(name), ""
     except ProtocolError as exc:
         return None, str(exc)
+
+
+# expect: cleanup ---------------------------------------------------------------------------------------
+CLEANUP_ENDINGS = ("success", "failure")
+
+
+def check_cleanup(expect: Any, at: Pos, tree: Any, add: Add) -> None:
+    """``expect: cleanup`` is success or failure, for a tree that has a ``cleanup:``."""
+    if "cleanup" not in expect:
+        return
+    value = str(expect["cleanup"]).lower()
+    where = pos_of(expect, "cleanup", at)
+    if value not in CLEANUP_ENDINGS:
+        add(where, "cleanup is success or failure (how the tree's cleanup: ended), got %r%s" % (
+            expect["cleanup"], did_you_mean(value, CLEANUP_ENDINGS)))
+    elif tree is not None and getattr(tree, "cleanup", None) is None:
+        add(where, "expect: cleanup, but %s has no cleanup: (a top-level node run after root)"
+            % os.path.basename(str(getattr(tree, "path", "the tree"))))
+
+
+def cleanup_problems(expect: Any, result: Any) -> List[str]:
+    """How the run's cleanup ended against ``expect: cleanup``."""
+    if "cleanup" not in expect:
+        return []
+    want = str(expect["cleanup"]).upper()
+    got = result.cleanup_status.value if result.cleanup_status is not None else "not run"
+    if got == want:
+        return []
+    why = " (%s)" % result.cleanup_reason if result.cleanup_reason else ""
+    return ["cleanup %s, expected %s%s" % ("cut short" if got == "INVALID" else got, want, why)]
 
 
 # expect: calls ----------------------------------------------------------------------------------------
