@@ -1,4 +1,5 @@
-"""The transport over real ROS topics (DESIGN §2). The only coordinator part that talks to ROS.
+"""The transport over real ROS topics (DESIGN §2). The only coordinator part that talks to ROS
+(with the modules it names below).
 
 Calls and cancels go to a module's own call topic when its announcement names one (a
 cancel there, marked ``"cancel": true``, can never overtake its call), else to the shared
@@ -8,21 +9,20 @@ Sending never blocks the ticking thread: a module's own topic is written by a
 cannot block; what a socket does not take, to that topic's own thread), the shared topics by
 rospy's queued publishers (a queue and writer thread per subscriber connection), so a
 subscriber that stops reading (a stopped process) fills only its own queue (then loses its
-oldest messages). The preflight is :mod:`coordinator.preflight`.
+oldest messages). The preflight is :mod:`coordinator.preflight`; the start-up guard
+:mod:`coordinator.startguard`; the run stream's topics :mod:`coordinator.rosstream`; the
+liveness watchdogs' questions to the master :mod:`coordinator.rosliveness`.
 """
 from __future__ import annotations
 
 import contextlib
 import json
 import logging
-import socket
 import threading
-import time
 import typing
 from collections import OrderedDict
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Set, Tuple
 
-from blackboard.node import TOPIC_STORED
 from comm import (
     TOPIC_BB_ANSWER,
     TOPIC_BB_REQUEST,
@@ -30,11 +30,10 @@ from comm import (
     TOPIC_CANCEL,
     TOPIC_EVENT,
     TOPIC_RESULT,
-    sync_publisher,
 )
 from comm.address import own_address_problem
 from comm.addressing import PING_FUNCTION, cancel_on_call_topic
-from comm.errors import EnvironmentProblem, ProtocolError
+from comm.errors import ProtocolError
 from comm.limits import check_depth
 from comm.liveness import BLACKBOARD, DEFAULT_PERIOD, ModuleLost, NodeWatch, Watchdog
 from comm.messages import (
@@ -47,14 +46,15 @@ from comm.messages import (
     FunctionResult,
 )
 from comm.nodelife import registering
-from comm.rpc import PidLine, master_api, wait_closed
-from coordinator.preflight import diff_definitions, legacy_nodes, wait_ready
+from coordinator.preflight import diff_definitions, wait_ready
+from coordinator.rosliveness import node_of, uri_of
+from coordinator.rosstream import RosStreamSink
 from coordinator.runevents import Notice
-from coordinator.runstream import CHANNELS, Sink
 from coordinator.sender import TopicSender, topic_senders, widen_accept_queue
+from coordinator.startguard import MasterGone, StartupGuard
 from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
-from modules.discovery import PARAM_ROOT, LiveModule, live_modules, node_alive
+from modules.discovery import LiveModule, live_modules
 
 __all__ = ["RosTransport", "RosStreamSink", "StartupGuard", "MasterGone", "diff_definitions", "address_problem",
            "SEND_QUEUE"]
@@ -62,7 +62,6 @@ __all__ = ["RosTransport", "RosStreamSink", "StartupGuard", "MasterGone", "diff_
 log = logging.getLogger("bmtree.coordinator")
 
 SEND_QUEUE = 10000  # messages queued per subscriber connection before the oldest is dropped
-LIVENESS_QUESTION = 2.0  # s a liveness lookup may wait for the master (then: not known now)
 
 
 def address_problem() -> str:
@@ -70,162 +69,6 @@ def address_problem() -> str:
     process's advertised address does not resolve, is loopback while the master's is not, or is not
     an address of this machine (:func:`comm.address.own_address_problem`)."""
     return str(own_address_problem() or "")
-
-
-class MasterGone(EnvironmentProblem):
-    """The ROS master stopped answering while ``bmtree run`` was starting (exit 3)."""
-
-
-def _end_registration_retries() -> None:
-    """End rospy's retries of a registration with a master that does not answer.
-
-    ``rospy.Publisher``, ``rospy.Subscriber`` and ``init_node`` (its ``/rosout``) register with the
-    master in a loop that only ``rospy.is_shutdown()`` ends, holding rospy's topic lock. Raising
-    the shutdown flag ends it; rospy's shutdown hooks are not run, as their unregistering asks the
-    master with no timeout (a master that does not answer would hang the process there), and there
-    is nothing to unregister from a master that is gone. rospy's other questions to the master (its
-    proxy bounded at start-up: :func:`comm.nodelife.bound_master_questions`) fail at once from now
-    on. No lock taken: called from a signal handler too."""
-    import rospy.core
-
-    from comm.rpc import MasterProxy
-
-    rospy.core._shutdown_flag = True
-    for proxy in list(getattr(rospy.core, "_xmlrpc_cache", {}).values()):
-        if isinstance(proxy, MasterProxy):
-            proxy.sticky = proxy.failed = True
-
-
-class StartupGuard:
-    """Bounds ``bmtree run``'s start-up when the ROS master stops answering meanwhile.
-
-    A thread asks the master for its pid over one kept connection and waits for it to close
-    (as :class:`comm.masterwatch.MasterWatch`, which exists only once the node is up): a master
-    that stops answering gets ``limit`` seconds to answer again (rospy keeps retrying its
-    registrations meanwhile, and they succeed then). After that rospy's retries are ended, and
-    :meth:`check` (and :meth:`watching`) raise :class:`MasterGone`. A stop signal held while a
-    registration waits for a master that does not answer ends that wait at once.
-
-    Args:
-        limit: seconds a master that stopped answering has to answer again (``--wait``).
-        say: where the progress lines go (stderr).
-        interrupts: the run's :class:`comm.nodelife.Interrupts`, whose held signals end a wait.
-    """
-
-    def __init__(self, limit: float, say: Callable[[str], None], interrupts: Any = None, period: float = 0.25,
-                 timeout: float = 1.0, master_uri: str = ""):
-        import rosgraph
-
-        self.limit = limit
-        self.say = say
-        self.period = period
-        self.timeout = timeout
-        self.recheck = 1.0  # s between questions while the master answers (a start-up is short)
-        self.master_uri = master_uri or rosgraph.get_master_uri()
-        self.down = False  # the master does not answer now
-        self.expired = False  # ... and did not answer again within ``limit``: start-up is over
-        self._interrupts = interrupts
-        self._stop = threading.Event()
-        self._wake_r, self._wake_w = socket.socketpair()
-        self._thread: Optional[threading.Thread] = None
-
-    def start(self) -> StartupGuard:
-        if self._thread is None:
-            if self._interrupts is not None:
-                self._interrupts.on_held.append(self._on_held)
-            self._thread = threading.Thread(target=self._loop, name="bmtree-startup-guard", daemon=True)
-            self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Start-up is over (the run's own master watch takes over)."""
-        if self._interrupts is not None and self._on_held in self._interrupts.on_held:
-            self._interrupts.on_held.remove(self._on_held)
-        self._stop.set()
-        try:
-            self._wake_w.send(b"x")
-        except OSError:
-            pass
-
-    def _on_held(self) -> None:
-        """A stop signal came inside a registration (signal handler, main thread: no lock taken)."""
-        if self.down:
-            _end_registration_retries()
-
-    def _loop(self) -> None:
-        line = PidLine(self.master_uri, self.timeout, "/bmtree_startup")
-        down_since = None
-        try:
-            while not self._stop.is_set():
-                pid = line.pid()
-                if self._stop.is_set():
-                    return
-                if pid is None:
-                    now = time.monotonic()
-                    if down_since is None:
-                        down_since = now
-                        self.down = True
-                        self.say("the ROS master at %s stopped answering during start-up; waiting up to %g s "
-                                 "(--wait) for it to answer again ..." % (self.master_uri, self.limit))
-                    elif now - down_since >= self.limit:
-                        self.expired = True
-                        _end_registration_retries()
-                        return
-                elif down_since is not None:
-                    down_since = None
-                    self.down = False
-                    self.say("the ROS master at %s answers again; starting goes on" % self.master_uri)
-                if down_since is None and line.fileno() >= 0:
-                    # asked again every second anyway: a master that is stopped, or whose machine
-                    # dropped off the network, keeps the connection open and answers nothing
-                    if wait_closed({"master": line}, self.recheck, self._wake_r)[0]:
-                        return
-                elif self._stop.wait(self.period):
-                    return
-        finally:
-            line.close()
-
-    def answers(self) -> bool:
-        """The master answers now (asked afresh)."""
-        return PidLine(self.master_uri, self.timeout, "/bmtree_startup").pid() is not None
-
-    def error(self, cause: Any = None) -> MasterGone:
-        if self.expired:
-            return MasterGone("the ROS master at %s stopped answering during start-up and did not answer again within "
-                              "%g s (--wait): nothing was called (start it again, then the run)"
-                              % (self.master_uri, self.limit))
-        return MasterGone("the ROS master at %s stopped answering during start-up%s: nothing was called (start it "
-                          "again, then the run)" % (self.master_uri, " (%s)" % cause if cause else ""))
-
-    def check(self) -> None:
-        """MasterGone once the master did not come back in time."""
-        if self.expired:
-            raise self.error()
-
-    def wait_back(self) -> None:
-        """The end of start-up: while the master does not answer, wait for it (bounded: MasterGone)."""
-        while self.down and not self.expired and self._thread is not None and self._thread.is_alive():
-            time.sleep(0.05)
-        self.check()
-
-    @contextlib.contextmanager
-    def watching(self) -> Iterator[None]:
-        """Start-up steps: what they raise because the master does not answer becomes MasterGone."""
-        import rosgraph
-        import rospy
-
-        try:
-            yield
-        except (MasterGone, KeyboardInterrupt):
-            raise
-        except Exception as exc:
-            if self.expired:
-                raise self.error() from None
-            if isinstance(exc, (OSError, rosgraph.masterapi.Error, rospy.exceptions.ROSException)) and \
-                    not self.answers():
-                raise self.error(exc) from None
-            raise
-        self.check()
 
 
 class RosTransport(Transport):
@@ -240,7 +83,7 @@ class RosTransport(Transport):
         self._deliver: Callable[[Any], None] = self._hold
         self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
         self._bb_watch: Optional[NodeWatch] = None  # the Blackboard node's process, while the run goes on
-        self.watchdog = Watchdog(self._from_watchdog, self._node_of, self._uri_of, period=liveness)
+        self.watchdog = Watchdog(self._from_watchdog, node_of, uri_of, period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._String: Any = None
@@ -356,7 +199,7 @@ class RosTransport(Transport):
             deliver(item)
         self.watchdog.start()
         if self._bb_watch is None:
-            self._bb_watch = NodeWatch(lambda: self._node_of(BLACKBOARD), self._uri_of, self._blackboard_gone,
+            self._bb_watch = NodeWatch(lambda: node_of(BLACKBOARD), uri_of, self._blackboard_gone,
                                        self._blackboard_back, period=1.0).start()
 
     def _blackboard_gone(self, node: str, reason: str) -> None:
@@ -366,42 +209,6 @@ class RosTransport(Transport):
     def _blackboard_back(self, node: str) -> None:
         self._deliver(Notice("blackboard_back", "the Blackboard node %s is back: results from now on are stored "
                                                 "again (those of the calls that ended meanwhile are not)" % node))
-
-    @staticmethod
-    def _node_of(module: str) -> Optional[str]:
-        """The node serving ``module`` (announced, else a legacy node named after it), or the Blackboard's."""
-        import rosgraph
-
-        master = master_api("/bmtree_liveness", LIVENESS_QUESTION)  # a master that does not answer: OSError
-        if module == BLACKBOARD:  # the live node publishing answers and acknowledgements
-            pubs, _, _ = master.getSystemState()
-            pubs_of = {t: list(n) for t, n in pubs}
-            answering = pubs_of.get(TOPIC_BB_ANSWER, [])
-            nodes = [n for n in answering if n in pubs_of.get(TOPIC_STORED, [])] or answering
-            for node in nodes:
-                try:
-                    if node_alive(master.lookupNode(node), 0.5):
-                        return node
-                except rosgraph.masterapi.MasterError:
-                    continue
-            return nodes[0] if nodes else None
-        try:
-            entry = master.getParam("%s/%s" % (PARAM_ROOT, module))
-            if isinstance(entry, dict) and isinstance(entry.get("node"), str):
-                return entry["node"]
-        except rosgraph.masterapi.MasterError:
-            pass
-        found = legacy_nodes([module]).get(module)
-        return found[0] if found else None
-
-    @staticmethod
-    def _uri_of(node: str) -> Optional[str]:
-        import rosgraph
-
-        try:
-            return master_api("/bmtree_liveness", LIVENESS_QUESTION).lookupNode(node)
-        except rosgraph.masterapi.MasterError:
-            return None
 
     def _route(self, module: str) -> Any:
         route = self._routes.get(module)
@@ -594,67 +401,3 @@ class RosTransport(Transport):
         for p in list(self._pubs.values()) + list(self._routes.values()):
             p.unregister()
         self._subs, self._pubs, self._routes = [], {}, {}
-
-
-class RosStreamSink(Sink):
-    """Publishes run-stream records, one topic per channel. ``tree`` and ``end`` (once per run)
-    are latched, so a viewer that connects late still gets the tree and the result, and written
-    at once; the frequent channels are queued, so a slow viewer never slows the tick, and
-    drained (bounded) at the end of the run."""
-
-    _ONCE = ("tree", "end")
-
-    def __init__(self, namespace: str, string_cls: Any):
-        import rospy
-
-        self._String = string_cls
-        self._pubs = {}
-        with registering():
-            for c in CHANNELS:
-                topic = "%s/%s" % (namespace.rstrip("/"), c)
-                self._pubs[c] = (sync_publisher(topic, string_cls, latch=True) if c in self._ONCE else
-                                 rospy.Publisher(topic, string_cls, queue_size=1000))
-
-    def write(self, channel: str, text: str) -> None:
-        self._pubs[channel].publish(self._String(text))
-
-    def close(self, timeout: float = 1.0) -> None:
-        end = time.monotonic() + timeout
-        for c, pub in self._pubs.items():
-            if c in self._ONCE:
-                continue
-            for conn in list(getattr(pub.impl, "connections", [])):
-                while getattr(conn, "_queue", None) and time.monotonic() < end:
-                    time.sleep(0.005)
-
-    def settle(self, timeout: float = 3.0) -> bool:
-        """Wait (bounded) until every viewer already subscribed is connected, so that it misses
-        nothing of the run; True if all are.
-
-        A subscriber whose node does not answer its XML-RPC (``getPid``) is left out: a viewer or
-        run killed outright stays registered with the master for ever, and would otherwise cost
-        every later run the whole wait for a connection that never comes."""
-        master = master_api("/bmtree_stream")
-        end = time.monotonic() + timeout
-        dead: Set[str] = set()
-        alive: Set[str] = set()
-        while True:
-            try:
-                subs = {t: list(n) for t, n in master.getSystemState()[1]}
-            except Exception:
-                return False
-            missing = {n for p in self._pubs.values() for n in subs.get(p.resolved_name, ())
-                       if not p.impl.has_connection(n)} - dead
-            for node in sorted(missing - alive):  # each asked once
-                try:
-                    answers = node_alive(master.lookupNode(node), 0.5)
-                except Exception:  # no longer registered
-                    answers = False
-                (alive if answers else dead).add(node)
-                if not answers:
-                    log.debug("run stream: subscriber %s is registered but does not answer: not waited for", node)
-            if not missing - dead:
-                return True
-            if time.monotonic() >= end:
-                return False
-            time.sleep(0.02)

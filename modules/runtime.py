@@ -5,16 +5,14 @@ events through two publish callbacks, and takes how to run work and keep time
 (:mod:`modules.execution`), so the ROS node (:mod:`modules.node`, worker threads and
 wall time) and the test kit's in-process transport (the run's simulated clock) are the
 same runtime: busy, refusals, cancels and ``Concurrent`` answer alike in both.
+What the author's class derives from is :mod:`modules.basicmodule`; the answers' error
+texts are :mod:`modules.errortext`.
 """
 from __future__ import annotations
 
 import logging
-import os
-import re
-import sysconfig
 import threading
-import traceback
-from typing import Any, Callable, Dict, List, Optional, Set, Union
+from typing import Any, Callable, Dict, Optional
 
 from comm.errors import ProtocolError
 from comm.messages import (
@@ -26,217 +24,16 @@ from comm.messages import (
     FunctionResult,
     load_payload,
 )
+from modules.basicmodule import BasicModule, BindingError, CallContext, Failure, Rejected, public_methods
 from modules.binding import signature_problems
 from modules.definition import FunctionDefinition, ModuleDefinition
+from modules.errortext import author_files, bounded, raised_text, salvage_keys, which_call
 from modules.execution import Executor, Scheduler, TimerThread, WorkerThreads
 from modules.outcome import Outcome, OutcomeKind
 
 __all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "ModuleServer", "BindingError"]
 
 log = logging.getLogger("bmtree.module")
-
-#: the longest ``error`` text the runtime sends (a message that long is cut, the place in the code kept)
-MAX_ERROR_CHARS = 2000
-
-_HERE = os.path.dirname(os.path.abspath(__file__))
-# bmtree's own code: never "the place" of a module's error (modules/sim/ is a module's code, so it is not)
-_OURS = tuple(os.path.join(os.path.dirname(_HERE), d, "") for d in ("comm", "coordinator", "blackboard"))
-_LIBRARY = tuple({os.path.join(sysconfig.get_paths()[k], "") for k in ("stdlib", "platstdlib")})
-
-_KEY_TEXT = {k: re.compile(r'"%s"\s*:\s*"([^"\\]{1,200})"' % k) for k in ("basic_mod", "function", "call_id")}
-
-
-def _salvage(text: Any) -> Dict[str, str]:
-    """The plain string keys of a payload too big, deep or broken to parse, to answer it."""
-    if isinstance(text, (bytes, bytearray)):
-        text = bytes(text[:1 << 20]).decode("utf-8", "replace")
-    if not isinstance(text, str):
-        return {}
-    out = {}
-    for key, pattern in _KEY_TEXT.items():
-        m = pattern.search(text)
-        if m:
-            out[key] = m.group(1)
-    return out
-
-
-def _bounded(text: str, limit: int = MAX_ERROR_CHARS) -> str:
-    """``text`` cut to ``limit`` characters: an error text travels in every answer and run log."""
-    return text if len(text) <= limit else text[:limit] + "..."
-
-
-def _ours(path: str) -> bool:
-    path = os.path.abspath(path)
-    return os.path.dirname(path) == _HERE or path.startswith(_OURS)
-
-
-def _library(path: str) -> bool:
-    return path.startswith(_LIBRARY) or path.startswith("<frozen") or any(
-        d in path for d in (os.sep + "site-packages" + os.sep, os.sep + "dist-packages" + os.sep))
-
-
-def _author_files(impl: Any) -> Set[str]:
-    """The files that define the methods of ``impl``'s class and its bases, bmtree's own excepted."""
-    files = set()
-    for cls in type(impl).__mro__:
-        if cls in (BasicModule, object):
-            continue
-        for value in vars(cls).values():
-            code = getattr(getattr(value, "__func__", value), "__code__", None)
-            if code is not None and not _ours(code.co_filename):
-                files.add(os.path.abspath(code.co_filename))
-    return files
-
-
-def _place_of(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
-    """``arm.py:10 in pick``: the innermost frame of the module author's code in ``exc``'s traceback.
-
-    That is the line the author fixes: not the runtime's frames that called the method, and not
-    the standard library's or an installed package's frames it called, unless it is in one of the
-    ``authors`` files (the class's own, which may be installed) or no other frame is left. ""
-    when the exception came from bmtree's own code alone."""
-    authors = authors or set()
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not _ours(f.filename)]
-    if not frames:
-        return ""
-    frame = next((f for f in reversed(frames) if os.path.abspath(f.filename) in authors or not _library(f.filename)),
-                 frames[-1])
-    return "%s:%s in %s" % (os.path.basename(frame.filename), frame.lineno, frame.name)
-
-
-def _raised_text(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
-    """The ``error`` of a call whose method raised: ``KeyError: 'banana' (arm.py:10 in pick)``, or
-    ``AssertionError at arm.py:10 in pick`` for an empty message; bounded in size, the place kept,
-    so the tree's log says where to look without the module's terminal."""
-    name = type(exc).__name__
-    try:
-        message = str(exc)
-    except Exception:  # a broken __str__ must not lose the answer
-        message = "(its message cannot be shown)"
-    place = _place_of(exc, authors)
-    message = _bounded(message, MAX_ERROR_CHARS - len(name) - len(place) - 8)
-    if not message:
-        return "%s at %s" % (name, place) if place else name
-    return "%s: %s (%s)" % (name, message, place) if place else "%s: %s" % (name, message)
-
-
-def _which(call_id: Optional[str]) -> str:
-    return "call %s" % call_id if call_id is not None else "a call without an id"
-
-
-class Failure(Exception):
-    """Raise (or return) this from a function to answer ``failed`` with a reason."""
-
-
-class Rejected(Exception):
-    """Raise this to answer ``rejected``: the call cannot be taken now (its Exec-condition
-    does not hold), as opposed to a call that was tried and failed."""
-
-
-class BindingError(Exception):
-    """The class and the definition do not match (named in the message)."""
-
-
-class CallContext:
-    """What a running function knows about its call: id, and whether it was cancelled."""
-
-    def __init__(self, call_id: Optional[str], function: str):
-        self.call_id = call_id
-        self.function = function
-        self.cancelled = threading.Event()
-        self._callbacks: List[Callable[[], None]] = []
-        self._lock = threading.Lock()
-
-    def on_cancel(self, callback: Callable[[], None]) -> None:
-        """Run ``callback`` (once, from the cancelling thread) when the call is cancelled."""
-        with self._lock:
-            if not self.cancelled.is_set():
-                self._callbacks.append(callback)
-                return
-        callback()
-
-    def cancel(self) -> bool:
-        """Cancel the call; False if it was cancelled already (a second cancel changes nothing)."""
-        with self._lock:
-            if self.cancelled.is_set():
-                return False
-            self.cancelled.set()
-            callbacks, self._callbacks = self._callbacks, []
-        for cb in callbacks:
-            try:
-                cb()
-            except Exception:
-                log.exception("cancel callback of %s failed", self.function)
-        return True
-
-    def sleep(self, seconds: float) -> bool:
-        """Sleep unless cancelled first; True if the full time passed (an infinite time waits for the
-        cancel, NaN does not wait). This blocks a worker thread in wall time: to wait on the
-        module's clock (simulated in tests), return an Outcome with a ``delay`` instead."""
-        if seconds != seconds or seconds <= 0:
-            return not self.cancelled.is_set()
-        if seconds > threading.TIMEOUT_MAX:
-            self.cancelled.wait()
-            return False
-        return not self.cancelled.wait(seconds)
-
-
-class BasicModule:
-    """Base class for module authors: one method per function of the definition.
-
-    A method receives its inputs as keyword arguments (ROS messages, by name) and
-    returns a dict of outputs (ROS messages or YAML-like values such as ``True`` for
-    ``std_msgs/Bool``), or an :class:`~modules.outcome.Outcome` (``succeed(delay=2.0, ...)``).
-    Raise or return :class:`Failure` to answer ``failed``.
-    Long functions should watch ``self.context.cancelled`` or use
-    ``self.context.sleep``.
-
-    Attributes:
-        concurrent: True, or a set of function names that may run while others run.
-            Non-concurrent functions exclude each other (they share the hardware).
-    """
-
-    concurrent: Union[bool, Set[str]] = False
-
-    def __init__(self) -> None:
-        self._server: Optional[ModuleServer] = None
-        self._local = threading.local()
-
-    @property
-    def context(self) -> CallContext:
-        ctx = getattr(self._local, "ctx", None)
-        if ctx is None:
-            raise RuntimeError("no call is running in this thread")
-        return ctx
-
-    @property
-    def definition(self) -> ModuleDefinition:
-        assert self._server is not None, "module not bound to a server"
-        return self._server.definition
-
-    def emit(self, event: str, **params: Any) -> None:
-        """Publish an event of this module, checked against the definition's Events."""
-        assert self._server is not None, "module not bound to a server"
-        self._server.emit(event, params)
-
-    def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
-        """Hook run in the call's turn before the function: return an Outcome to answer with it
-        instead of running the method (fault injection), None to run the method."""
-        return None
-
-    def setup(self, node: Any) -> None:
-        """Hook run once by the ROS node after it connected (extra topics, parameters)."""
-
-    def shutdown(self) -> None:
-        """Hook run once when the node stops."""
-
-
-_RESERVED = set(dir(BasicModule))
-
-
-def _public_methods(obj: Any) -> Set[str]:
-    return {n for n in dir(type(obj)) if not n.startswith("_") and n not in _RESERVED
-            and callable(getattr(type(obj), n, None))}
 
 
 class _Call:
@@ -302,12 +99,12 @@ class ModuleServer:
         #: (the world's faults of a user's own module under ``bmtree run --sim``)
         self.faults: Dict[str, Any] = {}
         self._bind()
-        self._authors = _author_files(impl)  # where an exception's place is looked for first
+        self._authors = author_files(impl)  # where an exception's place is looked for first
         impl._server = self
 
     def _bind(self) -> None:
         functions = set(self.definition.functions)
-        methods = _public_methods(self.impl)
+        methods = public_methods(self.impl)
         problems = []
         for fn in sorted(functions - methods):
             problems.append("function %r of definition %s has no method in class %s" % (
@@ -343,7 +140,7 @@ class ModuleServer:
         try:
             head = load_payload(text, self.max_bytes)
         except ProtocolError as exc:
-            keys = _salvage(text)
+            keys = salvage_keys(text)
             if keys.get("basic_mod") == self.definition.name and "call_id" in keys:
                 self._reject(keys["call_id"], keys.get("function"), "malformed call: %s" % exc)
             else:
@@ -459,8 +256,9 @@ class ModuleServer:
         with self._lock:
             late = call.late = call.running and not call.answered
         if late:
-            log.warning("%s of %s was cancelled but its code has not returned after %g s; %s", _which(call.ctx.call_id),
-                        call.fn.qualified, self.cancel_grace, "%s stays busy until it does" % self.definition.name
+            log.warning("%s of %s was cancelled but its code has not returned after %g s; %s",
+                        which_call(call.ctx.call_id), call.fn.qualified, self.cancel_grace,
+                        "%s stays busy until it does" % self.definition.name
                         if call.exclusive else "it goes on running")
         self._finish(call, self._cancelled(call))
 
@@ -492,15 +290,15 @@ class ModuleServer:
             except Rejected as exc:
                 result = self._result(call, CallStatus.REJECTED, str(exc) or "rejected")
             except Exception as exc:
-                log.exception("%s raised (%s)", call.fn.qualified, _which(ctx.call_id))
-                result = self._result(call, CallStatus.FAILED, _raised_text(exc, self._authors))
+                log.exception("%s raised (%s)", call.fn.qualified, which_call(ctx.call_id))
+                result = self._result(call, CallStatus.FAILED, raised_text(exc, self._authors))
             finally:
                 self.impl._local.ctx = None
         with self._lock:
             call.running = False
             late, call.late = call.late, False
         if late:
-            log.info("the code of cancelled %s of %s has returned; %s is free again", _which(ctx.call_id),
+            log.info("the code of cancelled %s of %s has returned; %s is free again", which_call(ctx.call_id),
                      call.fn.qualified, self.definition.name)
         if ctx.cancelled.is_set():
             self._finish(call, self._cancelled(call))
@@ -528,7 +326,7 @@ class ModuleServer:
         coordinator says ``arm.pick failed: …`` already)."""
         prefix = call.fn.qualified + ": "
         problem = problem[len(prefix):] if problem.startswith(prefix) else problem
-        log.warning("%s: invalid outputs (%s): %s", call.fn.qualified, _which(call.ctx.call_id), _bounded(problem))
+        log.warning("%s: invalid outputs (%s): %s", call.fn.qualified, which_call(call.ctx.call_id), bounded(problem))
         return self._result(call, CallStatus.FAILED, "invalid outputs: %s" % problem)
 
     def _follow(self, call: _Call, outcome: Outcome) -> None:
@@ -554,7 +352,7 @@ class ModuleServer:
             if not answered and kind == OutcomeKind.RESPOND:
                 call.running = True
         if late:
-            log.info("cancelled %s of %s is over; %s is free again", _which(call.ctx.call_id), call.fn.qualified,
+            log.info("cancelled %s of %s is over; %s is free again", which_call(call.ctx.call_id), call.fn.qualified,
                      self.definition.name)
         if answered:  # cancelled meanwhile: an outcome that ignored the cancel frees the module only now
             if outcome.ignores_cancel:
@@ -605,10 +403,10 @@ class ModuleServer:
 
     def _result(self, call: _Call, status: CallStatus, error: str) -> FunctionResult:
         return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.definition.name, function=call.ctx.function,
-                              status=status, error=_bounded(error))
+                              status=status, error=bounded(error))
 
     def _reject(self, call_id: Optional[str], function: Any, error: str) -> None:
-        error = _bounded(error)
+        error = bounded(error)
         log.warning("rejected call %s of %s.%s: %s", call_id, self.definition.name, function, error)
         fname = function if isinstance(function, str) else None
         self._publish_result(FunctionResult(call_id=call_id, basic_mod=self.definition.name, function=fname,

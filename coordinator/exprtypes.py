@@ -1,0 +1,120 @@
+"""What an expression's values will be, known before running: the kind of each operand, and the
+operands that cannot fit (with the fix when it is plain), for the tree's checks.
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Callable, List, Optional, Tuple
+
+from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, text_of
+from coordinator.refs import Ref, kind_of
+
+__all__ = ["static_kind"]
+
+
+def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
+                errors: List[Tuple[int, str]]) -> Optional[str]:
+    """The kind of ``node``'s value (a node of a :class:`~coordinator.exprparse.Parser` tree) when known,
+    after recording misfits below it."""
+    op = node[0]
+    if op == "lit":
+        return kind_of(node[1])
+    if op == "ref":
+        return key_kind(node[1])
+    if op in ("and", "or"):
+        static_kind(node[1], key_kind, errors)
+        static_kind(node[2], key_kind, errors)
+        return None
+    if op == "not":
+        static_kind(node[1], key_kind, errors)
+        return "bool"
+    if op == "neg":
+        k = static_kind(node[1], key_kind, errors)
+        if k is not None and k != "number":
+            errors.append((node[2], "cannot negate a %s" % k))
+        return "number"
+    if op == "arith":
+        a, b = static_kind(node[2], key_kind, errors), static_kind(node[3], key_kind, errors)
+        if a is None or b is None:
+            return None
+        if node[1] == "+" and a == b == "string":
+            return "string"
+        if a != "number" or b != "number":
+            errors.append((node[4], "cannot %s a %s and a %s" % (VERB[node[1]], a, b)))
+            return None
+        return "number"
+    if op == "call":
+        name, args, at = node[1], node[2], node[3]
+        if name == "at":
+            kinds = [static_kind(arg, key_kind, errors) for arg in args]
+            if kinds[0] not in (None, "list", "string"):
+                errors.append((at, "at() takes a list or a string first, not a %s" % kinds[0]))
+            if len(kinds) > 1 and kinds[1] not in (None, "number"):
+                errors.append((at, "at() takes a number as position, not a %s" % kinds[1]))
+            return None   # an element: its kind is not known here
+        if name == "join":
+            kinds = [static_kind(arg, key_kind, errors) for arg in args]
+            if kinds[0] not in (None, "list"):
+                errors.append((at, "join() takes a list first, not a %s" % kinds[0]))
+            if len(kinds) > 1 and kinds[1] not in (None, "string"):
+                errors.append((at, "join() takes text as separator, not a %s" % kinds[1]))
+            return "string"
+        want = FUNCTIONS[name][1]
+        for arg in args:
+            k = static_kind(arg, key_kind, errors)
+            if k is None:
+                continue
+            if (want and k != want) or (name == "len" and k not in ("string", "list")):
+                errors.append((at, "%s() takes a %s, not a %s" % (name, want or "string or a list", k)))
+        return FUNCTIONS[name][2]
+    a, b = static_kind(node[2], key_kind, errors), static_kind(node[3], key_kind, errors)
+    if node[1] in ORDER and a is not None and b is not None and a != b:
+        errors.append((node[4], "cannot compare a %s %s a %s" % (a, node[1], b)))
+    elif node[1] in ("==", "!=") and ({a, b} == {"number", "string"} or {a, b} == {"bool", "string"}):
+        fix = _as_truth(node) if "bool" in (a, b) else ""
+        errors.append((node[4], "a %s %s a %s is always %s%s" % (
+            a, node[1], b, "false" if node[1] == "==" else "true",
+            fix or _as_other(node[2]) or _as_other(node[3]))))
+    return "bool"
+
+
+def _as_truth(node: Any) -> str:
+    """`` (write door_open, or door_open == true)``: the fix for a true/false value compared with text that
+    is not a literal ``true``/``false`` of its own ('' when the text side is not written in the expression)."""
+    op, left, right = node[1], node[2], node[3]
+    text, other = (left, right) if left[0] == "lit" and isinstance(left[1], str) else (right, left)
+    if text[0] != "lit" or not isinstance(text[1], str):
+        return ""
+    name = str(other[1])[1:] if other[0] == "ref" else ""
+    word = text[1].strip().lower()
+    if word not in ("true", "false"):
+        return " (a true/false value is not text: %scompare it with true or false, unquoted)" % (
+            "write %s or not %s, or " % (name, name) if name else "")
+    if not name:
+        return " (compare with %s, unquoted)" % word
+    holds = (word == "true") == (op == "==")
+    return " (write %s%s, or %s %s %s, unquoted)" % ("" if holds else "not ", name, name, op, word)
+
+
+_NUMBER_TEXT = re.compile(r"-?(?:\d+\.\d*|\d*\.\d+|\d+)(?:[eE][-+]?\d+)?$")
+
+
+def _as_other(node: Any) -> str:
+    """`` (write 0, not "0")``: the fix when one side of a number-text comparison is a literal that
+    the other kind can write; '' otherwise."""
+    if node[0] != "lit":
+        return ""
+    v = node[1]
+    if isinstance(v, str):
+        if not _NUMBER_TEXT.match(v):
+            return ""
+        num = float(v)
+        if num in (float("inf"), float("-inf")):
+            return ""
+        return " (write %s, not %s)" % (text_of(num), _quoted(v))
+    return " (write %s, not %s)" % (_quoted(text_of(v)), text_of(v))
+
+
+def _quoted(text: str) -> str:
+    """Text as an expression writes it, in double quotes."""
+    return '"%s"' % text.replace("\\", "\\\\").replace('"', '\\"')
