@@ -14,7 +14,7 @@ if ! /usr/bin/python3 -c 'import rospy, genpy, std_msgs.msg, geometry_msgs.msg, 
    || ! command -v rosmaster >/dev/null; then
   need+=($ROS_DEBS)
 fi
-# make bench's peer baseline: an actionlib goal (move_base_msgs/MoveBase) round trip
+# actionlib: modules/actions.py and its tests, and make bench's peer baseline (a MoveBase goal round trip)
 BENCH_DEBS="python3-actionlib python3-actionlib-msgs python3-move-base-msgs"
 if ! /usr/bin/python3 -c 'import actionlib, actionlib_msgs.msg, move_base_msgs.msg' 2>/dev/null \
    && apt-cache show python3-actionlib >/dev/null 2>&1; then

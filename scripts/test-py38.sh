@@ -33,7 +33,7 @@ site=$("$V/bin/python" -c 'import site; print(site.getsitepackages()[0])')
 ros="$PWD/$V/ros"
 mkdir -p "$ros"
 rosdir=$(/usr/bin/python3 -c 'import os, genpy; print(os.path.dirname(os.path.dirname(genpy.__file__)))')
-for p in catkin genmsg genpy roscpp rosgraph rosgraph_msgs roslaunch rosmaster rosclean roslib rospy std_msgs std_srvs geometry_msgs sensor_msgs; do
+for p in catkin genmsg genpy roscpp rosgraph rosgraph_msgs roslaunch rosmaster rosclean roslib rospy std_msgs std_srvs geometry_msgs sensor_msgs actionlib actionlib_msgs move_base_msgs; do
   if [ -e "$rosdir/$p" ]; then ln -sfn "$rosdir/$p" "$ros/$p"; fi
 done
 echo "$ros" > "$site/bmtree-ros.pth"
