@@ -16,7 +16,7 @@ from modules.outcome import Outcome
 if TYPE_CHECKING:  # pragma: no cover
     from modules.runtime import ModuleServer
 
-__all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "BindingError", "public_methods"]
+__all__ = ["BasicModule", "CallContext", "Cancelled", "Failure", "Rejected", "BindingError", "public_methods"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -34,13 +34,25 @@ class BindingError(Exception):
     """The class and the definition do not match (named in the message)."""
 
 
+class Cancelled(threading.Event):
+    """A call's cancel flag: an Event (``wait``, ``is_set``) that is also true or false by itself, so
+    ``if self.context.cancelled:`` and ``self.context.cancelled()`` (the C++ library's spelling) say
+    whether the call was cancelled, as a reader expects (a plain Event is always true)."""
+
+    def __bool__(self) -> bool:
+        return self.is_set()
+
+    def __call__(self) -> bool:
+        return self.is_set()
+
+
 class CallContext:
     """What a running function knows about its call: id, and whether it was cancelled."""
 
     def __init__(self, call_id: Optional[str], function: str):
         self.call_id = call_id
         self.function = function
-        self.cancelled = threading.Event()
+        self.cancelled = Cancelled()
         self._callbacks: List[Callable[[], None]] = []
         self._lock = threading.Lock()
 

@@ -236,3 +236,13 @@ def test_the_readme_module_example_binds_and_serves(tmp_path):
     assert s.result(s.call("open", width=0.2)).error == "the gripper opens 10 cm at most"
     assert s.result(s.call("open", width=0.05)).status == "succeeded"
     assert s.result(s.call("close")).values["holding"].data is True
+
+
+def test_a_calls_cancelled_flag_reads_as_true_only_once_cancelled():
+    """``if self.context.cancelled:`` is what authors write (a plain Event would always be true)."""
+    from modules.basicmodule import CallContext
+
+    ctx = CallContext("c1", "go_to")
+    assert not ctx.cancelled and not ctx.cancelled() and not ctx.cancelled.is_set()
+    assert ctx.cancel()
+    assert ctx.cancelled and ctx.cancelled() and ctx.cancelled.wait(0)
