@@ -24,6 +24,8 @@ from comm.nodelife import StopSignals
 from comm.nodeopts import count, parse_node_args
 from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
+from comm.rpc import MASTER_TIMEOUT, master_answers, master_api
+from comm.startup import patiently
 
 __all__ = ["TOPIC_STORED", "make_parser", "main"]
 
@@ -32,11 +34,13 @@ ANNOUNCEMENTS = "/bmtree/modules"  # modules.discovery.PARAM_ROOT (the Blackboar
 
 
 def _announcements() -> Any:
-    """The module announcements (``/bmtree/modules``), for attributing original modules' results."""
+    """The module announcements (``/bmtree/modules``), for attributing original modules' results.
+    Asked from the writer thread, so bounded: a master that does not answer raises OSError (the
+    result is stored without its module) and never holds the results behind it, nor the answers."""
     import rosgraph
 
     try:
-        return rosgraph.Master("/blackboard").getParam(ANNOUNCEMENTS)
+        return master_api("/blackboard", MASTER_TIMEOUT).getParam(ANNOUNCEMENTS)
     except rosgraph.masterapi.Error:
         return {}
 
@@ -49,8 +53,8 @@ def _running_blackboard() -> str:
     from blackboard.client import blackboard_listeners
 
     try:
-        if not rosgraph.is_master_online():
-            return ""  # init_node waits for it; nothing can be registered there yet
+        if not master_answers(1.0):  # bounded: rosgraph.is_master_online() waits for a stopped master for ever
+            return ""  # init_node waits for it (and says so); nothing can be registered there yet
         found = blackboard_listeners("/blackboard_start")
     except (OSError, rosgraph.masterapi.Error):
         return ""
@@ -87,16 +91,19 @@ def main(argv: Optional[List[str]] = None) -> int:
                          "master\n" % other)
         return 3
     if not stop.init_node("blackboard"):
+        stop.leave()
         return 0
     rospy.core.add_preshutdown_hook(_kicked_out)
     log_to_rosout()
-    path = os.path.expanduser(args.db or rospy.get_param("~db", "") or default_db_path())  # ~/ from a launch file
+    db = args.db or patiently(lambda: rospy.get_param("~db", ""))
+    path = os.path.expanduser(db or default_db_path())  # ~/ from a launch file
     keep = args.keep if args.keep is not None else DEFAULT_KEEP
     max_bytes = args.max_bytes if args.max_bytes is not None else DEFAULT_MAX_BYTES
     try:
         store = Store(path, keep=keep)
     except Exception as exc:
         sys.stderr.write("error: cannot open the store %s: %s\n" % (path, exc))
+        stop.leave()
         return 3
     # from the writer thread, in request order; an answer waits for its asker's connection (a Blackboard
     # restarted mid-run gets requests before the coordinator has connected to its answers)
@@ -115,7 +122,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     rospy.Subscriber(TOPIC_BB_REQUEST, String, on_request, queue_size=1000, tcp_nodelay=True)
     watch_master()
     rospy.loginfo("blackboard storing in %s (%d values, keeping %d per name)", path, service.total, keep)
-    stop.spin()
+    stop.spin()  # then leaves the graph, bounded: a master that does not answer is left as it is
     service.stop()
     store.close()
     return 0

@@ -56,6 +56,8 @@ class StopSignals:
         self._read_fd, self._write_fd = os.pipe()
         os.set_blocking(self._write_fd, False)
         self.signal: Optional[int] = None
+        self._started = threading.Event()  # start-up is over (see init_node)
+        self._watch: Any = None  # the start-up's comm.startup.StartupWatch
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._on_signal)
         if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal; nohup ignores it
@@ -87,23 +89,35 @@ class StopSignals:
         return self._stopped
 
     def init_node(self, name: str, **kwargs: Any) -> bool:
-        """``rospy.init_node`` without rospy's signal handlers; False when a stop signal came first."""
+        """``rospy.init_node`` without rospy's signal handlers; False when a stop signal came first.
+
+        Start-up lasts until :meth:`started` (or :meth:`spin`): meanwhile a master that does not
+        answer is said on stderr every few seconds (:class:`comm.startup.StartupWatch`), and a
+        stop signal that a master holds in a registration ends the process (``_stop_start_up``).
+        rospy's questions to the master are bounded from here on (a registration is retried, by
+        rospy; :func:`comm.startup.patiently` retries the node's own)."""
         import rospy
+
+        from comm.rpc import MASTER_TIMEOUT
+        from comm.startup import StartupWatch
 
         if self.requested or not self._master_for_private_params():
             return False
+        bound_master_questions(MASTER_TIMEOUT)
+        self._watch = StartupWatch(_node_master(), "node %s" % name).start()
         # without a master, init_node retries its registrations for ever, holding rospy's topic
         # lock, which rospy's own shutdown needs too: a stop then ends the process (below)
-        started = threading.Event()
-        threading.Thread(target=self._stop_start_up, args=(started,), name="bmtree-start-stop",
-                         daemon=True).start()
-        try:
-            rospy.init_node(name, disable_signals=True, **kwargs)
-        finally:
-            started.set()
+        threading.Thread(target=self._stop_start_up, name="bmtree-start-stop", daemon=True).start()
+        rospy.init_node(name, disable_signals=True, **kwargs)
         rospy.on_shutdown(self._wake)
         rospy.core.add_shutdown_hook(_wake_registration_thread())  # hooks that run once is_shutdown()
         return not self.requested
+
+    def started(self) -> None:
+        """Start-up is over: the node serves (its master watch says from now on when the master is away)."""
+        self._started.set()
+        if self._watch is not None:
+            self._watch.stop()
 
     def _master_for_private_params(self) -> bool:
         """Wait for the master when the command line has ``_name:=value`` parameters: ``init_node``
@@ -128,18 +142,24 @@ class StopSignals:
             select.select([self._read_fd], [], [], 0.5)
         return False
 
-    def _stop_start_up(self, started: threading.Event, grace: float = 1.0) -> None:
-        """While ``init_node`` runs: after a stop signal it has ``grace`` seconds to return (it
-        does whenever the master answers, and the node then stops as usual); if it is still stuck
-        in registrations that no master takes, nothing was registered or announced, and the
-        process exits with 0 at once (the pipe is watched, never read)."""
-        while not started.is_set() and not self._stopped:
+    def _stop_start_up(self, grace: float = 1.0) -> None:
+        """While the node starts: after a stop signal start-up has ``grace`` seconds to end (it
+        notices the stop, or ends, whenever the master answers, and the node then stops as usual);
+        still held after that by a master that does not answer (a registration rospy retries, a
+        question asked again), the process exits with 0 (the pipe is watched, never read): what it
+        registered stays with that master."""
+        while not self._started.is_set() and not self._stopped:
             select.select([self._read_fd], [], [], 0.05)
-        if not started.wait(grace):
-            sys.stderr.write("stopped during start-up: no ROS master answered at %s\n" % os.environ.get(
-                "ROS_MASTER_URI", "http://localhost:11311/"))
-            sys.stderr.flush()
-            os._exit(0)
+        if self._started.wait(grace):
+            return
+        from comm.rpc import master_answers
+
+        while not self._started.wait(0.5):
+            if not master_answers(1.0, _node_master()):
+                sys.stderr.write("stopped during start-up: no ROS master answered at %s; leaving without "
+                                 "unregistering (%s)\n" % (_node_master(), LEFT_BEHIND))
+                sys.stderr.flush()
+                os._exit(0)
 
     def wait(self) -> None:
         """Block until a stop signal or :meth:`_wake` (rospy's shutdown)."""
@@ -147,12 +167,34 @@ class StopSignals:
             os.read(self._read_fd, 64)
 
     def spin(self) -> None:
-        """Block until a stop signal or rospy's shutdown (master kicked us out), then shut rospy down."""
+        """Block until a stop signal or rospy's shutdown (master kicked us out), then :meth:`leave`."""
+        self.started()
+        self.wait()
+        self.leave()
+
+    def leave(self, cleanup: Optional[Callable[[], None]] = None) -> None:
+        """Leave the ROS graph: rospy shut down, then ``cleanup`` (the node's own unregistering),
+        bounded by :func:`leave_graph`: a master that does not answer is left without unregistering,
+        said on stderr, and a second stop signal leaves at once."""
         import rospy
 
-        self.wait()
-        if not rospy.is_shutdown():
-            rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
+        self.started()
+        if not rospy.core.is_initialized():
+            if cleanup is not None:
+                cleanup()
+            return
+
+        def steps() -> None:
+            if not rospy.is_shutdown():
+                rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
+            if cleanup is not None:
+                cleanup()
+
+        def say(text: str) -> None:
+            sys.stderr.write(text + "\n")
+            sys.stderr.flush()
+
+        leave_graph(steps, say, stopped_at=self.signalled_at)
 
 
 def _wake_registration_thread() -> Callable[[str], None]:
@@ -257,6 +299,13 @@ def registering() -> Any:
     """A block in which a process's :class:`Interrupts` hold a stop signal until the block ends
     (wrap rospy's ``init_node``, ``Publisher`` and ``Subscriber`` in it); a plain block otherwise."""
     return _interrupts.held() if _interrupts is not None else contextlib.nullcontext()
+
+
+def _node_master() -> str:
+    """This node's master (``__master:=`` first, as rospy)."""
+    import rosgraph
+
+    return str(rosgraph.get_master_uri())
 
 
 def _master_uri() -> str:

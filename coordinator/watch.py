@@ -204,6 +204,44 @@ def no_run_message(namespace: str, waited: float, only: str = "", others: Option
                            "; the runs seen: %s" % seen if seen else ""))
 
 
+@contextlib.contextmanager
+def joining(limit: float, tool: str) -> Iterator[Any]:
+    """The start-up of ``bmtree watch`` or ``control`` (``rospy.init_node`` and their topics), bounded.
+
+    The master answered the check before it (``master_up``); should it stop answering now (its
+    process stopped, its machine cut off), rospy would retry its registrations for ever and hold
+    Ctrl-C. Here, as in ``bmtree run``'s start-up, rospy's questions are bounded and the master
+    gets ``limit`` seconds (``--wait``) to answer again, said on stderr
+    (:class:`coordinator.ros_transport.StartupGuard`); then rospy's retries end and
+    :class:`coordinator.ros_transport.MasterGone` is raised (exit 3). A stop signal is held until
+    the block ends, then raised as KeyboardInterrupt, at once while the master does not answer; a
+    second one exits at once (:class:`comm.nodelife.Interrupts`). Yields those Interrupts
+    (``last_signal``: when a stop came)."""
+    from comm.nodelife import Interrupts, bound_master_questions, registering
+    from comm.rpc import MASTER_TIMEOUT
+    from coordinator.cliutil import EXIT_ENV, err
+    from coordinator.ros_transport import MasterGone, StartupGuard
+
+    bound_master_questions(MASTER_TIMEOUT)
+    interrupts = Interrupts(EXIT_ENV)
+    guard = None
+    try:
+        guard = StartupGuard(limit, err, interrupts).start()
+        with registering():
+            yield interrupts
+    except Exception:
+        if guard is None or not guard.expired:
+            raise
+    finally:
+        if guard is not None:
+            guard.stop()
+        interrupts.restore()
+    if guard is not None and guard.expired:
+        raise MasterGone("the ROS master at %s stopped answering while bmtree %s registered with it and did not answer "
+                         "again within %g s (--wait): start it again, then bmtree %s" % (guard.master_uri, tool, limit,
+                                                                                       tool))
+
+
 def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
@@ -229,6 +267,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     view = None
     client = None
     stop = threading.Event()
+    held = None  # the start-up's signals (a stop then is raised as KeyboardInterrupt)
 
     def wait(predicate: Callable[[WatchState], bool], timeout: float) -> bool:
         """``state.wait`` that a stop signal or the q key also ends (False)."""
@@ -241,14 +280,18 @@ def cmd_watch(args: argparse.Namespace) -> int:
         return False
 
     try:
-        rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
-        watcher = RosWatcher(state, args.namespace,
-                             on_record=(lambda r: printer.record(r, state)) if printer else None)
-        watcher.start()
-        liveness = RunLiveness(watcher).start()
         from coordinator.control import ControlClient
 
-        client = ControlClient()
+        try:
+            with joining(args.wait, "watch") as held:  # bounded: a master that stops answering now
+                rospy.init_node("bmtree_watch", anonymous=True, disable_signals=True)
+                watcher = RosWatcher(state, args.namespace,
+                                     on_record=(lambda r: printer.record(r, state)) if printer else None)
+                watcher.start()
+                client = ControlClient()
+        except KeyboardInterrupt:  # a stop signal while registering ends the watch as one later does
+            return EXIT_OK
+        liveness = RunLiveness(watcher).start()
         to = watcher.node
 
         def steer(cmd: Dict[str, Any]) -> Dict[str, Any]:
@@ -312,7 +355,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
             rospy.signal_shutdown("bmtree watch finished")
 
         with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
-            leave_graph(steps, err, stopped_at=signals.signalled_at)
+            leave_graph(steps, err, stopped_at=signals.signalled_at or (held.last_signal if held else None))
 
 
 class _OutOfSync(logging.Filter):
@@ -363,17 +406,21 @@ def cmd_control(args: argparse.Namespace) -> int:
     if not master_up(args.wait):
         err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
         return EXIT_ENV
-    rospy.init_node("bmtree_control", anonymous=True, disable_signals=True)
-    client = ControlClient()
+    client = None
+    held = None
     try:
+        with joining(args.wait, "control") as held:  # bounded: a master that stops answering now
+            rospy.init_node("bmtree_control", anonymous=True, disable_signals=True)
+            client = ControlClient()
         reply = client.send(dict(cmd, to=args.node) if args.node else cmd, args.wait)
     finally:
         def steps() -> None:
-            client.close()
+            if client is not None:
+                client.close()
             rospy.signal_shutdown("bmtree control finished")
 
         with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
-            leave_graph(steps, err)
+            leave_graph(steps, err, stopped_at=held.last_signal if held else None)
     if reply.get("ok"):
         print(reply.get("answer"))
         return EXIT_OK

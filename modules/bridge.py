@@ -26,6 +26,7 @@ from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
 from comm.nodelife import stop_requested
 from comm.nodeopts import node_name, seconds
+from comm.rpc import MASTER_TIMEOUT, master_api
 from modules.cppinfo import data_topic, data_topics, signature_problems
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
@@ -180,7 +181,7 @@ class CppBridge(BasicModule):
         """The C++ node: whoever subscribes ``/<BM>/BM_input`` (its name is not fixed)."""
         import rosgraph
 
-        master = rosgraph.Master(self._self_name or "/bmtree_bridge")
+        master = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT)  # OSError: no answer in time
         name = self.definition.name
         pubs, subs, _ = master.getSystemState()
         listeners = next((n for t, n in subs if t == "/%s/BM_input" % name), [])
@@ -471,8 +472,8 @@ class CppBridge(BasicModule):
             return
         self._gone_said = uri
         now: Optional[str] = ""  # the node's URI on the master now ("": not known, None: unregistered)
-        try:
-            now = rosgraph.Master(self._self_name or "/bmtree_bridge").lookupNode(node)
+        try:  # bounded: asked from a call's thread, whose answer a master that does not answer must not hold
+            now = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT).lookupNode(node)
         except rosgraph.masterapi.MasterError:  # "unknown node"
             now = None
         except (rosgraph.masterapi.MasterException, OSError):

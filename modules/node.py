@@ -31,6 +31,8 @@ from comm.nodelife import StopSignals
 from comm.nodeopts import count, node_name, node_params, parse_node_args
 from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
+from comm.rpc import MASTER_TIMEOUT, master_api
+from comm.startup import patiently
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
 from modules.runtime import BasicModule, BindingError, ModuleServer
@@ -167,16 +169,17 @@ class ModuleNode:
         self.kicked_out = ""  # why the master stopped this node (another node took its name)
 
     def _taken_by(self) -> str:
-        """The other live node that already serves this module, if any."""
+        """The other live node that already serves this module, if any (asked again while the
+        master does not answer)."""
         import rosgraph
         import rospy
 
+        entry = patiently(lambda: rospy.get_param(self._param, None))
+        if not isinstance(entry, dict) or not isinstance(entry.get("node"), str) or entry["node"] == rospy.get_name():
+            return ""
         try:
-            entry = rospy.get_param(self._param, None)
-            if not isinstance(entry, dict) or entry.get("node") in (None, rospy.get_name()):
-                return ""
-            uri = rosgraph.Master(rospy.get_name()).lookupNode(entry["node"])
-        except Exception:  # not announced, or its node is not registered
+            uri = patiently(lambda: master_api(rospy.get_name()).lookupNode(entry["node"]))
+        except rosgraph.masterapi.Error:  # its node is not registered
             return ""
         return entry["node"] if node_alive(uri, 1.0) else ""
 
@@ -193,9 +196,9 @@ class ModuleNode:
         import rospy
         from std_msgs.msg import String
 
-        name = rospy.get_param("~basic_mod", self.definition.name)
+        name = patiently(lambda: rospy.get_param("~basic_mod", self.definition.name))
         if self.max_bytes is None:
-            value = rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES)
+            value = patiently(lambda: rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
             if isinstance(value, bool) or not isinstance(value, int) or value < MIN_MAX_BYTES:
                 raise BindingError("parameter ~max_bytes must be a whole number of at least %d, got %r" % (
                     MIN_MAX_BYTES, value))
@@ -217,7 +220,7 @@ class ModuleNode:
         res_pub = ReplyPublisher(sync_publisher(TOPIC_RESULT, String))
         ev_pub = rospy.Publisher(TOPIC_EVENT, String, queue_size=1000)
         self.event_publisher = ev_pub  # for setup(): who listens to this module's events
-        faults = _faults(self.definition, rospy.get_param("~faults", None))
+        faults = _faults(self.definition, patiently(lambda: rospy.get_param("~faults", None)))
         self.server = ModuleServer(self.definition, self.impl,
                                    publish_result=lambda text: res_pub.publish(String(text)),
                                    publish_event=lambda text: ev_pub.publish(String(text)),
@@ -234,7 +237,7 @@ class ModuleNode:
         self.impl.setup(self)
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
                            rospy.get_node_uri(), getattr(self.impl, "call_limit", None))
-        rospy.set_param(self._param, ann)
+        patiently(lambda: rospy.set_param(self._param, ann))
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
         rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))
         injected = _injected(self.definition.name, self.impl, faults)
@@ -251,6 +254,11 @@ class ModuleNode:
                             self.definition.name, lost.module, lost.reason)
 
     def stop(self) -> None:
+        self.unregister()
+        self.impl.shutdown()
+
+    def unregister(self) -> None:
+        """Leave the graph: the topics and this node's announcement (asks the master)."""
         import rospy
 
         if self.callers is not None:
@@ -263,7 +271,6 @@ class ModuleNode:
                 rospy.delete_param(self._param)
         except Exception:  # the master may be gone already
             pass
-        self.impl.shutdown()
 
 
 def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:
@@ -305,11 +312,13 @@ def _injected(module: str, impl: BasicModule, faults: Dict[str, Any]) -> str:
 
 
 def _uri_of(node: str) -> Optional[str]:
-    """A node's XML-RPC URI from the master (None once it is no longer registered)."""
+    """A node's XML-RPC URI from the master (None once it is no longer registered). Bounded: a
+    master that does not answer raises OSError (the caller's liveness is not known now), and never
+    holds the watch over the callers, which then cannot cancel the call of a caller that is gone."""
     import rosgraph
 
     try:
-        return rosgraph.Master("/bmtree_callers").lookupNode(node)
+        return master_api("/bmtree_callers", MASTER_TIMEOUT).lookupNode(node)
     except rosgraph.masterapi.MasterError:
         return None
 
@@ -400,7 +409,9 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
 
     The node is ``node_name``, else ``name_format`` of the module's name (after ``_basic_mod:=``).
     ``failures`` maps more start-up exceptions to exit codes (the bridge's C++ side missing is 3).
-    A stop signal at any moment, start-up included, ends it with 0."""
+    A stop signal at any moment, start-up included, ends it with 0. A master that does not answer
+    is waited for at start-up (said every few seconds) and left without unregistering at the end
+    (:meth:`comm.nodelife.StopSignals.leave`)."""
     codes: Dict[type, int] = {BindingError: 2, DuplicateModule: 3}
     codes.update(failures or {})
     try:
@@ -411,6 +422,7 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
     stop = StopSignals()
     warn_own_address()  # an address the others cannot reach: rospy would start as if all were well
     if not stop.init_node(node_name or name_format % definition.name, anonymous=False):
+        stop.leave()
         return 0
     log_to_rosout()
     node = ModuleNode(definition, impl, max_bytes)
@@ -422,9 +434,11 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
                 return 0
             sys.stderr.write("error: %s\n" % exc)
             return next(code for kind, code in codes.items() if isinstance(exc, kind))
-        stop.spin()
+        stop.started()
+        stop.wait()
     finally:
-        node.stop()
+        stop.leave(node.unregister)  # bounded: a master that does not answer is left as it is
+        impl.shutdown()
     return 3 if node.kicked_out else 0
 
 
