@@ -11,7 +11,6 @@ from __future__ import annotations
 import datetime
 import json
 import os
-import re
 import sys
 import types
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Set, TextIO, Tuple
@@ -21,9 +20,17 @@ from py_trees.common import Status
 
 from coordinator.context import LATE_ANSWER
 from coordinator.reasons import FailureTrail, originates
-from coordinator.runevents import Notice, RunObserver, control_line
+from coordinator.runevents import (
+    CLEANUP_NOTICES,
+    IncludeArgs,
+    Notice,
+    RunObserver,
+    cleanup_said,
+    control_line,
+    status_word,
+)
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
-from coordinator.runner import Display, call_line, late_line, short_json, stop_label
+from coordinator.runner import Display, call_line, cleanup_stop_label, late_line, stop_label
 
 __all__ = ["Replay", "find_run", "cmd_runs", "cmd_replay"]
 
@@ -97,49 +104,6 @@ class Failure(NamedTuple):
     within: str = ""
 
 
-_ARG = re.compile(r"(?:^|(?<=, ))([A-Za-z_][A-Za-z0-9_]*)=")
-
-
-class _IncludeArgs:
-    """The values an include's arguments had: what its ``arguments of …`` leaf wrote, i.e. the tree
-    blackboard writes of the tick in which that leaf last succeeded. The recorded name of an include
-    says only ``search_room(room=$room)``; the values say which room it was."""
-
-    def __init__(self, nodes: Dict[int, Dict[str, Any]]):
-        self.nodes = nodes
-        self.setter = {i: n.get("parent") for i, n in nodes.items() if n.get("kind") == "set"
-                       and str(n.get("name", "")).startswith("arguments of ")
-                       and nodes.get(n.get("parent"), {}).get("kind") == "include"}
-        self.values: Dict[Any, Dict[str, Any]] = {}
-        self._window: Dict[str, Any] = {}
-
-    def write(self, key: str, value: Any) -> None:
-        self._window[key] = value
-
-    def tick(self, changes: List[Any]) -> None:
-        for change in changes:
-            inc = self.setter.get(change[0])
-            if inc is not None and change[1] == "SUCCESS":
-                self.values[inc] = dict(self._window)
-        self._window = {}
-
-    def name(self, node_id: Any) -> str:
-        """The include's name with its arguments' values (``search_room(room="kitchen")``), when known."""
-        name = str(self.nodes.get(node_id, {}).get("name", "?"))
-        values = self.values.get(node_id)
-        head, paren, inner = name.partition("(")
-        if not values or not paren or not inner.endswith(")"):
-            return name
-        inner = inner[:-1]
-        keys = list(_ARG.finditer(inner))
-        parts = []
-        for k, m in enumerate(keys):
-            key = m.group(1)
-            text = inner[m.end():keys[k + 1].start() - 2 if k + 1 < len(keys) else len(inner)]
-            parts.append("%s=%s" % (key, short_json(values[key], 40) if key in values else text))
-        return "%s(%s)" % (head, ", ".join(parts)) if parts else name
-
-
 class Replay:
     """Steps through a run log, keeping the tree, the tree blackboard and the calls in flight."""
 
@@ -155,7 +119,7 @@ class Replay:
         self.kids: Dict[Any, List[int]] = {}
         for i, p in self.parent.items():
             self.kids.setdefault(p, []).append(i)
-        self.args = _IncludeArgs(self.nodes)
+        self.args = IncludeArgs.of_nodes(self.nodes.values())
         self.main, self.cleanup_ids = _root_and_cleanup(self.nodes, self.kids)
         self.pending: Dict[str, Dict[str, Any]] = {}
         self.finished: List[Dict[str, Any]] = []
@@ -172,6 +136,7 @@ class Replay:
         self.t = float(rec.get("t") or self.t)
         if kind == "tick":
             changes = []
+            self.args.tick(rec.get("changes") or [])   # first: an include's line says its arguments' values
             for change in rec.get("changes") or []:
                 b = self.by_id.get(change[0])
                 if b is None:
@@ -180,8 +145,8 @@ class Replay:
                 b.status = new
                 b.feedback_message = change[2] if len(change) > 2 else ""
                 # as it was at this change: a retry may restart the leaf in the same tick
-                changes.append((types.SimpleNamespace(name=b.name, feedback_message=b.feedback_message), old, new))
-            self.args.tick(rec.get("changes") or [])
+                changes.append((types.SimpleNamespace(name=self._named(self.args, change[0]),
+                                                      feedback_message=b.feedback_message), old, new))
             if display is not None:
                 display.on_tick(self.root, changes, self.t)
         elif kind == "call_start":
@@ -257,6 +222,22 @@ class Replay:
         last = self.log.records[ticks[-1]].get("changes") or []
         return ticks[-1] if any(c[0] == root and c[1] == "INVALID" for c in last) else None
 
+    def cut_calls(self) -> Set[str]:
+        """The calls of the cleanup halted because it was cut short (its time limit, a stop): those
+        halted just before the tick in which the cleanup's top node was halted."""
+        top = self.kids.get(self.kids.get(None, [None])[0], [])
+        if not self.cleanup_ids or len(top) != 2:
+            return set()
+        records = self.log.records
+        ticks = [i for i, r in enumerate(records) if r.get("type") == "tick"]
+        cut = next((i for i in ticks if any(c[0] == top[1] and c[1] == "INVALID"
+                                            for c in records[i].get("changes") or [])), None)
+        if cut is None:
+            return set()
+        before = max((i for i in ticks if i < cut), default=0)
+        return {str(r.get("call_id")) for r in records[before + 1:cut] if r.get("type") == "call_end"
+                and r.get("status") == "halted" and r.get("node") in self.cleanup_ids}
+
     def until(self, stop: Callable[[Dict[str, Any]], bool]) -> bool:
         """Apply records up to and including the first for which ``stop`` is true; False if none is."""
         while True:
@@ -274,7 +255,7 @@ class Replay:
         took its next element, a selector its next child, a retry made its next attempt)."""
         trail = FailureTrail(self.parent.get)
         status: Dict[int, str] = {}
-        args = _IncludeArgs(self.nodes)
+        args = IncludeArgs.of_nodes(self.nodes.values())
         found: Dict[int, Failure] = {}
         for index, rec in enumerate(self.log.records):
             kind = rec.get("type")
@@ -302,7 +283,7 @@ class Replay:
                 inc = next((a for a in up if self.nodes.get(a, {}).get("kind") == "include"), None)
                 found[o.seq] = Failure(o.seq, index, o.behaviour, o.message, o.time,
                                        by=next((a for a in up if a not in failed_now), None),
-                                       within=args.name(inc) if inc is not None else "")
+                                       within=self._named(args, inc) if inc is not None else "")
             args.tick(rec.get("changes") or [])
         ended = None
         end = self.log.end
@@ -343,7 +324,7 @@ class Replay:
         names = {i: b.name for i, b in self.by_id.items()}
         for i in self.args.values:
             if i in self.by_id:
-                self.by_id[i].name = self.args.name(i)
+                self.by_id[i].name = self._named(self.args, i)
         try:
             out.write(py_trees.display.unicode_tree(self.root, show_status=True) + "\n")
         finally:
@@ -368,6 +349,10 @@ class Replay:
             return float(self.log.records[stop].get("t") or 0.0)
         return self.log.last_alive
 
+    def _named(self, args: IncludeArgs, node_id: Any) -> str:
+        """An include's name with the values its arguments had (``search_room(room="kitchen")``)."""
+        return args.name(node_id, str(self.nodes.get(node_id, {}).get("name", "?")))
+
     def _where(self, node_id: Any) -> str:
         n = self.nodes.get(node_id) if isinstance(node_id, int) else None
         if n is None:
@@ -387,19 +372,6 @@ def _root_and_cleanup(nodes: Dict[int, Dict[str, Any]], kids: Dict[Any, List[int
         under.add(n)
         todo.extend(kids.get(n, []))
     return below[0], under
-
-
-def _cleanup_said(end: Optional[Dict[str, Any]]) -> List[str]:
-    """The cleanup's line of the report (from the end record), as the live summary says it."""
-    said = (end or {}).get("cleanup")
-    if not isinstance(said, dict):
-        return []
-    status = said.get("status")
-    if status is None:
-        return ["cleanup (root %s): did not run" % said.get("ended")]
-    word = {"SUCCESS": "succeeded", "FAILURE": "FAILED"}.get(str(status), "cut short")
-    why = ": %s" % said.get("reason") if said.get("reason") and status != "SUCCESS" else ""
-    return ["cleanup (root %s): %s in %.2f s%s" % (said.get("ended"), word, float(said.get("duration") or 0.0), why)]
 
 
 def find_run(ref: str, directory: Optional[str] = None) -> str:
@@ -442,7 +414,8 @@ def cmd_runs(args: Any) -> int:
 def _stop(replay: Replay) -> Tuple[Optional[int], str, Callable[[Dict[str, Any]], Tuple[str, str]]]:
     """A stop from outside: its tick record (None if the run was not stopped so), what it was
     (``interrupted at 2.110s``), and the (status, error) of a call as a summary shows it: the
-    calls that stop halted are said so (``interrupted``), not "halted by the tree"."""
+    calls that stop halted are said so (``interrupted``), not "halted by the tree", and so are those
+    the end of a cleanup cut short halted (its time limit, a second Ctrl-C)."""
     log = replay.log
     end = log.end or {}
     stop = replay.stop_tick()
@@ -457,9 +430,14 @@ def _stop(replay: Replay) -> Tuple[Optional[int], str, Callable[[Dict[str, Any]]
         stopped_calls = {str(r.get("call_id")) for r in log.records[after + 1:stop]
                          if r.get("type") == "call_end" and r.get("status") == "halted"}
 
+    said = end.get("cleanup") if isinstance(end.get("cleanup"), dict) else {}
+    cut_calls = replay.cut_calls() if said.get("status") not in (None, "SUCCESS") else set()
+
     def label(c: Dict[str, Any]) -> Tuple[str, str]:
         if str(c.get("call_id")) in stopped_calls:
             return stop_label(interrupted, str(end.get("reason") or ""))
+        if str(c.get("call_id")) in cut_calls:  # the cleanup's time limit, or a second Ctrl-C
+            return cleanup_stop_label(str(said.get("reason") or ""))
         return str(c.get("status")), str(c.get("error") or "")
 
     return stop, what, label
@@ -475,7 +453,7 @@ def _report(replay: Replay, out: TextIO) -> None:
                   "no end: the process was killed?\n" % (
                       name, log.last_alive, replay.t, "; that record was cut" if log.truncated else ""))
     else:
-        out.write("%s: %s in %.2f s (%s ticks)\n" % (name, end.get("status"), float(end.get("duration") or 0.0),
+        out.write("%s: %s in %.2f s (%s ticks)\n" % (name, status_word(end.get("status")), float(end.get("duration") or 0.0),
                                                      end.get("ticks")))
         if end.get("reason") and end.get("status") != "SUCCESS":
             out.write("reason: %s\n" % end.get("reason"))
@@ -488,7 +466,8 @@ def _report(replay: Replay, out: TextIO) -> None:
     cleanup = [c for c in replay.finished if c.get("node") in replay.cleanup_ids]
     for c in [c for c in replay.finished if c.get("node") not in replay.cleanup_ids] + [None] + cleanup:
         if c is None:
-            out.write("".join(line + "\n" for line in _cleanup_said(end)))
+            said = cleanup_said((end or {}).get("cleanup"))
+            out.write(said + "\n" if said else "")
             continue
         status, error = label(c)
         out.write(call_line(float(c.get("started") or 0.0), c.get("target"), status, float(c.get("duration") or 0.0),
@@ -502,10 +481,12 @@ def _report(replay: Replay, out: TextIO) -> None:
         out.write("  +%7.3fs  %-26s %-11s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
     graph = [n for n in replay.notices  # late answers are listed under their calls
              if n.get("what") != LATE_ANSWER or str(n.get("call_id")) not in listed]
-    if graph:
-        out.write("the ROS graph:\n")
-        for n in graph:
-            out.write("  +%7.3fs  %s\n" % (float(n.get("t") or 0.0), n.get("text")))
+    for head, notices in (("the ROS graph:", [n for n in graph if n.get("what") not in CLEANUP_NOTICES]),
+                          ("the cleanup:", [n for n in graph if n.get("what") in CLEANUP_NOTICES])):
+        if notices:
+            out.write(head + "\n")
+            for n in notices:
+                out.write("  +%7.3fs  %s\n" % (float(n.get("t") or 0.0), n.get("text")))
     if replay.control:
         out.write("control:\n")
         for c in replay.control:

@@ -10,13 +10,18 @@ not raise (a failing observer is logged and detached, the run goes on).
 """
 from __future__ import annotations
 
+import json
 import logging
+import re
+import sys
 from dataclasses import dataclass
-from typing import Any, Dict, Iterable, List, Tuple
+from typing import Any, Dict, Iterable, List, Optional, TextIO, Tuple
 
+import py_trees
 from py_trees.common import Status
 
-__all__ = ["RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line"]
+__all__ = ["Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "cleanup_said",
+           "CLEANUP_NOTICES", "IncludeArgs", "include_label"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -128,3 +133,213 @@ class StatusWatcher:
                 else:
                     last[b] = s
         return out
+
+
+#: the kinds of notice about a tree's cleanup (not about the ROS graph)
+CLEANUP_NOTICES = ("cleanup", "cleanup_failed")
+
+
+def status_word(status: Any) -> str:
+    """A run's status as people read it: py_trees' ``INVALID`` of a run stopped from outside (Ctrl-C)
+    is ``INTERRUPTED``; machine-readable records keep ``INVALID``."""
+    text = str(getattr(status, "value", status))
+    return "INTERRUPTED" if text == "INVALID" else text
+
+
+def cleanup_said(said: Any) -> str:
+    """How a tree's cleanup ended, from the ``cleanup`` of an ``end`` record: ``cleanup (root stopped):
+    succeeded in 0.41 s`` (``FAILED …: why``, ``cut short …: why``); '' for a run without one."""
+    if not isinstance(said, dict):
+        return ""
+    status = said.get("status")
+    if status is None:
+        return "cleanup (root %s): did not run" % said.get("ended")
+    word = {"SUCCESS": "succeeded", "FAILURE": "FAILED"}.get(str(status), "cut short")
+    why = ": %s" % said.get("reason") if said.get("reason") and status != "SUCCESS" else ""
+    return "cleanup (root %s): %s in %.2f s%s" % (said.get("ended"), word, float(said.get("duration") or 0.0), why)
+
+
+_ARG = re.compile(r"(?:^|(?<=, ))([A-Za-z_][A-Za-z0-9_]*)=")
+
+
+def _short(value: Any, width: int) -> str:
+    text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
+def include_label(name: str, values: Optional[Dict[str, Any]], width: int = 40, most: int = 160) -> str:
+    """An include's name with the values its arguments had (``fetch_item(item="milk")``, not
+    ``fetch_item(item=$item)``), each cut to ``width`` characters and the whole to ``most``; the name
+    as it is without values."""
+    head, paren, inner = name.partition("(")
+    if not values or not paren or not inner.endswith(")"):
+        return name
+    inner = inner[:-1]
+    keys = list(_ARG.finditer(inner))
+    parts = []
+    for k, m in enumerate(keys):
+        key = m.group(1)
+        text = inner[m.end():keys[k + 1].start() - 2 if k + 1 < len(keys) else len(inner)]
+        parts.append("%s=%s" % (key, _short(values[key], width) if key in values else text))
+    if not parts:
+        return name
+    label = "%s(%s)" % (head, ", ".join(parts))
+    return label if len(label) <= most else label[:most - 2] + "…)"
+
+
+class IncludeArgs:
+    """The values an include's arguments had: what its ``arguments of …`` leaf wrote, i.e. the tree
+    blackboard writes of the tick in which that leaf last succeeded (the name of an include says only
+    ``search_room(room=$room)``; the values say which room it was). ``setters``: the id of each such
+    leaf -> the id of its include (ids of the run stream, or behaviours).
+
+    Writes and ticks come in order from a log or the run itself; over ROS topics a write may come
+    after its tick (another topic): given the run times (``t``), a write older than the last tick
+    goes to the include whose tick it belongs to."""
+
+    def __init__(self, setters: Dict[Any, Any]):
+        self.setters = setters
+        self.values: Dict[Any, Dict[str, Any]] = {}
+        self._window: Dict[str, Any] = {}
+        self._span: Dict[Any, Tuple[float, float]] = {}  # include -> (previous tick's t, its tick's t)
+        self._last: Optional[float] = None
+
+    @staticmethod
+    def of_nodes(nodes: Iterable[Dict[str, Any]]) -> IncludeArgs:
+        """For the nodes of a ``tree`` record."""
+        by_id = {n.get("id"): n for n in nodes if isinstance(n, dict)}
+        return IncludeArgs({i: n.get("parent") for i, n in by_id.items() if n.get("kind") == "set"
+                            and str(n.get("name", "")).startswith("arguments of ")
+                            and by_id.get(n.get("parent"), {}).get("kind") == "include"})
+
+    def write(self, key: str, value: Any, t: Optional[float] = None) -> None:
+        if t is not None and self._last is not None and t < self._last:  # came after its tick
+            for inc, (lo, hi) in self._span.items():
+                if lo < t <= hi:
+                    self.values.setdefault(inc, {})[key] = value
+            return
+        self._window[key] = value
+
+    def tick(self, changes: Iterable[Any], t: Optional[float] = None) -> None:
+        """A tick's changes (``[id, status, …]``; status a text or a py_trees Status)."""
+        for change in changes:
+            inc = self.setters.get(change[0])
+            if inc is not None and str(getattr(change[1], "value", change[1])) == "SUCCESS":
+                self.values[inc] = dict(self._window)
+                if t is not None:
+                    self._span[inc] = (self._last if self._last is not None else float("-inf"), t)
+        self._window = {}
+        if t is not None:
+            self._last = t if self._last is None else max(self._last, t)
+
+    def name(self, node_id: Any, name: str, width: int = 40) -> str:
+        """``name`` (the include's) with its arguments' values, when known."""
+        return include_label(name, self.values.get(node_id), width)
+
+
+class NoticeLines(RunObserver):
+    """Without the display (``-q``, ``run.launch``): the notices about the ROS graph (the master
+    went away and came back, another run started) still reach the operator, on stderr."""
+
+    def __init__(self, stream: TextIO = sys.stderr):
+        self.stream = stream
+        self._start = 0.0
+
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        self._start = ctx.clock.now()
+
+    def on_notice(self, notice: Any, now: float) -> None:
+        self.stream.write("[%7.3fs] NOTICE    %s\n" % (now - self._start, notice.text))
+        self.stream.flush()
+
+
+class Display(RunObserver):
+    """Shows the tree with statuses: redrawn in place on a terminal, as changed lines otherwise."""
+
+    def __init__(self, stream: TextIO = sys.stdout, tty: Optional[bool] = None, min_interval: float = 0.1):
+        self.stream = stream
+        self.tty = stream.isatty() if tty is None else tty
+        self.min_interval = min_interval
+        self.root: Optional[py_trees.behaviour.Behaviour] = None
+        self._drawn: Optional[float] = None
+        self._lines = 0
+        self._start = 0.0
+        self._note = ""  # the latest control answer or notice, under the tree on a terminal
+        self._args = IncludeArgs({})  # the values of the includes' arguments (their names say them)
+
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        self.root = root
+        self._start = ctx.clock.now()
+        self._args = IncludeArgs(include_setters(root))
+
+    def on_blackboard_write(self, key: str, value: Any, now: float) -> None:
+        self._args.write(key, value)
+
+    def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
+        self.root = root
+        if self._args.setters:  # (a replay shows names it has made already)
+            self._args.tick([(b, status) for b, _before, status in changes])
+        now -= self._start          # shown as seconds since the start
+        if self.tty:
+            if self._drawn is None or now - self._drawn >= self.min_interval:
+                self._draw(now)
+            return
+        for b, before, status in changes:
+            if status != Status.INVALID:
+                extra = " (%s)" % b.feedback_message if status == Status.FAILURE and b.feedback_message else ""
+                self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, status.value, self._label(b), extra))
+            elif before == Status.RUNNING:
+                self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", self._label(b)))
+        self.stream.flush()
+
+    def _label(self, b: Any) -> str:
+        """A behaviour's name; an include's with its arguments' values (``fetch_item(item="milk")``)."""
+        return self._args.name(b, b.name) if self._args.values else b.name
+
+    def on_control(self, record: Any, now: float) -> None:
+        self._line(now, "CONTROL", control_line(record), "control: ")
+
+    def on_notice(self, notice: Any, now: float) -> None:
+        self._line(now, "NOTICE", notice.text)
+
+    def _line(self, now: float, kind: str, text: str, label: str = "") -> None:
+        """A line between the status changes; on a terminal the latest stays under the tree."""
+        if self.tty:
+            self._note = label + text
+            if self.root is not None:
+                self._draw(now - self._start)
+            return
+        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, kind, text))
+        self.stream.flush()
+
+    def on_end(self, result: Any) -> None:
+        if self.tty and self.root is not None:
+            self._draw(result.duration)
+
+    def _draw(self, now: float) -> None:
+        self._drawn = now
+        names = {b: b.name for b in self._args.values}
+        try:  # includes with their arguments' values
+            for b in names:
+                b.name = self._args.name(b, b.name)
+            text = py_trees.display.unicode_tree(self.root, show_status=True)
+        finally:
+            for b, name in names.items():
+                b.name = name
+        if self._note:
+            text += "\n" + self._note
+        if self._lines:
+            self.stream.write("\x1b[%dA\x1b[J" % self._lines)
+        self.stream.write(text + "\n")
+        self._lines = text.count("\n") + 1
+        self.stream.flush()
+
+
+def include_setters(root: Any) -> Dict[Any, Any]:
+    """The ``arguments of …`` leaf of each include under ``root`` -> the include (behaviours)."""
+    out = {}
+    for b in root.iterate():
+        node = getattr(b.parent, "bmtree_node", None) if b.parent is not None else None
+        if b.name.startswith("arguments of ") and getattr(node, "kind", None) == "include":
+            out[b] = b.parent
+    return out

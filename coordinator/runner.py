@@ -9,10 +9,9 @@ coverage of the test kit, the status changes that observers such as the display 
 from __future__ import annotations
 
 import json
-import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, TextIO, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -21,11 +20,20 @@ from comm.nodelife import BURST
 from coordinator.context import WAKE, CallRecord, RunContext, late_answer_text
 from coordinator.nodes.task import WithCleanup
 from coordinator.reasons import FailureExplainer
-from coordinator.runevents import Change, Notice, RunObserver, StatusWatcher, control_line, notify
+from coordinator.runevents import (  # noqa: F401 - Display and NoticeLines: where they were
+    Change,
+    Display,
+    Notice,
+    NoticeLines,
+    RunObserver,
+    StatusWatcher,
+    notify,
+    status_word,
+)
 from coordinator.running import while_running
 
 __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line",
-           "cleanup_lines", "late_line", "short_json", "stop_label", "summary_lines"]
+           "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "stop_label", "summary_lines"]
 
 
 @dataclass
@@ -60,18 +68,32 @@ class RunResult:
 
 
 class StatusHistory(py_trees.visitors.VisitorBase):
-    """The statuses each ticked behaviour went through, in order (``run.statuses(name)``)."""
+    """The statuses each ticked behaviour went through, in order (``run.statuses(name)``), a repeat
+    of the same status once; a halt (a RUNNING behaviour stopped: py_trees sets it INVALID) is
+    ``INVALID``: ``["RUNNING", "INVALID", "RUNNING", "SUCCESS"]`` for a leaf halted and restarted.
+    A finished behaviour that py_trees resets (INVALID after SUCCESS or FAILURE) is no halt: not
+    recorded. A visitor sees the behaviours a tick visits; the halts, which the tick does not visit
+    (a parent stops its children), come from the status changes of the tick (:meth:`halted`)."""
 
     def __init__(self) -> None:
         super().__init__(full=False)
         self.history: Dict[Any, List[Status]] = {}
 
     def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
+        self._add(behaviour, behaviour.status)
+
+    def halted(self, changes: List[Change]) -> None:
+        """The behaviours a tick (or a stop from outside) halted: RUNNING before, INVALID now."""
+        for b, before, status in changes:
+            if status == Status.INVALID and before == Status.RUNNING:
+                self._add(b, Status.INVALID)
+
+    def _add(self, behaviour: Any, status: Status) -> None:
         h = self.history.get(behaviour)
         if h is None:
-            self.history[behaviour] = [behaviour.status]
-        elif h[-1] != behaviour.status:
-            h.append(behaviour.status)
+            self.history[behaviour] = [status]
+        elif h[-1] != status:
+            h.append(status)
 
 
 class Visited(py_trees.visitors.VisitorBase):
@@ -86,22 +108,6 @@ class Visited(py_trees.visitors.VisitorBase):
 
     def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
         self.visited.append((behaviour, behaviour.status))
-
-
-class NoticeLines(RunObserver):
-    """Without the display (``-q``, ``run.launch``): the notices about the ROS graph (the master
-    went away and came back, another run started) still reach the operator, on stderr."""
-
-    def __init__(self, stream: TextIO = sys.stderr):
-        self.stream = stream
-        self._start = 0.0
-
-    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
-        self._start = ctx.clock.now()
-
-    def on_notice(self, notice: Any, now: float) -> None:
-        self.stream.write("[%7.3fs] NOTICE    %s\n" % (now - self._start, notice.text))
-        self.stream.flush()
 
 
 def short_json(value: Any, width: int = 60) -> str:
@@ -135,10 +141,26 @@ def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
     return "halted", reason.split(" while ", 1)[0] or "the run was stopped"
 
 
+def cleanup_stop_label(reason: str) -> Tuple[str, str]:
+    """(status, error) shown for a call of a tree's cleanup halted when the cleanup was cut short,
+    instead of the call's own "halted by the tree": ``interrupted`` for a Ctrl-C, else its time limit
+    (``halted  did not end within 30 s (cleanup_timeout)``)."""
+    if reason.startswith("interrupted"):
+        return "interrupted", ""
+    return "halted", reason.split(" while ", 1)[0] or "the cleanup was cut short"
+
+
+def _cut_short(reason: str) -> bool:
+    """The cleanup's reason says it was ended from outside (its time limit, a stop), not by itself."""
+    return reason.startswith(("did not end within", "interrupted"))
+
+
 def summary_lines(result: RunResult, tree_name: str) -> List[str]:
-    """The end-of-run summary: result, reason, every call (the failing one with its inputs; those the
-    stop from outside halted said so)."""
-    lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, result.status.value, result.duration, result.ticks)]
+    """The end-of-run summary: result (``INTERRUPTED`` for a run stopped by Ctrl-C), reason, every call
+    (the failing one with its inputs; those the stop from outside, or the end of a cut cleanup, halted
+    said so)."""
+    lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, status_word(result.status), result.duration,
+                                                   result.ticks)]
     if result.reason and not result.succeeded:
         lines.append("reason: %s" % result.reason)
     lines.append("calls:")
@@ -151,6 +173,10 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
         if (result.stopped_at is not None and str(status) == "halted" and c.ended is not None
                 and c.ended >= result.stopped_at and id(c) not in cleanup):
             status, error = stop_label(result.status == Status.INVALID, result.reason)
+        elif (id(c) in cleanup and str(status) == "halted" and c.ended is not None and _cut_short(result.cleanup_reason)
+              and result.cleanup_started is not None and result.cleanup_duration is not None
+              and c.ended >= result.cleanup_started + result.cleanup_duration - 1e-6):
+            status, error = cleanup_stop_label(result.cleanup_reason)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:
@@ -169,70 +195,6 @@ def cleanup_lines(result: RunResult) -> List[str]:
     took = " in %.2f s" % result.cleanup_duration if result.cleanup_duration is not None else ""
     why = ": %s" % result.cleanup_reason if result.cleanup_reason and result.cleanup_failed else ""
     return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)]
-
-
-class Display(RunObserver):
-    """Shows the tree with statuses: redrawn in place on a terminal, as changed lines otherwise."""
-
-    def __init__(self, stream: TextIO = sys.stdout, tty: Optional[bool] = None, min_interval: float = 0.1):
-        self.stream = stream
-        self.tty = stream.isatty() if tty is None else tty
-        self.min_interval = min_interval
-        self.root: Optional[py_trees.behaviour.Behaviour] = None
-        self._drawn: Optional[float] = None
-        self._lines = 0
-        self._start = 0.0
-        self._note = ""  # the latest control answer or notice, under the tree on a terminal
-
-    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
-        self.root = root
-        self._start = ctx.clock.now()
-
-    def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
-        self.root = root
-        now -= self._start          # shown as seconds since the start
-        if self.tty:
-            if self._drawn is None or now - self._drawn >= self.min_interval:
-                self._draw(now)
-            return
-        for b, before, status in changes:
-            if status != Status.INVALID:
-                extra = " (%s)" % b.feedback_message if status == Status.FAILURE and b.feedback_message else ""
-                self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, status.value, b.name, extra))
-            elif before == Status.RUNNING:
-                self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", b.name))
-        self.stream.flush()
-
-    def on_control(self, record: Any, now: float) -> None:
-        self._line(now, "CONTROL", control_line(record), "control: ")
-
-    def on_notice(self, notice: Any, now: float) -> None:
-        self._line(now, "NOTICE", notice.text)
-
-    def _line(self, now: float, kind: str, text: str, label: str = "") -> None:
-        """A line between the status changes; on a terminal the latest stays under the tree."""
-        if self.tty:
-            self._note = label + text
-            if self.root is not None:
-                self._draw(now - self._start)
-            return
-        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, kind, text))
-        self.stream.flush()
-
-    def on_end(self, result: Any) -> None:
-        if self.tty and self.root is not None:
-            self._draw(result.duration)
-
-    def _draw(self, now: float) -> None:
-        self._drawn = now
-        text = py_trees.display.unicode_tree(self.root, show_status=True)
-        if self._note:
-            text += "\n" + self._note
-        if self._lines:
-            self.stream.write("\x1b[%dA\x1b[J" % self._lines)
-        self.stream.write(text + "\n")
-        self._lines = text.count("\n") + 1
-        self.stream.flush()
 
 
 class TreeRunner:
@@ -263,7 +225,7 @@ class TreeRunner:
             if o not in ctx.observers:
                 ctx.observers.append(o)
         self._history = StatusHistory() if record_history else None
-        self._visited = Visited() if ctx.observers else None
+        self._visited = Visited() if ctx.observers or record_history else None
         self._watcher = StatusWatcher()
         for v in [self._history, self._visited, *visitors]:
             if v is not None:
@@ -286,9 +248,15 @@ class TreeRunner:
             self._tell(self._visited.visited)
 
     def _tell(self, visited: List[Tuple[Any, Status]]) -> None:
-        """Observers get the status changes (after a tick, or after a stop outside a tick: ``[]``)."""
-        if self._visited is not None and self.ctx.observers:
-            notify(self.ctx.observers, "on_tick", self.root, self._watcher.changes(visited), self.ctx.clock.now())
+        """Observers get the status changes (after a tick, or after a stop outside a tick: ``[]``); the
+        status history its halts."""
+        if self._visited is None:
+            return
+        changes = self._watcher.changes(visited)
+        if self._history is not None:
+            self._history.halted(changes)
+        if self.ctx.observers:
+            notify(self.ctx.observers, "on_tick", self.root, changes, self.ctx.clock.now())
 
     def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None) -> RunResult:
         """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()``

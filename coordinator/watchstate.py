@@ -15,8 +15,9 @@ from __future__ import annotations
 import json
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Set
 
+from coordinator.runevents import IncludeArgs, cleanup_said
 from coordinator.runstream import VERSION, Sink, to_json
 from coordinator.watchruns import OtherRuns, run_matches
 
@@ -67,6 +68,9 @@ class WatchState:
         self.events: List[Dict[str, Any]] = []
         self.control: List[Dict[str, Any]] = []
         self.blackboard: Dict[str, Any] = {}
+        #: the values each include's arguments had (its label says them: ``fetch_item(item="milk")``)
+        self.args = IncludeArgs({})
+        self._cleanup: Optional[Set[int]] = None  # the ids of the tree's cleanup (cached)
         self.end: Optional[Dict[str, Any]] = None
         self.paused = False
         self.t = 0.0
@@ -105,6 +109,7 @@ class WatchState:
                 self._reset(run)
             self.tree = {k: v for k, v in rec.items() if k != "nodes"}
             self.nodes = [n for n in rec.get("nodes") or [] if isinstance(n, dict)]
+            self.args, self._cleanup = IncludeArgs.of_nodes(self.nodes), None
             for key, value in (rec.get("blackboard") or {}).items():
                 if str(key) not in self.blackboard:  # the same run's tree again must not undo its writes
                     self._write(str(key), value)
@@ -136,6 +141,7 @@ class WatchState:
                 return  # already in the snapshot
             self.tick = n or self.tick + 1
             self.tick_t = float(rec.get("t") or self.t)
+            self.args.tick(rec.get("changes") or [], self.tick_t)
             for row in rec.get("loops") or []:  # for_each nodes that moved to another element
                 self.loops[int(row[0])] = [int(row[1]), int(row[2])]
             for change in rec.get("changes") or []:
@@ -164,6 +170,7 @@ class WatchState:
                 self.ncalls += 1
         elif kind == "write":
             self._write(str(rec.get("key")), rec.get("value"))
+            self.args.write(str(rec.get("key")), rec.get("value"), float(rec.get("t") or 0.0))
         elif kind in ("event", "notice"):  # a notice: what happened to the ROS graph (the master went away)
             self.events.append(rec)
             del self.events[:-KEEP]
@@ -227,6 +234,7 @@ class WatchState:
         for key in [k for k in board if k not in order] + order:
             self._write(str(key), board[key])
         self.paused = bool(rec.get("paused"))
+        self.args.values.update((int(k), dict(v)) for k, v in (rec.get("args") or {}).items() if isinstance(v, dict))
         if rec.get("end"):
             self.end = rec["end"]
         self.caught_up = True
@@ -244,7 +252,8 @@ class WatchState:
                     "last": {str(k): v for k, v in self.last.items() if self.status.get(k, "INVALID") == "INVALID"},
                     "pending": list(self.pending.values()), "calls": self.calls[-calls:],
                     "events": self.events[-events:], "control": self.control[-events:],
-                    "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused, "end": self.end}
+                    "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused,
+                    "end": self.end, "args": {str(k): v for k, v in self.args.values.items()}}
 
     def view(self) -> Dict[str, Any]:
         """Everything a view draws, as plain data (the web page's JSON): the snapshot, with the
@@ -253,7 +262,10 @@ class WatchState:
             snap = self.snapshot(calls=KEEP, events=KEEP)
             snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started", "control")},
                         nodes=self.nodes, version=self.version, events=self.all_events()[-KEEP:],
-                        calls_total=self.calls_total, others=self.others.summary())
+                        calls_total=self.calls_total, others=self.others.summary(),
+                        labels={str(i): self.name(i) for i in self.args.values if self.name(i) != self._node_name(i)},
+                        pending_title=self.pending_title(),
+                        cleanup=cleanup_said((self.end or {}).get("cleanup")))
             return snap
 
     def all_events(self) -> List[Dict[str, Any]]:
@@ -295,6 +307,48 @@ class WatchState:
                 return "HALTED"
             return "was %s" % self.last[i] if i in self.last else ""
         return s
+
+    def _node_name(self, i: int) -> str:
+        names = getattr(self, "_names", None)
+        if names is None or names[0] is not self.nodes:
+            names = self._names = (self.nodes, {n.get("id"): str(n.get("name", "?")) for n in self.nodes})
+        return names[1].get(i, "?")
+
+    def name(self, i: int) -> str:
+        """A node's name as shown: an include's with the values its arguments had when it started
+        (``fetch_item(item="milk")``, not ``fetch_item(item=$item)``), each value cut to 40 characters."""
+        return self.args.name(i, self._node_name(i)) if i in self.args.values else self._node_name(i)
+
+    @property
+    def cleanup_ids(self) -> Set[int]:
+        """The ids of the tree's cleanup (the second node under its ``with_cleanup`` top node); none
+        without ``cleanup:``."""
+        with self.lock:
+            if self._cleanup is None:
+                top = [n for n in self.nodes if n.get("parent") is None]
+                below = [n.get("id") for n in self.nodes if top and n.get("parent") == top[0].get("id")]
+                under: Set[int] = set()
+                if top and top[0].get("kind") == "with_cleanup" and len(below) == 2:
+                    todo = [below[1]]
+                    while todo:
+                        i = todo.pop()
+                        under.add(i)
+                        todo.extend(n.get("id") for n in self.nodes if n.get("parent") == i and n.get("id") not in under)
+                self._cleanup = under
+            return self._cleanup
+
+    def pending_title(self) -> str:
+        """The pending calls' panel title: during a tree's cleanup, whose calls they are (``pending
+        calls of the cleanup (root stopped)``)."""
+        with self.lock:
+            mine = [c for c in self.pending.values() if c.get("node") in self.cleanup_ids]
+            if not mine:
+                return "pending calls"
+            ended = self.blackboard.get("ended")
+            how = " (root %s)" % ended if isinstance(ended, str) and ended else ""
+            if len(mine) == len(self.pending):
+                return "pending calls of the cleanup%s" % how
+            return "pending calls (%d of the cleanup%s)" % (len(mine), how)
 
     def wait(self, predicate: Callable[[WatchState], bool], timeout: float) -> bool:
         """Block until ``predicate(self)`` holds (True) or ``timeout`` passes (False)."""

@@ -9,6 +9,7 @@ import re
 import textwrap
 from typing import Any, Dict, List, Optional
 
+from coordinator.runevents import cleanup_said, status_word
 from coordinator.watchstate import WatchState
 
 __all__ = ["brief", "values_text", "cut", "share", "where_text", "pending_text", "call_text", "result_text",
@@ -124,15 +125,17 @@ def call_text(c: Dict[str, Any], width: int, target_width: int, status_width: in
 
 
 def result_text(end: Dict[str, Any]) -> str:
-    """The result line: ``result: FAILURE in 66.85s (282 ticks)  reason: …``; a run that is gone
-    (the watch's own end) lived at least until it was found gone."""
+    """The result line: ``result: FAILURE in 66.85s (282 ticks)  reason: …`` (``INTERRUPTED`` for a run
+    stopped by Ctrl-C), then how a tree's cleanup ended (``cleanup (root stopped): succeeded in 0.41 s``);
+    a run that is gone (the watch's own end) lived at least until it was found gone."""
     if end.get("gone"):
         head = "result: %s, gone at about %.2fs (%s ticks)" % (end.get("status"), float(end.get("duration") or 0.0),
                                                                end.get("ticks"))
     else:
-        head = "result: %s in %.2fs (%s ticks)" % (end.get("status"), float(end.get("duration") or 0.0),
+        head = "result: %s in %.2fs (%s ticks)" % (status_word(end.get("status")), float(end.get("duration") or 0.0),
                                                     end.get("ticks"))
-    return head + (("  reason: %s" % end["reason"]) if end.get("reason") else "")
+    cleanup = cleanup_said(end.get("cleanup"))
+    return head + (("  reason: %s" % end["reason"]) if end.get("reason") else "") + ("  " + cleanup if cleanup else "")
 
 
 def wrap(text: str, width: int, most: Optional[int] = None) -> List[str]:
@@ -157,9 +160,11 @@ def summary_lines(state: WatchState) -> List[str]:
             if state.nodes:
                 out.append("the watch ended before the run %s (at %.2fs, tick %d)" % (name, state.now(), state.tick))
         else:
-            out.append(result_text(dict(end, reason="")))
+            out.append(result_text(dict(end, reason="", cleanup=None)))
             if end.get("reason"):
                 out.append("reason: %s" % end["reason"])
+            if cleanup_said(end.get("cleanup")):
+                out.append(cleanup_said(end.get("cleanup")))
             for c in state.pending.values():
                 if c.get("maybe_running"):
                     where = where_text(state, c.get("node"))

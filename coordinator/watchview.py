@@ -17,7 +17,7 @@ from typing import Any, Dict, List, Optional, TextIO, Tuple
 from rich.console import Group
 from rich.text import Text
 
-from coordinator.runevents import control_line
+from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word
 from coordinator.watchstate import WatchState
 from coordinator.watchtext import call_text, pending_text, result_text, values_text, wrap
 from coordinator.watchtext import cut as _cut
@@ -81,7 +81,7 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
         label = state.label(i)
         line = Text("  " * depth)
         line.append("%s " % MARK[label], style=STYLE[label])
-        line.append(str(n.get("name", "?")), style="bold" if label == "RUNNING" else "dim" if label.startswith("was") else "")
+        line.append(state.name(i), style="bold" if label == "RUNNING" else "dim" if label.startswith("was") else "")
         if n.get("shape") not in (None, "leaf"):
             line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
         if label:
@@ -131,7 +131,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         if state.paused:
             head.append("  PAUSED", style="bold magenta")
         if state.end:
-            head.append("  %s" % state.end.get("status"), style=STYLE.get(str(state.end.get("status")), ""))
+            head.append("  %s" % status_word(state.end.get("status")), style=STYLE.get(str(state.end.get("status")), ""))
         pending = list(state.pending.values())
         tw = max([16] + [len(str(c.get("target"))) for c in pending])
         plines = [Text(pending_text(state, c, t_now, width, min(24, tw)),
@@ -143,7 +143,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         # by time, and at one time in the order they came (a breakpoint hit right after a resume
         # comes after it); the run's events before its control answers
         timed = [(float(e.get("t") or 0.0), Text("  %7.2fs %s" % (float(e.get("t") or 0.0), event_text(e, 40)),
-                                                 style="yellow" if e.get("type") == "notice" else ""))
+                                                 style=_notice_style(e)))
                  for e in state.all_events()]
         timed += [(float(c.get("t") or 0.0), Text("  %7.2fs control %s" % (float(c.get("t") or 0.0), control_line(c)),
                                                   style="magenta")) for c in state.control]
@@ -178,7 +178,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                 if spare > 0 and takes[k] < n:
                     takes[k] += 1
                     spare -= 1
-        body = (_panel("pending calls", plines[:takes[0]], len(plines), "none")
+        body = (_panel(state.pending_title(), plines[:takes[0]], len(plines), "none")
                 + _panel("tree blackboard", board(takes[1]), len(written), "empty")
                 + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
                 + _panel("call log", calls[len(calls) - takes[3]:], max(len(calls), state.calls_total), "none"))
@@ -191,8 +191,15 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
     return Group(*out)
 
 
+def _notice_style(rec: Dict[str, Any]) -> str:
+    """Notices stand out among the events: about the graph or the cleanup, yellow; a failed cleanup red."""
+    if rec.get("type") != "notice":
+        return ""
+    return "red" if rec.get("what") == "cleanup_failed" else "yellow"
+
+
 def event_text(rec: Dict[str, Any], width: int = 60) -> str:
-    """A module's event (``people.lostPerson {...}``) or a notice about the graph, as text."""
+    """A module's event (``people.lostPerson {...}``) or a notice (about the graph, the tree's cleanup), as text."""
     if rec.get("type") == "notice":
         return str(rec.get("text"))
     return "%s.%s %s" % (rec.get("module"), rec.get("event"), _short(rec.get("params"), width))
@@ -260,18 +267,19 @@ class LinePrinter:
             lines.append("[%7.3fs] answered  %s (%s), taken at the next tick" % (t, rec.get("target"), rec.get("answer")))
         elif kind == "event":
             lines.append("[%7.3fs] event     %s" % (t, event_text(rec)))
-        elif kind == "notice":
-            lines.append("[%7.3fs] notice    %s" % (t, event_text(rec)))
+        elif kind == "notice":  # about the ROS graph, or the tree's cleanup
+            lines.append("[%7.3fs] %-9s %s" % (t, "cleanup" if rec.get("what") in CLEANUP_NOTICES else "notice",
+                                               event_text(rec)))
         elif kind == "write":
             lines.append("[%7.3fs] write     %s = %s" % (t, rec.get("key"), _short(rec.get("value"))))
         elif kind == "control":
             lines.append("[%7.3fs] control   %s" % (t, control_line(rec)))
         elif kind == "end":
-            line = "[%7.3fs] end       %s%s" % (t, rec.get("status"), (": %s" % rec["reason"]) if rec.get("reason") else "")
-            said = rec.get("cleanup") if isinstance(rec.get("cleanup"), dict) else None
-            if said is not None:  # a tree with cleanup: how it ended (the run's status stays root's)
-                line += "; cleanup (root %s): %s%s" % (said.get("ended"), said.get("status") or "did not run",
-                                                       ": %s" % said["reason"] if said.get("reason") else "")
+            line = "[%7.3fs] end       %s%s" % (t, status_word(rec.get("status")),
+                                                (": %s" % rec["reason"]) if rec.get("reason") else "")
+            said = cleanup_said(rec.get("cleanup"))
+            if said:  # a tree with cleanup: how it ended (the run's status stays root's)
+                line += "; " + said
             ticks = rec.get("ticks")
             for c in state.pending.values() if rec.get("gone") else ():
                 line += "\n[%7.3fs] maybe still running (run gone): %s since %.3fs %s" % (

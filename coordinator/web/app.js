@@ -51,6 +51,11 @@ function wrap(text, width, lines) {
   return out;
 }
 
+// a run's status as people read it: py_trees' INVALID of a run stopped by Ctrl-C is INTERRUPTED
+const statusWord = (st) => (st === "INVALID" ? "INTERRUPTED" : st);
+// a node's name as shown: an include's with the values its arguments had (fetch_item(item="milk"))
+const nameOf = (s, n) => (s.labels || {})[String(n.id)] || n.name;
+
 function label(s, i) {
   // "was SUCCESS" / "was FAILURE": its last outcome, drawn faded, after py_trees reset it (a
   // selector clears the children it moved past, a stopped tree its finished nodes)
@@ -124,14 +129,14 @@ function drawTree(s) {
     const cls = "node " + st.replace(" ", "-") + (n.id === culprit && failedLabel(st) ? " culprit" : "");
     const grp = el("g", { class: cls, "data-name": n.name, "data-status": st || "IDLE", "data-id": n.id });
     grp.appendChild(el("rect", { x, y, width: W, height: H, rx: 6 }));
-    const name = wrap(n.name, W - 2 * PAD, why ? 1 : 2);
+    const name = wrap(nameOf(s, n), W - 2 * PAD, why ? 1 : 2);
     const y0 = y + Math.round((H - (name.length + (why ? 2 : 1)) * LINE) / 2) + 11; // the lines centred in the box
     name.forEach((line, k) => grp.appendChild(el("text", { x: x + PAD, y: y0 + k * LINE, class: "name" }, line)));
     const at = (s.loops || {})[String(n.id)]; // a for_each's element now: 2/4
     const kind = (n.kind || n.shape) + (st ? " · " + st : "") + (at && st === "RUNNING" ? " · " + at[0] + "/" + at[1] : "");
     grp.appendChild(el("text", { x: x + PAD, y: y0 + name.length * LINE, fill: "#555" }, kind));
     if (why) grp.appendChild(el("text", { x: x + PAD, y: y0 + 2 * LINE, class: "reason" }, wrap(why, W - 2 * PAD, 1)[0]));
-    grp.appendChild(el("title", {}, n.name + (feedback ? ": " + feedback : "")));
+    grp.appendChild(el("title", {}, nameOf(s, n) + (feedback ? ": " + feedback : "")));
     svg.appendChild(grp);
   }
   const old = g.firstChild;
@@ -215,8 +220,11 @@ function wall(epoch, withDate) {
 
 function noticeClass(e) {
   const what = String(e.what || "");
-  return "notice" + (/_down$/.test(what) ? " down" : /_back$/.test(what) ? " back" : "");
+  return "notice" + (/_down$/.test(what) || what === "cleanup_failed" ? " down" : /_back$/.test(what) ? " back" : "");
 }
+
+// a notice is about the ROS graph (the master went away...), or about the tree's cleanup
+const noticeOf = (e) => (e.what === "cleanup" || e.what === "cleanup_failed" ? "cleanup" : "ROS graph");
 
 function graphAlert(s) {
   // what of the ROS graph is down now (a *_down notice not followed by its *_back), for the header
@@ -238,7 +246,7 @@ function drawTitle(s) {
   $("mode").textContent = "REPLAY";
   const started = typeof t.started === "number" && t.started > 0 ? t.started : null;
   $("run").textContent = t.run ? "run " + t.run + (started ? ", started " + wall(started, true) : "") : "";
-  const status = s.end ? " · " + s.end.status : (mode === "replay" ? "" : " · live");
+  const status = s.end ? " · " + statusWord(s.end.status) : (mode === "replay" ? "" : " · live");
   document.title = t.name ? name + " · " + (mode === "replay" ? "replay" : "watch") + " of run " + (t.run || "?")
     + (started ? " (" + wall(started, true) + ")" : "") + status + " — bmtree" : "bmtree";
 }
@@ -253,8 +261,8 @@ function draw(s) {
   $("paused").hidden = !s.paused;
   const r = $("result");
   r.className = s.end ? s.end.status : "";
-  r.textContent = s.end ? "result: " + s.end.status + (s.end.status === "UNFINISHED" ? "" : " in " + sec(s.end.duration))
-    + (s.end.reason ? " (" + s.end.reason + ")" : "") : "";
+  r.textContent = s.end ? "result: " + statusWord(s.end.status) + (s.end.status === "UNFINISHED" ? "" : " in " + sec(s.end.duration))
+    + (s.end.reason ? " (" + s.end.reason + ")" : "") + (s.cleanup ? "; " + s.cleanup : "") : "";
   const down = graphAlert(s);
   $("alert").hidden = !down;
   $("alert").textContent = down;
@@ -264,9 +272,9 @@ function draw(s) {
   const why = s.nodes.filter((n) => failedLabel(label(s, n.id)) && s.feedback[String(n.id)])
     .sort((a, b) => (b.id === culprit) - (a.id === culprit));
   $("whybox").hidden = !why.length;
-  rows("why", why, (n) => [[n.name, s.feedback[String(n.id)]], label(s, n.id) === "FAILURE" ? "failed" : ""], ["name", "val"]);
+  rows("why", why, (n) => [[nameOf(s, n), s.feedback[String(n.id)]], label(s, n.id) === "FAILURE" ? "failed" : ""], ["name", "val"]);
   rows("blackboard", Object.keys(s.blackboard).sort(), (k) => [k, js(s.blackboard[k])], ["key", "val"]);
-  const ev = s.events.map((e) => e.type === "notice" ? [e.t, [[sec(e.t), "ROS graph", e.text], noticeClass(e)]]
+  const ev = s.events.map((e) => e.type === "notice" ? [e.t, [[sec(e.t), noticeOf(e), e.text], noticeClass(e)]]
     : [e.t, [sec(e.t), e.module + "." + e.event, js(e.params)]])
     .concat(s.control.map((c) => [c.t, [sec(c.t), "control " + c.command + " " + js(c.args || {}), c.answer]]));
   ev.sort((a, b) => a[0] - b[0]);
@@ -291,6 +299,7 @@ function drawPending(s) {
   // here, as the terminal does (not in a replay or after the end)
   const now = mode === "replay" || s.end || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
+  $("pendingh").textContent = s.pending_title || "pending calls"; // during a cleanup: its calls
   // answered while the run was paused (its leaf takes it at the next tick), or of a run that is gone
   const note = (c) => (c.answered !== undefined && c.answered !== null ? " · answered " + (c.answer || "")
     : c.maybe_running ? " · may still be running" : "");
