@@ -403,11 +403,11 @@ def cmd_runs(args: Any) -> int:
         print("no recorded runs in %s" % directory)
         return 0
     print("recorded runs in %s (newest first):" % directory)
-    print("%3s  %-19s  %-24s %9s  %-10s %s" % ("#", "start", "tree", "duration", "result", "reason"))
+    print("%3s  %-19s  %-24s %9s  %-11s %s" % ("#", "start", "tree", "duration", "result", "reason"))
     for k, r in enumerate(reversed(runs[-args.limit:] if args.limit else runs), 1):
         start = datetime.datetime.fromtimestamp(r.started).strftime("%Y-%m-%d %H:%M:%S")
         dur = "%.2fs" % r.duration if isinstance(r.duration, (int, float)) else "-"
-        print("%3d  %-19s  %-24s %9s  %-10s %s" % (k, start, r.name[:24], dur, r.status, r.reason))
+        print("%3d  %-19s  %-24s %9s  %-11s %s" % (k, start, r.name[:24], dur, status_word(r.status), r.reason))
     return 0
 
 

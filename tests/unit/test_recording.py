@@ -455,6 +455,12 @@ def test_replay_failure_of_an_interrupted_run_shows_what_ran_when_it_was_stopped
     assert "no leaf's failure ended this run: interrupted while 'go to the kitchen' was running (at 2." in out, out
     assert "the state at its last tick before it was stopped, at 0.000s:" in out, out
     assert "go to the kitchen [*]" in out and "navigation.go_to" in out.split("calls in flight (interrupted at 2.")[1], out
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    shutil.copy(log, str(runs / "20260101-120000-aaaaaa-go_kitchen.jsonl"))
+    assert cli.main(["runs", "--dir", str(runs)]) == 0
+    listed = capsys.readouterr().out.splitlines()[-1]
+    assert " INTERRUPTED " in listed and "INVALID" not in listed, listed  # py_trees' word stays in the log
 
 
 def test_find_run_by_number_name_and_last(sim_defs, tmp_path):
