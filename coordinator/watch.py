@@ -170,10 +170,15 @@ class RunLiveness:
 
     @staticmethod
     def _uri_of(node: str) -> Optional[str]:
+        """The run node's URI; a master that does not answer raises OSError after a bounded wait (the
+        watch tries again later) rather than holding the liveness thread, and the watch's exit, for ever."""
         import rosgraph
 
+        from comm.rpc import master_api
+        from coordinator.rosliveness import LIVENESS_QUESTION
+
         try:
-            return rosgraph.Master("/bmtree_watch_liveness").lookupNode(node)
+            return master_api("/bmtree_watch_liveness", LIVENESS_QUESTION).lookupNode(node)
         except rosgraph.masterapi.MasterError:
             return None
 
