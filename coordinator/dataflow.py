@@ -21,7 +21,7 @@ from coordinator.errors import TreeError
 from coordinator.nodes.base import Flow
 from coordinator.refs import Computed, Ref
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of, top_of
-from coordinator.values import Binding, KeyTypes, ref_type
+from coordinator.values import Binding, KeyTypes, Template, ref_type
 
 __all__ = ["check_flow", "check_types", "key_types"]
 
@@ -99,7 +99,8 @@ def _settle(types: KeyTypes, copies: List[Tuple[str, Ref]]) -> None:
 
 def _literal(value: Any) -> bool:
     """A number, text, true/false or a list, written in the tree (a mapping is not checked this way)."""
-    return isinstance(value, (bool, int, float, str, list)) and not isinstance(value, (Ref, Computed))
+    return (isinstance(value, (bool, int, float, str, list)) and not isinstance(value, (Ref, Computed))
+            or isinstance(value, Template))   # a {…} template: text, whatever its keys hold
 
 
 def _bindings(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[TreeNode]],

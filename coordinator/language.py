@@ -10,6 +10,7 @@ import os
 from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
+from coordinator import parsehints
 from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_key_problems
 from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
@@ -107,6 +108,9 @@ class Parser:
             data = exc.object
             self.err(Pos(shown, *text_pos(data, exc.start)), "not UTF-8 text: byte 0x%02x" % data[exc.start]
                      if isinstance(data, bytes) else "cannot read %s: not UTF-8 text" % shown)
+            return None
+        if parsehints.looks_like_xml(text):   # a BehaviorTree.CPP file
+            self.err(Pos(shown, 1, 1), parsehints.XML_HINT)
             return None
         try:
             data = load_yaml(text, shown)
@@ -250,12 +254,14 @@ class Parser:
         if not keys.issuperset(raw):
             for k in raw:
                 if k != kind and k not in allowed:
-                    hint = did_you_mean(k, allowed + ("children",) if inline else allowed)
+                    said = parsehints.foreign_hint(k, kind, allowed, raw, self.definitions)
+                    hint = "" if said else did_you_mean(k, allowed + ("children",) if inline else allowed)
                     if inline and (k == "children" or hint == " (did you mean 'children'?)"):
                         hint = _CHILDREN_HINT % (kind, kind, kind)
                         meant.add("children")
-                    elif hint:
-                        meant.add(hint[len(" (did you mean '"):-len("'?)")])
+                    elif hint or said:
+                        meant.update([hint[len(" (did you mean '"):-len("'?)")]] if hint else [])
+                        hint = hint or said
                     elif k in LEAF_OPTIONS and nk.family != "leaf":
                         hint = misplaced(k, kind, allowed, nearby(raw, kind))
                     else:
@@ -301,7 +307,7 @@ class Parser:
         first = unknown[0] if unknown else None
         if first is not None:
             self.err(raw.key_pos[first], "unknown node kind %r%s" % (
-                first, kind_hint(first) or did_you_mean(first, REGISTRY)))
+                first, kind_hint(first, self.definitions) or did_you_mean(first, REGISTRY)))
         else:
             self.err(raw.pos, "node has no kind (one of: %s)" % ", ".join(REGISTRY))
 
@@ -321,7 +327,7 @@ class Parser:
                     self.err(src.key_pos[k], "option %r given twice" % k)
                     continue
                 if src is inner and k not in allowed:
-                    hint = did_you_mean(k, allowed + ("children",))
+                    hint = "" if parsehints.foreign_option(k) else did_you_mean(k, allowed + ("children",))
                     misspelt = misspelt or hint == " (did you mean 'children'?)"
                     if not hint and k in LEAF_OPTIONS:
                         hint = misplaced(k, kind, allowed, nearby(inner, "children"))
@@ -446,7 +452,8 @@ class Parser:
             if allowed is not None and name not in allowed:
                 self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, closest(name, allowed, what)))
             elif not isinstance(key_, str) or not key_.isidentifier():
-                self.err(value.val_pos[name], "tree key %r is not an identifier" % (key_,))
+                hint, out[name] = parsehints.key_fix(key_)   # "{obj_pos}": obj_pos meant (written: no knock-on error)
+                self.err(value.val_pos[name], "tree key %r is not an identifier%s" % (key_, hint))
             else:
                 out[name] = key_
         return out

@@ -11,25 +11,27 @@ from typing import Any, Dict, Optional, Tuple
 
 from coordinator.yamlsrc import LMap
 
-__all__ = ["OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "kind_hint", "one_child", "option_hint", "takes",
-           "top_key_hint"]
+__all__ = ["CONDITIONS", "OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "foreign_option", "kind_hint",
+           "one_child", "option_hint", "takes", "top_key_hint"]
 
 _BT, _PT, _SM = "BehaviorTree.CPP", "py_trees", "SMACH"
 _MEMORY = "sequence, whose memory: true (its default) does not tick again a child that succeeded"
+_REACTIVE = ("%s with memory: false (the earlier children are checked again on every tick, so only its last child "
+             "may take more than one tick; to react while an action runs, see 'Reacting while an action runs' in "
+             "trees/README.md)")
 
 # (name there, tools, the bmtree kinds it becomes, what it is in bmtree): with a kind it is that kind
 # ("bmtree's …"); without one, bmtree writes it with other kinds (the text says how)
 _TABLE: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
     ("Fallback", (_BT,), ("selector",), "selector"),
     ("Selector", (_PT,), ("selector",), "selector"),
-    ("ReactiveFallback", (_BT,), ("selector",),
-     "selector with memory: false (the earlier children are checked again on every tick)"),
+    ("ReactiveFallback", (_BT,), ("selector",), _REACTIVE % "selector"),
     ("Sequence", (_BT, _PT, _SM), ("sequence",), "sequence"),
-    ("ReactiveSequence", (_BT,), ("sequence",),
-     "sequence with memory: false (the earlier children are checked again on every tick)"),
+    ("ReactiveSequence", (_BT,), ("sequence",), _REACTIVE % "sequence"),
     ("SequenceStar", (_BT,), ("sequence",), _MEMORY),
     ("SequenceWithMemory", (_BT,), ("sequence",), _MEMORY),
-    ("Parallel", (_BT, _PT), ("parallel",), "parallel, with policy: all or one"),
+    ("Parallel", (_BT, _PT), ("parallel",), "parallel, with policy: all, one or first_success (success_count 1 "
+                                            "and failure_count all)"),
     ("ParallelAll", (_BT,), ("parallel",), "parallel"),
     ("Concurrence", (_SM,), ("parallel",), "parallel, with policy: all or one, or succeed_on: [child names] "
                                            "(its outcome map)"),
@@ -53,8 +55,12 @@ _TABLE: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
     ("Sleep", (_BT,), ("wait",), "wait: SECONDS"),
     ("SetBlackboard", (_BT,), ("set",), "set: {key: value}"),
     ("ScriptCondition", (_BT,), ("check",), "check: 'expression'"),
+    ("UnsetBlackboard", (_BT,), ("set",), "set: {key: null} (a key cannot be removed; a check reads it as null)"),
 ) + tuple(("Switch%d" % n, (_BT,), ("switch",), "switch: $key, with cases: {case: node} and default:")
-          for n in range(2, 7))
+          for n in range(2, 7)) + tuple(
+    (loop, (_BT,), ("for_each",), "for_each: LIST (a list, $key or $( … )), with as: KEY and child: beside it "
+                                  "(the queue is the list, the value the as key)")
+    for loop in ("LoopNode", "LoopString", "LoopDouble", "LoopInt", "LoopBool"))
 
 # names with no kind of their own: how bmtree writes them
 _IDIOMS: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
@@ -72,6 +78,20 @@ _IDIOMS: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
      "option), a transition on it a switch on that key, a fallback state a selector"),
     ("CBState", (_SM,), ("check", "set"), "write the callback in the tree, as check: 'expression' for a "
                                           "condition or set: {key: \"$( … )\"} for a value"),
+    ("Script", (_BT,), ("set", "check"), "set: {key: \"$( … )\"} for an assignment (counter := counter + 1 is "
+                                         "set: {counter: \"$(counter + 1)\"}), check: 'expression' for a condition"),
+    ("RunOnce", (_BT,), ("selector", "sequence", "check", "set"),
+     "a selector of check: 'done' and a sequence of the node and set: {done: true}, with done false at first (a "
+     "tree input's default)"),
+    ("AlwaysSuccess", (_BT,), ("check",), "check: 'true' succeeds at once (force_success over a node, for "
+                                          "ForceSuccess)"),
+    ("WhileDoElse", (_BT,), ("selector", "sequence", "check"),
+     "a selector with memory: false of a sequence [check, do-node] and the else-node (the check is read again on "
+     "every tick, and the do-node takes over once it holds)"),
+    ("Action", (_BT,), ("call",), "call: module.function (your action is a function of a module, whose definition "
+                                  "names its inputs and outputs)"),
+    ("Condition", (_BT,), ("check", "call"), "check: 'expression' over tree keys, or call: module.function of a "
+                                             "function whose success output answers true or false"),
 )
 
 
@@ -100,14 +120,60 @@ OTHER_OPTIONS: Dict[str, Tuple[Tuple[str, ...], str]] = {
     "num_attempts": (("child",), "BehaviorTree.CPP's num_attempts is retry's value: retry: N"),
     "num_cycles": (("child",), "BehaviorTree.CPP's num_cycles is repeat's value: repeat: N"),
     "msec": (("child",), "BehaviorTree.CPP's msec is timeout's value, in seconds: timeout: SECONDS"),
+    "success_count": (("policy",), "BehaviorTree.CPP's success_count and failure_count are parallel's policy: "
+                                   "all (every child succeeds), one (the first success wins, the first failure "
+                                   "fails it), first_success (the first success wins, it fails only when all "
+                                   "failed), or succeed_on: [names]"),
+    "variable": (("cases",), "BehaviorTree.CPP's variable is switch's value, and its case_N ports its cases: "
+                             "switch: $key, with cases: {value: node} and default: node"),
+}
+OTHER_OPTIONS["failure_count"] = OTHER_OPTIONS["success_count"]
+OTHER_OPTIONS.update(("case_%d" % n, OTHER_OPTIONS["variable"]) for n in range(1, 10))
+
+# BehaviorTree.CPP's pre- and post-conditions, which any node takes there (by name, in lower case): what bmtree
+# writes instead
+_SUBTREES = "see 'Subtrees' in trees/README.md"
+CONDITIONS: Dict[str, str] = {
+    "_skipif": "a selector of check: 'condition' and the node (it is skipped, as SUCCESS, while the condition holds)",
+    "_successif": "a selector of check: 'condition' and the node (SUCCESS without running it when the condition "
+                  "holds)",
+    "_failureif": "a sequence of check: 'not (condition)' and the node (FAILURE without running it when the "
+                  "condition holds)",
+    "_while": "a sequence with memory: false of check: 'condition' and the node: the node is halted once the "
+              "condition is false (see 'Reacting while an action runs' in trees/README.md)",
+    "_onhalted": "the tree's cleanup: (beside root:) runs once after root ends, however it ended, also halted "
+                 "(see 'Cleaning up' in trees/README.md)",
+    "_onsuccess": "a sequence of the node and set: {key: value}: what comes after the node runs when it succeeded",
+    "_onfailure": "a selector of the node and a sequence of set: {key: value} and fail: \"why\" (the branch still "
+                  "fails)",
+    "_post": "a sequence of the node and set: {key: value}, or force_success over the node first, to set it "
+             "however the node ended",
+    "_autoremap": "include shares the tree blackboard: the subtree reads and writes the caller's keys by their own "
+                  "names, and args: sets its inputs; outputs: copies its keys to other names (%s)" % _SUBTREES,
 }
 
 
-def kind_hint(name: Any) -> str:
+def foreign_option(option: Any) -> bool:
+    """Whether ``option`` is another tool's option or a BehaviorTree.CPP pre/post condition that has a hint
+    of its own (a "did you mean" would mislead: ``_successIf`` is not ``check_success``)."""
+    text = str(option).lower()
+    return text in OTHER_OPTIONS or text in CONDITIONS
+
+
+def kind_hint(name: Any, definitions: Any = None) -> str:
     """`` (BehaviorTree.CPP's Fallback is bmtree's selector)`` for a kind of another tool, `` (did you mean
-    'for_each'?)`` for a kind written otherwise (``ForEach``), else ''."""
+    'for_each'?)`` for a kind written otherwise (``ForEach``), how to call a function written as the kind
+    (``speech.say: {text: hi}``; ``definitions``: the modules'), else ''."""
     from coordinator.nodes import REGISTRY
 
+    if isinstance(name, str) and re.match(r"^\w+\.\w+$", name):
+        mod_name, member = name.split(".")
+        mod = (definitions or {}).get(mod_name)
+        if mod is not None and member in mod.events:
+            return " (an event is waited for by a wait_event node: write wait_event: %s, with outputs: {param: " \
+                   "KEY} to keep its params)" % name
+        if mod is None or member in mod.functions:
+            return " (a function is called by a call node: write call: %s with inputs: {...} beside it)" % name
     found = OTHER_KINDS.get(_norm(name))
     if found:
         return " (%s)" % found[1]
@@ -138,7 +204,10 @@ def takes(kind: str, allowed: Tuple[str, ...]) -> str:
 def option_hint(option: Any, kind: str, allowed: Tuple[str, ...]) -> str:
     """The hint for an option the kind does not take: the options it takes and, for another tool's option
     that this kind writes otherwise, how."""
-    other = OTHER_OPTIONS.get(str(option).lower())
+    text = str(option).lower()
+    if text in CONDITIONS:
+        return " (BehaviorTree.CPP's %s condition has no option in bmtree: write %s)" % (option, CONDITIONS[text])
+    other = OTHER_OPTIONS.get(text)
     return takes(kind, allowed) + (": %s" % other[1] if other and set(other[0]) & set(allowed) else "")
 
 

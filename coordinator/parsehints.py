@@ -7,10 +7,11 @@ from typing import Any, Dict, List, Mapping, Tuple
 
 from comm.errors import did_you_mean
 from coordinator.nodes import REGISTRY
-from coordinator.othernames import takes
+from coordinator.othernames import foreign_option, option_hint, takes
 from coordinator.yamlsrc import LMap
 
-__all__ = ["LEAF_OPTIONS", "closest", "misplaced", "nearby", "nest_hint", "unquoted"]
+__all__ = ["LEAF_OPTIONS", "XML_HINT", "closest", "foreign_hint", "foreign_option", "key_fix", "looks_like_xml",
+           "misplaced", "nearby", "nest_hint", "unquoted"]
 
 _KINDS = frozenset(REGISTRY)
 _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
@@ -99,3 +100,54 @@ def nest_hint(raw: LMap, first: str, second: str) -> str:
     where = "'child:'" if "child" in _OPTION_NAMES[outer] else "'%s:'" % outer
     moved = [k for k in raw if k != inner and k in _OPTION_NAMES[inner] and k not in _OPTION_NAMES[outer]]
     return "nest the %s%s under %s" % (inner, " and its %s" % ", ".join(moved) if moved else "", where)
+
+
+XML_HINT = ("this looks like BehaviorTree.CPP XML (<root BTCPP_format=…>); bmtree trees are YAML: see trees/README.md "
+            "(its 'Nodes' section names what each BehaviorTree.CPP node is in bmtree)")
+
+
+def looks_like_xml(text: str) -> bool:
+    """Whether a tree file's text is XML (a BehaviorTree.CPP or Groot file), not YAML: it starts with ``<``."""
+    return text.lstrip("\ufeff \t\r\n").startswith("<")
+
+
+def foreign_hint(option: Any, kind: str, allowed: Tuple[str, ...], raw: Any, definitions: Mapping[str, Any]) -> str:
+    """The hint for an option that is another tool's (``_successIf``, ``success_count``), or an input of the
+    function a ``call`` calls written beside it instead of under ``inputs:`` (a param of ``wait_event``'s
+    event, beside it instead of under ``outputs:``); '' for any other."""
+    if foreign_option(option):
+        return option_hint(option, kind, allowed)
+    target = raw.get(kind) if kind in ("call", "wait_event") else None
+    if not isinstance(target, str) or target.count(".") != 1:
+        return ""
+    mod_name, member = target.split(".")
+    mod = definitions.get(mod_name)
+    if mod is None:
+        return ""
+    if kind == "call":
+        fn = mod.functions.get(member)
+        if fn is not None and any(q.name == option for q in fn.inputs):
+            return ": %r is an input of %s: move it under inputs: (inputs: {%s: …})" % (option, target, option)
+        return ""
+    ev = mod.events.get(member)
+    if ev is not None and any(q.name == option for q in ev.params):
+        return ": %r is a param of %s: take it with outputs: {%s: KEY}" % (option, target, option)
+    return ""
+
+
+def key_fix(value: Any) -> Tuple[str, Any]:
+    """For a tree key of ``outputs`` that is not an identifier: the hint and the key meant (``"{obj_pos}"``,
+    ``"$obj_pos"``, an unquoted ``{obj_pos}``: ``obj_pos``, a plain name as BehaviorTree.CPP's ports write it
+    with braces), or ('', None)."""
+    name = None
+    if isinstance(value, str):
+        m = re.match(r"^\s*(?:\$|\{\s*)([^\W\d]\w*)\s*\}?\s*$", value)
+        if m and (value.strip().startswith("$") != value.strip().endswith("}")):
+            name = m.group(1)
+    elif isinstance(value, dict) and len(value) == 1:
+        only = next(iter(value))
+        if isinstance(only, str) and only.isidentifier() and value[only] is None:
+            name = only
+    if name is None:
+        return "", None
+    return ": an output is written to a tree key by its plain name: write %s" % name, name

@@ -172,7 +172,8 @@ def seen_until(log: RunLog) -> Tuple[RunLog, float]:
 
 
 def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
-    """The scenario file's content for ``log``, with the tree path relative to ``out_path``."""
+    """The scenario file's content for ``log``, with the tree path and the definitions the run was given
+    (``modules:``) relative to ``out_path``."""
     tree = log.tree
     end = log.end
     seen = log  # what the tree acted on
@@ -220,8 +221,34 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
         scenario["max_duration"] = tree["max_duration"]
     status = "failure" if stop_at is not None else str((end or {}).get("status", "")).lower()
     scenario["expect"] = {"status": status, "calls": calls}
-    rel = os.path.relpath(os.path.abspath(path), os.path.dirname(os.path.abspath(out_path)))
-    return {"tree": rel, "scenarios": [scenario]}
+    folder = os.path.dirname(os.path.abspath(out_path))
+    data: Dict[str, Any] = {"tree": _relative(path, folder)}
+    modules = _module_paths(log, folder)
+    if modules:
+        data["modules"] = modules
+    data["scenarios"] = [scenario]
+    return data
+
+
+def _relative(path: str, folder: str) -> str:
+    """``path`` relative to ``folder`` (absolute when it cannot be: another drive)."""
+    try:
+        return os.path.relpath(os.path.abspath(path), folder)
+    except ValueError:
+        return os.path.abspath(path)
+
+
+def _module_paths(log: RunLog, folder: str) -> List[str]:
+    """The definition files and folders the run was given (``--modules``, ``--module``), for the scenario
+    file's ``modules:`` key, relative to its folder: without them the scenario alone cannot mock those
+    modules (``no module 'arm' to mock``). Paths that are not there any more are left out."""
+    out: List[str] = []
+    for m in log.tree.get("modules") or []:
+        if isinstance(m, str) and os.path.exists(m):
+            rel = _relative(m, folder)
+            if rel not in out:
+                out.append(rel)
+    return out
 
 
 _HEADER_START = "# Written by 'bmtree replay"

@@ -17,7 +17,8 @@ from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
 __all__ = ["Binding", "ExprValue", "KeyTypes", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
-           "read_at", "ref_errors", "ref_kind", "ref_type", "value_kind", "value_type_errors"]
+           "read_at", "ref_errors", "ref_kind", "ref_type", "template_fix", "template_hint", "templates_as_text", "value_kind",
+           "value_type_errors"]
 
 _LOOSE = re.compile(r"(?<![$\w])\$([^\W\d]\w*)")
 
@@ -93,6 +94,53 @@ def template(text: str, base: int = 0) -> Union[str, Template]:
     if all(isinstance(p, str) for p in parts):
         return "".join(parts)  # type: ignore[arg-type]
     return Template(text, parts)
+
+
+_PLAIN_REF = re.compile(r"[^\W\d]\w*(\.[^\W\d]\w*|\[-?\d+\])*$")
+
+
+def template_hint(value: Any) -> str:
+    """Why a ``{…}`` template cannot be where a value other than text goes, and what to write: ``a {…}
+    template makes text; write $obj_pos`` (``$( … )`` for a hole that is an expression); '' when
+    ``value`` holds no template."""
+    found = _templates(value)
+    if not found:
+        return ""
+    fix = template_fix(found[0])
+    if fix:
+        return "a {…} template makes text; write %s" % fix
+    return "a {…} template makes text, which this value cannot be: write a $reference or a $( … ) expression"
+
+
+def template_fix(t: Template) -> str:
+    """What a template of one hole is meant as: ``$obj_pos`` for ``"{obj_pos}"``, ``$(len(x))`` for
+    ``"{len(x)}"``; '' for text around holes."""
+    if len(t.parts) == 1 and not isinstance(t.parts[0], str):
+        inner = t.parts[0][0].text.strip()
+        return "$" + inner if _PLAIN_REF.match(inner) else "$(%s)" % inner
+    return ""
+
+
+def _templates(value: Any) -> List[Template]:
+    if isinstance(value, Template):
+        return [value]
+    if isinstance(value, dict):
+        return [t for v in value.values() for t in _templates(v)]
+    if isinstance(value, list):
+        return [t for v in value for t in _templates(v)]
+    return []
+
+
+def templates_as_text(value: Any) -> Any:
+    """``value`` with each ``{…}`` template replaced by its text as written (what a check converts to say
+    that text is not taken: a template always makes text)."""
+    if isinstance(value, Template):
+        return value.text
+    if isinstance(value, dict):
+        return {k: templates_as_text(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [templates_as_text(v) for v in value]
+    return value
 
 
 def _closing(text: str, i: int) -> int:

@@ -363,6 +363,9 @@ class NodeKind(abc.ABC):
     options: Tuple[Option, ...] = ()
     summary = ""                       # what the node does, for the tables
     uses_blackboard_node = False
+    # why a node of this kind can still be RUNNING after the tick it started in ('' : it ends in that tick,
+    # unless a node below it runs): see ``lasting`` and ``coordinator.reactive``
+    lasts = ""
     # True when ``parse`` reads its ``at`` only to report a problem: it is then given None and reads
     # ``node.value_pos`` instead (the same position, made only when read: most never are)
     parse_without_pos = False
@@ -442,6 +445,11 @@ class NodeKind(abc.ABC):
 
     def warnings(self, node: TreeNode) -> List[TreeError]:
         return []
+
+    def lasting(self, node: TreeNode) -> str:
+        """Why ``node`` itself can be RUNNING after the tick it starts in (``lasts``; '' : it ends in that
+        tick unless a node below it does not): a kind whose answer depends on its value overrides it."""
+        return self.lasts
 
     # structure ---------------------------------------------------------------------------
     def expand(self, node: TreeNode) -> List[TreeNode]:

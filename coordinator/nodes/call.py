@@ -31,7 +31,15 @@ from coordinator.nodes.leafbase import Leaf
 from coordinator.nodes.timeouts import NO_TIMEOUT, timeout_option, with_no_timeout
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
-from coordinator.values import read_at, ref_type, value_type_errors
+from coordinator.values import (
+    Template,
+    read_at,
+    ref_type,
+    template_fix,
+    template_hint,
+    templates_as_text,
+    value_type_errors,
+)
 from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS", "NOT_SENT", "NO_TIMEOUT", "STATUS_TEXTS"]
@@ -201,6 +209,8 @@ class CallKind(NodeKind):
                                             "lost, or when halted)", shown="`--call-timeout` (30)"),
                Option("check_success", "bool", "`false`: a `success: false` output is not a failure", default=True))
 
+    lasts = "a call waits for its module's answer"
+
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> CallSpec:
         spec = CallSpec(target=value, timeout=timeout_option(p, node, raw, self.option("timeout"), "call", _HOW),
                         check_success=p.opt(node, raw, self.option("check_success")),
@@ -230,6 +240,8 @@ class CallKind(NodeKind):
                 p.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, params)))
         for q in fn.inputs:
             if q.name not in inputs_raw:
+                if q.name in raw:   # written beside the call: its error says to move it under inputs
+                    continue
                 p.err(raw.key_pos.get("inputs", at), "%s needs input %r (%s)" % (value, q.name, q.rostype))
             elif inputs_raw[q.name] is None:  # no message type takes null: the call could never be built
                 p.err(inputs_raw.val_pos[q.name], "input %r: null is not a %s value" % (q.name, q.rostype))
@@ -313,6 +325,11 @@ class CallKind(NodeKind):
             refs = refs_in(value)
             if not refs:
                 continue
+            said = _text_misfit(q, value, types, at)
+            if said is not None:   # a template (or an include's template argument) where text is not taken
+                if said:
+                    errors.append(TreeError(at, said))
+                continue
             try:
                 sample = resolve(value, lambda key: _sample(types, key))
             except (_Unknown, RefError):
@@ -348,6 +365,44 @@ def _clashing_keys(p: Any, raw: Any, spec: CallSpec) -> None:
                                        "%s its own key" % (taken[key], option, key, option))
         else:
             taken[key] = option
+
+
+def _text_misfit(q: Any, value: Any, types: Any, at: Pos) -> Optional[str]:
+    """Why input ``q`` cannot take ``value`` because text is made where it takes no text: a ``{…}`` template
+    in it, or a ``$key`` that an include's argument (``types.bound``) sets to one; '' when that text fits,
+    None when ``value`` holds no such text (or its other references' types are not known)."""
+    hint = template_hint(value)
+    if hint:
+        try:
+            sample = resolve(templates_as_text(value), lambda key: _sample(types, key))
+        except (_Unknown, RefError):
+            return None
+        try:
+            q.convert(sample)
+        except ProtocolError as exc:
+            return "%s: %s" % (said_of("input %r" % q.name, exc), hint)
+        return ""
+    if not isinstance(value, Ref) or value.path or _sample_or_none(types, value.key) is not None:
+        return None
+    for given, arg, include in getattr(types, "bound", {}).get(value.key, {}).get(at.file, ()):
+        if not isinstance(given, Template):
+            continue
+        origin = ("argument %r of the include at %s" % (arg, where(include, at)) if arg and include is not None
+                  else "the default of input %r" % value.key)
+        said = misfit_text(q.rostype, given.text, "%s, which is the template %r (%s)" % (value, given.text, origin))
+        if said:
+            fix = template_fix(given)
+            warn = "warning: " if include is None else ""   # the tree's own default: its caller may set it
+            return "%sinput %r %s: a {…} template makes text%s" % (warn, q.name, said, "; pass %s: %s there" % (
+                arg, fix) if arg and fix else "")
+    return None
+
+
+def _sample_or_none(types: Any, key: str) -> Any:
+    try:
+        return _sample(types, key)
+    except _Unknown:
+        return None
 
 
 def _cannot_take(name: str, rostype: str, value: Any, sample: Any, types: Dict[str, set], exc: Exception) -> str:

@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, FrozenSet, List, Tuple
+from typing import Any, Dict, FrozenSet, Iterator, List, Tuple
 
 import py_trees
+from py_trees.common import Status
 
 from comm.errors import did_you_mean
 from coordinator.errors import TreeError
@@ -22,7 +23,7 @@ from coordinator.nodes.base import (
 )
 from coordinator.treeast import TreeNode, walk
 
-__all__ = ["KINDS", "MemorySpec", "ParallelSpec"]
+__all__ = ["FirstSuccess", "KINDS", "MemorySpec", "POLICIES", "ParallelSpec"]
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,63 @@ class ParallelSpec:
 # ``succeed_on``'s type, for the JSON Schema (registered here: only the parallel takes it)
 TYPES.setdefault("names", ValueType("names", "list of child names", {
     "type": "array", "minItems": 1, "uniqueItems": True, "items": {"type": "string", "minLength": 1}}))
+POLICIES = ("all", "one", "first_success")
+TYPES.setdefault("parallel_policy", ValueType("parallel_policy", " or ".join("`%s`" % p for p in POLICIES),
+                                              {"enum": list(POLICIES)}))
+
+
+class FirstSuccess(py_trees.composites.Composite):
+    """A parallel that succeeds at the first child that succeeds (the others halted) and fails only when
+    every child has failed (BehaviorTree.CPP's Parallel with ``success_count: 1`` and ``failure_count``
+    all: detectors racing). A child that failed is not ticked again; the failure's reason names each
+    child's (its children are reset once it failed, so that the reason is the parallel's own)."""
+
+    def __init__(self, name: str, children: List[py_trees.behaviour.Behaviour]):
+        super().__init__(name=name, children=children)
+        self.failures: List[str] = []
+
+    def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        if self.status != Status.RUNNING:
+            for child in self.children:
+                if child.status != Status.INVALID:
+                    child.stop(Status.INVALID)
+            self.failures = []
+            self.feedback_message = ""
+            self.initialise()
+        for child in self.children:
+            if child.status == Status.FAILURE:   # it failed in an earlier tick: it stays failed
+                continue
+            yield from child.tick()
+            if child.status == Status.FAILURE:
+                self.failures.append("%s: %s" % (child.name, _failure_text(child)))
+        winner = next((c for c in self.children if c.status == Status.SUCCESS), None)
+        if winner is not None:
+            self.current_child = winner
+            self.feedback_message = "%s succeeded" % winner.name
+            self.stop(Status.SUCCESS)
+        elif all(c.status == Status.FAILURE for c in self.children):
+            self.current_child = self.children[-1] if self.children else None
+            self.feedback_message = "all %d children failed: %s" % (len(self.children), "; ".join(self.failures))
+            for child in self.children:   # (the reason is this one's, naming each failure)
+                child.stop(Status.INVALID)
+            self.stop(Status.FAILURE)
+        else:
+            self.status = Status.RUNNING
+        yield self
+
+    def stop(self, new_status: Status = Status.INVALID) -> None:
+        for child in self.children:
+            if child.status == Status.RUNNING:
+                child.stop(Status.INVALID)
+        py_trees.composites.Composite.stop(self, new_status)
+
+
+def _failure_text(b: py_trees.behaviour.Behaviour) -> str:
+    """The failure text of the deepest failed node under ``b`` (its own when none says more)."""
+    for node in reversed(list(b.iterate())):
+        if node.status == Status.FAILURE and node.feedback_message:
+            return node.feedback_message
+    return "failed"
 
 
 class _Composite(NodeKind):
@@ -49,6 +107,11 @@ class _Composite(NodeKind):
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
         spec = self.spec(p, node, raw)
         p.children(node, value, at)
+        if getattr(spec, "memory", True) is False:   # reactive: only its last lasting child may run
+            from coordinator.reactive import restart_problems
+
+            for where_, message in restart_problems(node):
+                p.err(where_, message)
         return spec
 
     def spec(self, p: Any, node: TreeNode, raw: Any) -> Any:
@@ -118,11 +181,13 @@ class Selector(_Composite):
 
 class Parallel(_Composite):
     name = "parallel"
-    summary = ("children ticked together; under every policy it fails as soon as one child fails, halting the "
-               "others")
-    options = (Option("policy", "policy", "`all`: succeed when all do; `one`: succeed when one does, halting the "
-                                          "others (a child that fails first still fails the parallel: wrap it in "
-                                          "`force_success` to let the others go on)", default="all"),
+    summary = ("children ticked together; it fails as soon as one child fails, halting the others (but with "
+               "`policy: first_success`: when all have failed)")
+    options = (Option("policy", "parallel_policy", "`all`: succeed when all do; `one`: succeed when one does, "
+                                                   "halting the others (a child that fails first still fails the "
+                                                   "parallel); `first_success`: succeed when one does, halting the "
+                                                   "others, and fail only when all have failed (detectors racing; "
+                                                   "a failed child is not run again)", default="all"),
                Option("succeed_on", "names", "instead of `policy`: succeed when the children of these names "
                                              "(their `name:`) have succeeded, halting the others (SMACH's "
                                              "Concurrence outcome map); any child failing still fails it"),
@@ -130,7 +195,7 @@ class Parallel(_Composite):
                                              "again", default=True))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
-        policy = check_choice(p, raw, "policy", ("all", "one"), "all")
+        policy = check_choice(p, raw, "policy", POLICIES, "all")
         synchronise = p.opt(node, raw, self.option("synchronise"))
         if "succeed_on" in raw and "policy" in raw:
             p.err(raw.key_pos["succeed_on"], "parallel takes 'succeed_on' or 'policy', not both: succeed_on (these "
@@ -149,6 +214,11 @@ class Parallel(_Composite):
         outs = [f.outcome(c, avail) for c in node.children]   # together: none reads what another writes
         if not outs:
             return frozenset(), NEVER
+        if node.spec.policy == "first_success":   # succeeds by one child (the others halted); fails when all did
+            failed = frozenset()
+            for _, cf in outs:
+                failed = join(failed, cf)
+            return meet(cs for cs, _ in outs), failed
         failed = meet(cf for _, cf in outs)
         if node.spec.succeed_on:
             ok: FrozenSet[str] = frozenset()
@@ -187,6 +257,8 @@ class Parallel(_Composite):
         if spec.succeed_on:
             policy: py_trees.common.ParallelPolicy.Base = py_trees.common.ParallelPolicy.SuccessOnSelected(
                 [children[i] for i in spec.succeed_on], synchronise=spec.synchronise)
+        elif spec.policy == "first_success":
+            return FirstSuccess(node.name, children)
         elif spec.policy == "all":
             policy = py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=spec.synchronise)
         else:

@@ -20,10 +20,11 @@ from coordinator.nodes.base import (
     param_type_errors,
     run_param,
 )
+from coordinator.nodes.timeouts import long_seconds
 from coordinator.treeast import TreeNode
 from coordinator.values import read_at
 
-__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec"]
+__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec", "once"]
 
 
 @dataclass(frozen=True)
@@ -168,6 +169,22 @@ class Retry(Guarded):
 CHILD = Option("child", "node", "the decorated node", required=True)
 
 
+def forever(p: Any, node: TreeNode, value: Any, at: Any) -> bool:
+    """A negative count of ``retry``/``repeat`` (BehaviorTree.CPP's -1: forever), reported with why there is none."""
+    if node.kind not in ("retry", "repeat") or isinstance(value, bool) or not isinstance(value, int) or value >= 0:
+        return False
+    runs = "attempts" if node.kind == "retry" else "runs"
+    p.err(at or node.value_pos, "count of %s is %d, BehaviorTree.CPP's 'forever': every bmtree loop is bounded, so "
+                                "give the most %s it may take (%s: 100); see 'Every loop is bounded' in "
+                                "trees/README.md" % (node.kind, value, runs, node.kind))
+    return True
+
+
+def once(times: Any) -> bool:
+    """Whether a count is the literal 1: a loop of one run starts no next one (it is never RUNNING for that)."""
+    return times == 1 and isinstance(times, int) and not isinstance(times, bool)
+
+
 class Counted(NodeKind):
     """A decorator whose main value is a number and whose child is the ``child`` option."""
 
@@ -176,7 +193,10 @@ class Counted(NodeKind):
     behaviour: Any = None
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
-        spec = self.make_spec(p.typed(node, self.label, value, at, self.value[0]))
+        v = None if forever(p, node, value, at) else p.typed(node, self.label, value, at, self.value[0])
+        if self.value[0] == "seconds":
+            long_seconds(p, v, at, "duration of %s" % self.name)
+        spec = self.make_spec(v)
         if "child" in raw:
             p.child(node, raw["child"], raw.val_pos["child"])
         return spec
@@ -220,10 +240,17 @@ class RetryKind(Counted):
     options = (CHILD, Option("delay", "seconds0", "seconds between a failed attempt and the next (a module "
                                                  "restarting, a door opening)", shown="`0`"))
     behaviour = Retry
+    lasts = "a retry is RUNNING between its attempts"
+
+    def lasting(self, node: TreeNode) -> str:
+        return "" if once(node.spec.times) else self.lasts
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
         times = super().parse(p, node, raw, value, at).times
-        return RetrySpec(times, p.opt(node, raw, self.option("delay")), raw.val_pos.get("delay"))
+        delay = p.opt(node, raw, self.option("delay"))
+        if "delay" in raw:
+            long_seconds(p, delay, raw.val_pos["delay"], "delay of retry")
+        return RetrySpec(times, delay, raw.val_pos.get("delay"))
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec.times, node.spec.delay)

@@ -1,6 +1,7 @@
 """The leaves other than ``call``: ``recall``, ``check``, ``wait_event``, ``set``, ``wait``."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, FrozenSet, Iterable, List, Optional
 
@@ -20,7 +21,7 @@ from coordinator.nodes.base import (
 )
 from coordinator.nodes.leafbase import Leaf
 from coordinator.nodes.loops import expr_option, expr_type_errors
-from coordinator.nodes.timeouts import NO_TIMEOUT, timeout_option, with_no_timeout
+from coordinator.nodes.timeouts import NO_TIMEOUT, long_seconds, timeout_option, with_no_timeout
 from coordinator.refs import Ref, RefError, refs_in, resolve
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at, value_type_errors
@@ -88,6 +89,7 @@ class RecallKind(NodeKind):
     summary = "ask the Blackboard node for the latest values; FAILURE names the missing ones"
     options = (Option("timeout", "seconds", "seconds (a recall always has a limit: no `none`)", shown="`5`"),)
     uses_blackboard_node = True
+    lasts = "a recall waits for the Blackboard node's answer"
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> RecallSpec:
         timeout = timeout_option(p, node, raw, self.option("timeout"), "recall", _RECALL_HOW, unlimited=False)
@@ -295,6 +297,7 @@ class WaitEventKind(NodeKind):
                Option("where", "expr", "an expression over the event's params, by their names (`person == "
                                        "\"Ana\"`): the first event for which it is true is taken, the others "
                                        "skipped"))
+    lasts = "a wait_event waits for its event"
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> WaitEventSpec:
         timeout = timeout_option(p, node, raw, self.option("timeout"), "wait_event", _WAIT_EVENT_HOW)
@@ -305,13 +308,15 @@ class WaitEventKind(NodeKind):
         if "where" in raw:
             spec.where, spec.where_pos = expr_option(p, raw, "where"), raw.val_pos["where"]
         found = p.target(node, value, at, "event")
-        if found is None:
-            return spec
-        mod, ename = found
-        ev = mod.events.get(ename)
-        if ev is None:
-            p.err(at, "module %r has no event %r%s" % (mod.name, ename, did_you_mean(ename, mod.events)
-                                                       or " (events: %s)" % (", ".join(mod.events) or "none")))
+        ev = None
+        if found is not None:
+            mod, ename = found
+            ev = mod.events.get(ename)
+            if ev is None:
+                p.err(at, "module %r has no event %r%s" % (mod.name, ename, did_you_mean(ename, mod.events)
+                                                           or " (events: %s)" % (", ".join(mod.events) or "none")))
+        if ev is None:   # (already an error) its outputs still write their keys: no knock-on errors where read
+            spec.outputs = p.key_map(node, raw, "outputs", None, "event param")
             return spec
         spec.event = ev
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in ev.params}, "event param")
@@ -387,6 +392,10 @@ class SetKind(NodeKind):
             at = getattr(node.spec, "pos", {}).get(k, node.pos)
             for off, msg in value_type_errors(v, types):
                 errors.append(TreeError(Pos(at.file, at.line, at.column + off), msg))
+            meant = _expression_text(v, types)
+            if meant:
+                errors.append(TreeError(at, "warning: %s: %r is stored as that text, not worked out: did you mean "
+                                            "\"$(%s)\"?" % (k, v, meant)))
 
     def default_name(self, node: TreeNode) -> str:
         return "set %s" % ", ".join(node.spec)
@@ -407,6 +416,26 @@ class SetKind(NodeKind):
         return {k: v for k, v in node.spec.items() if isinstance(v, Ref)}
 
     leaf = SetKeys
+
+
+_OPERATOR = re.compile(r"[-+*/<>]|==|!=|\w\(")   # (not the words and, or, not, in: ordinary text has them)
+_NAME = re.compile(r"[^\W\d]\w*(\.[^\W\d]\w*)*$")
+
+
+def _expression_text(value: Any, keys: Dict[str, set]) -> str:
+    """The expression a ``set`` value of plain text reads as, when it surely is one (``counter + 1`` with
+    ``counter`` a key of the tree: it is stored as text); '' for ordinary text: words (also joined by and,
+    or, not, in), a name alone, text that does not parse, or that reads a name no node writes and no
+    input declares."""
+    if not isinstance(value, str) or not _OPERATOR.search(value) or _NAME.match(value.strip()):
+        return ""
+    try:
+        expr = Expr.parse(value)
+    except ExprError:
+        return ""
+    if not expr.refs or not all(r.key in keys for r in expr.refs):
+        return ""
+    return value.strip()
 
 
 # wait -------------------------------------------------------------------------------------
@@ -430,9 +459,15 @@ class WaitKind(NodeKind):
     value = ("seconds0", "seconds (≥ 0)")
     label = "duration"
     summary = "RUNNING for N seconds, then SUCCESS"
+    lasts = "a wait waits its seconds"
+
+    def lasting(self, node: TreeNode) -> str:
+        return "" if node.spec == 0 and isinstance(node.spec, (int, float)) else self.lasts
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> Optional[float]:
-        return p.typed(node, self.label, value, at, self.value[0])
+        seconds = p.typed(node, self.label, value, at, self.value[0])
+        long_seconds(p, seconds, at, "duration of wait")
+        return seconds
 
     def default_name(self, node: TreeNode) -> str:
         seconds = node.spec   # a number: 'wait 5s'; a reference or an expression as written: 'wait $pause'

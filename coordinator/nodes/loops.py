@@ -25,7 +25,7 @@ from coordinator.nodes.base import (
     param_keys,
     param_type_errors,
 )
-from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec
+from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec, forever, once
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at
@@ -125,9 +125,13 @@ class RepeatKind(Counted):
     options = (CHILD,
                Option("until", "expr", "checked after each successful run: SUCCESS once it is true"),
                Option("while", "expr", "checked before each run: SUCCESS once it is false (maybe no run)"))
+    lasts = "a repeat is RUNNING between its runs"
+
+    def lasting(self, node: TreeNode) -> str:
+        return "" if once(node.spec.times) else self.lasts
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
-        times = p.typed(node, self.label, value, at, self.value[0])
+        times = None if forever(p, node, value, at) else p.typed(node, self.label, value, at, self.value[0])
         modes = [m for m in ("until", "while") if m in raw]
         if len(modes) > 1:
             p.err(raw.key_pos["while"], "repeat takes 'until' or 'while', not both")
@@ -255,6 +259,11 @@ class ForEachKind(NodeKind):
                Option("policy", "policy", "`all`: every run must succeed (FAILURE at the first that fails); "
                                           "`one`: SUCCESS at the first run that succeeds (a search)", default="all"),
                Option("max", "count", "the longest list run over; a longer one is FAILURE", default=DEFAULT_MAX))
+    lasts = "a for_each is RUNNING between its elements"
+
+    def lasting(self, node: TreeNode) -> str:
+        items = node.spec.items
+        return "" if isinstance(items, list) and len(items) <= 1 else self.lasts
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> ForEachSpec:
         items: Any = None

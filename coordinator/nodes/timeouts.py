@@ -10,7 +10,7 @@ from typing import Any, Dict
 from coordinator.nodes.base import TYPES, Option
 from coordinator.treeast import TreeNode
 
-__all__ = ["NO_TIMEOUT", "timeout_option", "with_no_timeout"]
+__all__ = ["LONG_SECONDS", "NO_TIMEOUT", "long_seconds", "timeout_option", "with_no_timeout"]
 
 NO_TIMEOUT = "none"
 """``timeout: none``, as a spec holds it: no limit (the only text a timeout may be)."""
@@ -42,8 +42,27 @@ def timeout_option(p: Any, node: TreeNode, raw: Any, option: Option, kind: str, 
     elif isinstance(v, str) and (not v.startswith("$") or v.startswith("$$")):
         p.err(at, "%s must be %s%s, got %r: %s" % (label, expect, " or 'none'" if unlimited else "", v, how))
     else:
-        return p.opt(node, raw, option)
+        value = p.opt(node, raw, option)
+        long_seconds(p, value, at, label)
+        return value
     return None
+
+
+LONG_SECONDS = 1000
+"""Durations from this many seconds on are likely milliseconds written as BehaviorTree.CPP's ``msec`` takes
+them (a warning), unless a whole number of half hours (1800, 3600: a limit for a whole task)."""
+
+
+def long_seconds(p: Any, value: Any, at: Any, label: str) -> None:
+    """Warn about a duration written in milliseconds by habit: ``timeout: 3000`` is 50 minutes."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return
+    if value < LONG_SECONDS or value % 1800 == 0:
+        return
+    minutes = value / 60.0
+    shown = "%.0f min" % minutes if minutes < 120 else "%.1f h" % (minutes / 60.0)
+    p.warn(at, "%s is %g seconds (%s): durations are in seconds; for %g milliseconds write %g" % (
+        label, value, shown, value, value / 1000.0))
 
 
 def with_no_timeout(schema: Dict[str, Any]) -> Dict[str, Any]:

@@ -59,7 +59,7 @@ inputs:
 root:
   sequence:
     name: all
-    memory: false
+    memory: true
     children:
       - set: {greeting: "$$5 off", where: {x: 1.0, y: 2.0, z: 0.0}}
       - parallel:
@@ -115,7 +115,7 @@ def test_every_node_kind_and_option(tmp_path, sim_defs):
     assert kinds == {"sequence", "parallel", "call", "wait_event", "selector", "inverter", "check", "force_failure",
                      "wait", "retry", "repeat", "timeout", "force_success", "recall", "set", "include"}
     root = tree.root
-    assert root.name == "all" and root.spec.memory is False
+    assert root.name == "all" and root.spec.memory is True and root.children[2].spec.memory is False
     par = root.children[1]
     assert (par.spec.policy, par.spec.synchronise) == ("one", False)
     say = par.children[0]

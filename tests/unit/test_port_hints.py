@@ -129,7 +129,9 @@ def test_a_switch_on_text_takes_number_and_text_cases(tmp_path, capsys):
 @pytest.mark.parametrize("name,said", [
     ("fallback", "BehaviorTree.CPP's Fallback is bmtree's selector"),
     ("ReactiveSequence", "BehaviorTree.CPP's ReactiveSequence is bmtree's sequence with memory: false (the earlier "
-                         "children are checked again on every tick)"),
+                         "children are checked again on every tick, so only its last child may take more than one "
+                         "tick; to react while an action runs, see 'Reacting while an action runs' in "
+                         "trees/README.md)"),
     ("Sequence", "BehaviorTree.CPP's, py_trees' and SMACH's Sequence is bmtree's sequence"),
     ("py_trees.composites.Selector", "py_trees' Selector is bmtree's selector"),
     ("retry_until_successful", "BehaviorTree.CPP's RetryUntilSuccessful is bmtree's retry: N (attempts in all), "

@@ -207,3 +207,18 @@ def test_an_event_just_after_the_tick_that_took_the_answer_stays_after_it(tmp_pa
 def test_a_killed_runs_events_are_tied_too(tmp_path):
     records = [start("a", "my.noop", 1.0), event(1.2), {"type": "tick", "t": 1.3, "n": 2, "changes": []}]
     assert events_of(tmp_path, records, end=False) == [{"event": "my.done", "after": "my.noop", "at": 0.2}]
+
+
+def test_a_scenario_from_a_run_given_definitions_names_them_and_runs_alone(tmp_path, my):
+    """``--modules``/``--module`` of the run become the scenario file's ``modules:``, relative to it: the
+    scenario runs by itself (before, it failed with ``no module 'my' to mock``)."""
+    log, run = field_run(tmp_path, my, tree_text(noops=2, wait=False), emits_then_answers)
+    assert run.succeeded
+    (tmp_path / "tests").mkdir()
+    out_path = str(tmp_path / "tests" / "replayed.yaml")
+    write_scenario(read_log(log), out_path)
+    data = yaml.safe_load(open(out_path))
+    assert list(data) == ["tree", "modules", "scenarios"]
+    assert data["tree"] == "../tree.yaml" and data["modules"] == ["../my.json"]
+    out = io.StringIO()
+    assert run_scenario_file(out_path, out=out) == [True], out.getvalue()
