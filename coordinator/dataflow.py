@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
 
-from coordinator.errors import TreeError
+from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import Flow
 from coordinator.refs import Computed, Ref
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of, top_of
@@ -71,7 +71,40 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
             _settle(types, copies)
     if inputs:
         types.bound = _bindings(tree, binders, writers, given)
+    types.why_not = _Choices(nodes, inputs)
     return types
+
+
+class _Choices:
+    """``KeyTypes.why_not``: why ``$key`` can never be (or contain) a text, as the nodes that write the key
+    say of the values they write there (a call's ``status``: how it ended; ``never_matches``, which the
+    ``switch`` check asks of its cases too); '' when one of them may write it, or says nothing (a ``set``),
+    and for a key an input gives (any value may be given). The writers are found on first use."""
+
+    def __init__(self, nodes: Sequence[TreeNode], inputs: Set[str]):
+        self.nodes, self.inputs = nodes, inputs
+        self.checking: Optional[TreeNode] = None   # the node whose values are checked: where messages are seen
+        self._writers: Optional[Dict[str, List[TreeNode]]] = None
+
+    def __call__(self, key: str, text: str, contains: bool) -> str:
+        if key in self.inputs:
+            return ""
+        if self._writers is None:
+            self._writers = {}
+            for n in self.nodes:
+                nk = n.nodekind
+                written = nk.writes(n) if nk.own_writes else None
+                for k in written if written else ():
+                    self._writers.setdefault(k, []).append(n)
+        writers = self._writers.get(key)
+        if not writers or not all(hasattr(w.nodekind, "never_matches") for w in writers):
+            return ""
+        seen_from = self.checking.pos if self.checking is not None else Pos("", 0, 0)
+        why = [w.nodekind.never_matches(w, key, text, contains, seen_from) for w in writers]
+        if not all(why):   # (None: any value; '': it may be)
+            return ""
+        said = "case %r never matches: " % text   # the switch's words for its case
+        return why[0][len(said):] if why[0].startswith(said) else why[0]
 
 
 def _settle(types: KeyTypes, copies: List[Tuple[str, Ref]]) -> None:
@@ -143,8 +176,11 @@ def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     errors: List[TreeError] = []
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
     types = key_types(tree, nodes, given)
+    choices = types.why_not if isinstance(types.why_not, _Choices) else None
     for n in nodes:
         nk = n.nodekind
         if nk.own_check_types:   # the base checks nothing
+            if choices is not None:
+                choices.checking = n
             nk.check_types(n, types, errors)
     return errors

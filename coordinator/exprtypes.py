@@ -9,7 +9,7 @@ from typing import Any, Callable, List, Optional, Tuple
 from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, text_of
 from coordinator.refs import Ref, kind_of
 
-__all__ = ["static_kind"]
+__all__ = ["never_true", "static_kind"]
 
 
 def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
@@ -76,6 +76,41 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
             a, node[1], b, "false" if node[1] == "==" else "true",
             fix or _as_other(node[2]) or _as_other(node[3]))))
     return "bool"
+
+
+def never_true(node: Any, why_not: Callable[[str, str, bool], str], errors: List[Tuple[int, str]]) -> None:
+    """Each comparison of a key with text that its value can never pass (``st == "timed_out"`` where ``st``
+    is a call's status): ``why_not(key, text, contains)`` says why ``$key`` is never ``text`` (``contains``:
+    never contains it, for ``"text" in st``), '' when it may be or that is not known."""
+    op = node[0]
+    if op in ("lit", "ref"):
+        return
+    if op == "cmp":
+        cmp, left, right = node[1], node[2], node[3]
+        sides = (left, right) if left[0] == "ref" else (right, left)
+        ref, text = sides
+        pair = ref[0] == "ref" and not ref[1].path and text[0] == "lit" and isinstance(text[1], str)
+        if pair and (cmp in ("==", "!=") or (cmp == "in" and right is ref)):
+            why = why_not(ref[1].key, text[1], cmp == "in")
+            if why:
+                written = "%s %s %s" % (_written(left), cmp, _written(right))
+                errors.append((node[4], "%s is always %s: %s" % (written, "true" if cmp == "!=" else "false", why)))
+            return
+        never_true(left, why_not, errors)
+        never_true(right, why_not, errors)
+        return
+    if op == "call":
+        for arg in node[2]:
+            never_true(arg, why_not, errors)
+        return
+    for child in node[1:]:   # and, or, not, neg, arith: their operands are tuples
+        if isinstance(child, tuple):
+            never_true(child, why_not, errors)
+
+
+def _written(node: Any) -> str:
+    """A reference or a text literal as an expression writes it."""
+    return str(node[1])[1:] if node[0] == "ref" else _quoted(node[1])
 
 
 def _as_truth(node: Any) -> str:

@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple, Union
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, check_text_size, text_of
+from coordinator.exprtypes import never_true
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
 __all__ = ["Binding", "ExprValue", "KeyTypes", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
@@ -277,6 +278,9 @@ class KeyTypes(dict):  # type: ignore[type-arg]
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
         self.bound: Dict[str, Dict[str, List[Binding]]] = {}
+        # why_not(key, text, contains): why $key can never be (contain) that text, '' when it may or is not
+        # known (a call's status: coordinator.dataflow.key_types), for the comparisons of expressions
+        self.why_not: Optional[Callable[[str, str, bool], str]] = None
 
 
 def held(t: str) -> str:
@@ -410,7 +414,18 @@ def expr_errors(expr: Expr, types: Dict[str, Set[Optional[str]]]) -> List[Tuple[
     for its operands of the wrong kind."""
     if not expr.refs:
         return expr.type_errors(lambda r: ref_kind(types, r))
-    return ref_errors(expr.refs, expr.ref_offsets, types) + expr.type_errors(lambda r: ref_kind(types, r))
+    return ref_errors(expr.refs, expr.ref_offsets, types) + expr.type_errors(lambda r: ref_kind(types, r)) \
+        + _never_true(expr, types)
+
+
+def _never_true(expr: Expr, types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:
+    """(offset, message) for each comparison of a key with text that the key's values never pass."""
+    why_not = getattr(types, "why_not", None)
+    if why_not is None or not expr.refs:
+        return []
+    found: List[Tuple[int, str]] = []
+    never_true(expr.tree, why_not, found)
+    return found
 
 
 # where a value reads a key ---------------------------------------------------------------------
@@ -450,11 +465,13 @@ def value_type_errors(value: Any, types: Dict[str, Set[Optional[str]]], nested: 
     elif isinstance(value, ExprValue):
         out += [(0 if nested else 2 + off, msg) for off, msg in ref_errors(value.expr.refs, value.expr.ref_offsets,
                                                                            types)]
-        out += [(2 + off, msg) for off, msg in value.expr.type_errors(lambda r: ref_kind(types, r))]
+        out += [(2 + off, msg) for off, msg in value.expr.type_errors(lambda r: ref_kind(types, r))
+                + _never_true(value.expr, types)]
     elif isinstance(value, Template):
         for expr, base in value.exprs():
             out += [(0 if nested else base + off, msg) for off, msg in ref_errors(expr.refs, expr.ref_offsets, types)]
-            out += [(base + off, msg) for off, msg in expr.type_errors(lambda r: ref_kind(types, r))]
+            out += [(base + off, msg) for off, msg in expr.type_errors(lambda r: ref_kind(types, r))
+                    + _never_true(expr, types)]
     elif isinstance(value, dict):
         for v in value.values():
             out += value_type_errors(v, types, True)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
+from coordinator.testing.limits import TickLimitError
 from coordinator.testing.mocks import (
     FunctionMock,
     InProcessTransport,
@@ -18,4 +19,4 @@ from coordinator.testing.mocks import (
 )
 
 __all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "MockModule", "Mocks", "Outcome",
-           "OutcomeKind", "TreeRun", "TreeTest", "fail", "hang", "reject", "respond", "succeed"]
+           "OutcomeKind", "TickLimitError", "TreeRun", "TreeTest", "fail", "hang", "reject", "respond", "succeed"]

@@ -26,6 +26,14 @@ from coordinator.errors import TreeErrors, UsageError
 from coordinator.language import load_tree
 from coordinator.nodes.base import NEVER, Flow
 from coordinator.runner import RunResult, TreeRunner
+from coordinator.testing.limits import (
+    DEFAULT_MAX_DURATION,
+    DEFAULT_MAX_TICKS,
+    DEFAULT_MAX_TICKS_PER_INSTANT,
+    KIT_RAISE_WITH,
+    TickGuard,
+    TickLimitError,
+)
 from coordinator.testing.mocks import InProcessTransport, Mocks
 from coordinator.treeast import TreeFile, TreeNode, top_of, walk
 from modules.definition import DefinitionError, ModuleDefinition
@@ -125,6 +133,8 @@ class Coverage:
     def __init__(self) -> None:
         self.trees: Dict[str, List[TreeNode]] = {}
         self.reached: Dict[Any, Set[str]] = defaultdict(set)
+        self.loaded_by: Dict[str, Set[str]] = {}   # file -> the trees (root files) whose nodes it holds
+        self.ran: Set[str] = set()   # the trees (root files) that ran at least once
         self._roots: Dict[str, TreeFile] = {}   # one tree per root file: its nodes' possible outcomes
         self._possible: Dict[Any, Tuple[bool, bool]] = {}   # node position -> (can succeed, can fail)
 
@@ -138,14 +148,23 @@ class Coverage:
             if node not in seen[node.pos.file]:
                 seen[node.pos.file].append(node)
         for f, nodes in seen.items():
+            self.loaded_by.setdefault(f, set()).add(tree.root.pos.file)
             known = self.trees.setdefault(f, [])
             for n in nodes:
                 if all(n.pos != k.pos for k in known):
                     known.append(n)
 
-    def visitor(self) -> py_trees.visitors.VisitorBase:
-        """A py_trees visitor that records into this coverage on every tick of a run."""
+    def visitor(self, tree: Optional[TreeFile] = None) -> py_trees.visitors.VisitorBase:
+        """A py_trees visitor that records into this coverage on every tick of a run (of ``tree``: then
+        that tree is one that ran)."""
+        if tree is not None:
+            self.ran.add(tree.root.pos.file)
         return _CoverageVisitor(self.reached)
+
+    def did_not_run(self, f: str) -> bool:
+        """None of the trees that hold ``f``'s nodes ran: its scenario file was invalid, or its tests
+        ended before ``t.run()``. Its nodes say nothing of the tree: the report says so once."""
+        return not self.loaded_by.get(f, set()) & self.ran and not any(self.reached.get(n.pos) for n in self.trees[f])
 
     def possible(self, node: TreeNode) -> Tuple[str, ...]:
         """The outcomes ``node`` can reach, as the data-flow walk sees them: ``("SUCCESS", "FAILURE")``
@@ -161,6 +180,10 @@ class Coverage:
         lines = ["bmtree tree coverage"]
         for f in sorted(self.trees):
             nodes = sorted(self.trees[f], key=lambda n: (n.pos.line, n.pos.column))
+            if self.did_not_run(f):
+                lines.append("%s: did not run: no scenario or test of it ran (an invalid scenario file, or a test "
+                             "that ended before t.run()); its %d nodes are not counted" % (f, len(nodes)))
+                continue
             ran = [n for n in nodes if self.reached.get(n.pos)]
             lines.append("%s: %d of %d nodes ran" % (f, len(ran), len(nodes)))
             for n in nodes:
@@ -244,25 +267,38 @@ class TreeTest:
         if coverage is not None:
             coverage.add_tree(self.tree)
 
-    def run(self, max_duration: float = 3600.0, default_timeout: float = 30.0,
-            observers: Sequence[Any] = (), stop_when: Optional[Callable[[], str]] = None) -> TreeRun:
+    raise_limits_with = KIT_RAISE_WITH
+    """How a tick limit's error says to raise it (``bmtree test`` names its scenario keys instead)."""
+
+    def run(self, max_duration: float = DEFAULT_MAX_DURATION, default_timeout: float = 30.0,
+            observers: Sequence[Any] = (), stop_when: Optional[Callable[[], str]] = None,
+            max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT) -> TreeRun:
         """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds, or until ``stop_when()``
         gives a reason); ``observers`` are :class:`~coordinator.runevents.RunObserver` (e.g. a
-        RunStream writing a run log)."""
+        RunStream writing a run log). A run that ticks ``max_ticks`` times, or ``max_ticks_per_instant``
+        times without the simulated clock moving (a livelock), is stopped and raises
+        :class:`~coordinator.testing.limits.TickLimitError`, whatever the test expects."""
         __tracebackhide__ = True
         self._check_inputs()
         clock = SimClock()
         transport = InProcessTransport(self.mocks, clock)
         ctx = RunContext(transport, clock, self.definitions, default_timeout=default_timeout)
         root = build_tree(self.tree, ctx, self.inputs)
-        visitors = [self.coverage.visitor()] if self.coverage is not None else []
+        visitors = [self.coverage.visitor(self.tree)] if self.coverage is not None else []
+        guard = TickGuard(max_ticks, max_ticks_per_instant, self.raise_limits_with)
+        stop = guard if stop_when is None else (lambda: guard() or stop_when())
         del self.mocks.errors[:]
         with now_from(clock.now):  # a time given as `now` is the simulated time: the same on every run
-            result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=observers,
-                                tree=self.tree).run(max_duration, stop_when)
+            result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=[guard, *observers],
+                                tree=self.tree).run(max_duration, stop)
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
-        return TreeRun(result, transport)
+        run = TreeRun(result, transport)
+        if guard.hit and result.reason.startswith(guard.hit):   # stopped by it; the reason adds the running node
+            where = result.reason[len(guard.hit):]
+            raise TickLimitError("%s: %s%s" % (self.path, guard.hit, " (it was stopped%s)" % where if where else ""),
+                                 guard.hit, run)
+        return run
 
     def _check_inputs(self) -> None:
         """UsageError naming the tree's inputs without a default that ``inputs`` lacks, and how to give them."""

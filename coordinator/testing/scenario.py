@@ -45,7 +45,6 @@ from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
-from coordinator.runevents import RunObserver
 from coordinator.testing.expected import (
     ExpectedCall,
     calls_diff,
@@ -56,6 +55,14 @@ from coordinator.testing.expected import (
     legacy_times,
 )
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
+from coordinator.testing.limits import (
+    DEFAULT_MAX_DURATION,
+    DEFAULT_MAX_TICKS,
+    DEFAULT_MAX_TICKS_PER_INSTANT,
+    SCENARIO_RAISE_WITH,
+    TickGuard,
+    TickLimitError,
+)
 from coordinator.testing.mocks import (
     MockError,
     Mocks,
@@ -87,12 +94,6 @@ Definitions = Union[Dict[str, ModuleDefinition], ScenarioDefinitions, None]
 __all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_INSTANT", "ExpectedCall", "TickGuard",
            "calls_diff", "load_scenario_file", "run_scenario_file", "run_scenarios"]
 
-DEFAULT_MAX_DURATION = 3600.0
-"""Simulated seconds a scenario may run (scenario key ``max_duration``); reaching it is a FAIL."""
-DEFAULT_MAX_TICKS = 100000
-"""Ticks a scenario may take in all (``max_ticks``): an hour of waiting is 14400 ticks of 0.25 s."""
-DEFAULT_MAX_TICKS_PER_INSTANT = 10000
-"""Ticks in a row at one simulated instant (``max_ticks_per_instant``): more is a livelock."""
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
 _SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS
 _EXPECT_COMMON = ("status", "calls", "blackboard", "reason", "duration")   # what "expect is a mapping with" names
@@ -158,39 +159,6 @@ class _Scenario:
         self.calls = calls if calls is not None else [ExpectedCall(c) for c in listed_calls(expect)[0]]
 
 
-class TickGuard(RunObserver):
-    """Counts the ticks of a run; as the runner's ``stop_when`` it ends a run that ticks ``max_ticks``
-    times in all, or ``max_ticks_per_instant`` times without the simulated clock moving (loops
-    restarting one another at once: a livelock). ``hit`` says which."""
-
-    def __init__(self, max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT):
-        self.max_ticks, self.max_ticks_per_instant = max_ticks, max_ticks_per_instant
-        self.hit = ""
-        self.ticks = 0
-        self._instant: Optional[float] = None
-        self._same = 0
-
-    def on_tick(self, root: Any, changes: Any, now: float) -> None:
-        self.ticks += 1
-        if now == self._instant:
-            self._same += 1
-        else:
-            self._instant, self._same = now, 1
-        if root.status != Status.RUNNING or self.hit:
-            return
-        if self.ticks >= self.max_ticks:
-            self.hit = ("stopped after %d ticks (max_ticks) at simulated time %g s; raise the scenario key "
-                        "'max_ticks' if this tree needs more" % (self.ticks, now))
-        elif self._same >= self.max_ticks_per_instant:
-            self.hit = ("stopped after %d ticks at simulated time %g s without the clock advancing "
-                        "(max_ticks_per_instant): a livelock, loops restarting at once? Raise the scenario key "
-                        "'max_ticks_per_instant' if this tree needs more" % (self._same, now))
-
-    def __call__(self) -> str:
-        """The runner's ``stop_when``: why to stop, or nothing."""
-        return self.hit
-
-
 def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDefinition],
               tree: Optional[TreeFile] = None, coverage: Optional[Coverage] = None) -> _Scenario:
     """Check one scenario (TreeErrors listing every problem, with positions) and script its mocks and events;
@@ -217,6 +185,7 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
         _check_inputs(tree, inputs, sc, at, out)
         if len(out.errors) == before:   # the tree is valid (checked before), its inputs given
             test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs), coverage=coverage)
+            test.raise_limits_with = SCENARIO_RAISE_WITH
     mocked = test.mocks if test is not None else Mocks(defs)
     stored = _stored(sc, at, defs, out)
     if stored:
@@ -467,10 +436,11 @@ class _FileErrors(TreeErrors):
 def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     """Run one scenario; its problems (none: PASS)."""
     limits = s.limits
-    guard = TickGuard(limits["max_ticks"], limits["max_ticks_per_instant"])
-    run = s.test.run(max_duration=limits["max_duration"], observers=[guard], stop_when=guard)
-    if guard.hit:
-        return run, [guard.hit]
+    try:   # the kit's tick limits, worded for a scenario (set where its TreeTest is made)
+        run = s.test.run(max_duration=limits["max_duration"], max_ticks=limits["max_ticks"],
+                         max_ticks_per_instant=limits["max_ticks_per_instant"])
+    except TickLimitError as exc:   # a FAIL whatever expect says
+        return exc.run, [exc.hit]
     stopped = run.reason.startswith("stopped after %g s" % limits["max_duration"])
     if stopped and "max_duration" not in s.given:
         return run, ["stopped after %g simulated seconds, the default max_duration: the tree did not end; set the "
