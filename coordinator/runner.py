@@ -258,13 +258,16 @@ class TreeRunner:
         if self.ctx.observers:
             notify(self.ctx.observers, "on_tick", self.root, changes, self.ctx.clock.now())
 
-    def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None) -> RunResult:
-        """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()``
-        gives a reason (asked after each tick; the test kit's tick limits); stopped is FAILURE.
+    def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None,
+            guard: Optional[Callable[[], str]] = None) -> RunResult:
+        """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()`` or
+        ``guard()`` gives a reason (asked after each tick); stopped is FAILURE.
 
         With ``cleanup:`` (the root behaviour is a :class:`WithCleanup`) the cleanup runs once after
         root ended, also when it was stopped (root halted first), bounded by its own time limit; a
-        stop signal (KeyboardInterrupt) during it ends it at once. The result is root's."""
+        stop signal (KeyboardInterrupt) during it ends it at once. The result is root's. ``guard``
+        (the test kit's tick limits) is asked during the cleanup too, and cuts it short: on a
+        simulated clock a livelock never reaches the cleanup's time limit."""
         ctx = self.ctx
         ctx.transport.connect(ctx.inbox.put)
         self.tree.setup()
@@ -296,6 +299,8 @@ class TreeRunner:
                         reason = "stopped after %g s" % max_duration
                     elif stop_when is not None:
                         reason = stop_when()
+                    if not reason and guard is not None:
+                        reason = guard()
                     if reason:
                         reason += while_running(main)
                         stopped_at = ctx.clock.now()
@@ -307,7 +312,7 @@ class TreeRunner:
                         self._tell([])
                         self._begin_cleanup(task, "stopped", reason)
                         continue
-                elif self._cleanup_over_time(task):
+                elif self._cleanup_over_time(task) or self._cleanup_guarded(task, guard):
                     break
                 self._wait(self._until(start, max_duration, task))
         except BaseException as exc:
@@ -422,6 +427,13 @@ class TreeRunner:
         self._end_cleanup(task, Status.FAILURE, "did not end within %g s (cleanup_timeout)%s"
                           % (task.limit, while_running(task.cleanup)))
         return True
+
+    def _cleanup_guarded(self, task: WithCleanup, guard: Optional[Callable[[], str]]) -> bool:
+        """True (the cleanup halted) once ``guard`` gives a reason while the cleanup runs."""
+        why = guard() if guard is not None and task.phase == "cleanup" else ""
+        if why:
+            self._end_cleanup(task, Status.FAILURE, why + while_running(task.cleanup))
+        return bool(why)
 
     def _cleanup_after_stop(self, task: WithCleanup, why: str) -> None:
         """A run stopped by a signal (KeyboardInterrupt): root halted, then the cleanup ticked until it

@@ -286,16 +286,16 @@ class TreeTest:
         root = build_tree(self.tree, ctx, self.inputs)
         visitors = [self.coverage.visitor(self.tree)] if self.coverage is not None else []
         guard = TickGuard(max_ticks, max_ticks_per_instant, self.raise_limits_with)
-        stop = guard if stop_when is None else (lambda: guard() or stop_when())
         del self.mocks.errors[:]
         with now_from(clock.now):  # a time given as `now` is the simulated time: the same on every run
             result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=[guard, *observers],
-                                tree=self.tree).run(max_duration, stop)
+                                tree=self.tree).run(max_duration, stop_when, guard)
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
         run = TreeRun(result, transport)
-        if guard.hit and result.reason.startswith(guard.hit):   # stopped by it; the reason adds the running node
-            where = result.reason[len(guard.hit):]
+        stopped = [r for r in (result.reason, result.cleanup_reason) if guard.hit and r.startswith(guard.hit)]
+        if stopped:   # stopped by it (root, or a cleanup that livelocked); the reason adds the running node
+            where = stopped[0][len(guard.hit):]
             raise TickLimitError("%s: %s%s" % (self.path, guard.hit, " (it was stopped%s)" % where if where else ""),
                                  guard.hit, run)
         return run

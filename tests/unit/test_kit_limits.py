@@ -86,3 +86,21 @@ def test_the_scenarios_use_the_kits_limits():
     assert (scenario.DEFAULT_MAX_TICKS, scenario.DEFAULT_MAX_TICKS_PER_INSTANT) == (
         DEFAULT_MAX_TICKS, DEFAULT_MAX_TICKS_PER_INSTANT)
     assert "TickGuard(" not in open(scenario.__file__).read()   # no guard of their own: TreeTest.run's
+
+
+def test_a_cleanup_that_livelocks_is_cut_short_by_the_limit_too(tmp_path):
+    """The cleanup's own time limit is on the simulated clock, which a livelock never moves."""
+    path = tmp_path / "cleanup_livelock.yaml"
+    path.write_text(LIVELOCK.replace("name: livelock\nroot:", "name: cleanup_livelock\nroot:\n  set: {y: b}\ncleanup:")
+                    % "call: speech.say\n        inputs: {text: hi}")
+    script = textwrap.dedent("""
+        from coordinator.testing import TickLimitError, TreeTest
+        try:
+            TreeTest(%r).run(max_ticks_per_instant=300)
+        except TickLimitError as exc:
+            print("RAISED", exc.run.result.status, exc.run.result.cleanup_status, exc.run.result.cleanup_reason)
+    """ % str(path))
+    out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.startswith("RAISED Status.SUCCESS Status.FAILURE stopped after 300 ticks at simulated time 0 s "
+                                 "without the clock advancing"), out.stdout + out.stderr
