@@ -19,22 +19,13 @@ from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
 from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, top_key_hint
 from coordinator.parsehints import LEAF_OPTIONS, closest, misplaced, nearby, nest_hint, unquoted
 from coordinator.refs import RefError
-from coordinator.treeast import (
-    REQUIRED,
-    TreeFile,
-    TreeNode,
-    gc_paused,
-    kinds_in,
-    nodes_of,
-    top_of,
-    used_modules,
-    walk,
-)
+from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, top_of, used_modules, walk
+from coordinator.treewarnings import TreeErrorsWithWarnings, warnings
 from coordinator.values import literal, loose_dollars
 from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
 from modules.definition import ModuleDefinition
 
-__all__ = ["FORMAT", "Parser", "TreeErrorsWithWarnings", "load_tree", "used_modules", "walk"]
+__all__ = ["FORMAT", "Parser", "TreeErrorsWithWarnings", "load_tree", "used_modules", "walk", "warnings"]
 
 FORMAT = 1
 # Parsing, the checks, the builder and py_trees (tick, visitors, display) recurse per level of the tree,
@@ -500,32 +491,3 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         raise TreeErrorsWithWarnings(errors, found)
     assert tree is not None
     return tree
-
-
-class TreeErrorsWithWarnings(TreeErrors):
-    """A tree's errors (``errors``), and its warnings (``warnings``) too in its text: fixing the errors
-    first and only then learning of a warning takes one more round."""
-
-    def __init__(self, errors: List[TreeError], warned: List[TreeError]):
-        super().__init__(list(errors) + list(warned))   # the text: both, in file order
-        said = set(warned)
-        self.warnings = [e for e in self.errors if e in said]
-        self.errors = [e for e in self.errors if e not in said]
-
-
-def warnings(nodes: List[TreeNode]) -> List[TreeError]:
-    """What the kinds' checks warn about (the tree runs, but likely not as meant)."""
-    seen: Set[Any] = set()
-    out: List[TreeError] = []
-    if not any(nk.own_warnings for nk in kinds_in(nodes)):
-        return out
-    for n in nodes:
-        nk = n.nodekind
-        if not nk.own_warnings:   # the base warns about nothing
-            continue
-        found = nk.warnings(n)
-        for w in found if found else ():
-            if w not in seen:
-                seen.add(w)
-                out.append(w)
-    return sorted(out, key=lambda e: (e.pos.file, e.pos.line, e.pos.column))

@@ -14,19 +14,18 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import socket
 import sys
 import threading
 import time
 from typing import Any, Dict, List, Optional, Tuple
-from urllib.parse import urlsplit
 
 from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
-from comm.nodelife import stop_requested
 from comm.nodeopts import node_name, seconds
-from comm.rpc import MASTER_TIMEOUT, master_api
+from modules.bridgegraph import CppNodeGraph
+from modules.bridgeoutput import CppCall as _Call
+from modules.bridgeoutput import CppOutputs
 from modules.cppinfo import data_topic, data_topics, signature_problems
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
@@ -40,49 +39,16 @@ log = logging.getLogger("bmtree.bridge")
 #: orders messages per connection only). Measured on loopback: see the README.
 DEFAULT_INPUT_GAP = 0.01
 _POLL = 0.2  # how often a running call checks that the C++ node is still there (s)
-_WATCH = 1.0  # how often the bridge checks, between calls, that the C++ node is still there (s)
 #: after --call-timeout, how long the bridge waits for a node that takes cancels to answer the
 #: cancel, to say what happened (a function that honours it answers within milliseconds)
 _CANCEL_ANSWER = 0.5
-
-
-def _refuses(uri: str) -> bool:
-    """True if nothing listens at a node's XML-RPC port any more: its process is gone."""
-    try:
-        host, port = urlsplit(uri).hostname, urlsplit(uri).port
-        with socket.create_connection((host, port), timeout=1.0):
-            return False
-    except ConnectionRefusedError:
-        return True
-    except (OSError, ValueError):
-        return False
-
-
-def _some(names: List[str], shown: int = 3) -> str:
-    """A few names and how many more: a node connected to nothing is said in one line, not one per topic."""
-    if len(names) <= shown + 1:
-        return ", ".join(names)
-    return "%s and %d more" % (", ".join(names[:shown]), len(names) - shown)
 
 
 class BridgeError(EnvironmentError):
     """The C++ node is not there or not connected (the message names what is missing)."""
 
 
-class _Call:
-    """What the bridge collects for the call the C++ node is running."""
-
-    def __init__(self, fn: FunctionDefinition, topics: List[str]):
-        self.fn = fn
-        self.fresh: Dict[str, List[Any]] = {t: [] for t in topics}
-        self.output: Optional[Dict[str, Any]] = None
-        self.output_at = 0.0
-        self.call_id = ""  # in BM_input and BM_cancel, for a node built with bmtree's library
-        self.skip: Dict[str, int] = {}  # values still to come on a topic that belong to another call
-        self.cancel_sent = False
-
-
-class CppBridge(BasicModule):
+class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
     """Execution over the C++ protocol; one method per function is added by :func:`make_bridge`.
 
     Args:
@@ -92,6 +58,9 @@ class CppBridge(BasicModule):
             built with bmtree's C++ library, :data:`DEFAULT_INPUT_GAP` for others.
         output_wait: seconds to wait, after ``BM_output``, for output values still in flight.
         connect_timeout: seconds to wait at start-up for the C++ node's connections.
+
+    Finding the C++ node and noticing its death: :class:`modules.bridgegraph.CppNodeGraph`; taking
+    its answers: :class:`modules.bridgeoutput.CppOutputs`.
     """
 
     def __init__(self, call_timeout: float = 30.0, input_gap: Optional[float] = None, output_wait: float = 1.0,
@@ -177,87 +146,6 @@ class CppBridge(BasicModule):
             return self.input_gap
         return 0.0 if self.library else DEFAULT_INPUT_GAP
 
-    def _find_node(self) -> Optional[str]:
-        """The C++ node: whoever subscribes ``/<BM>/BM_input`` (its name is not fixed)."""
-        import rosgraph
-
-        master = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT)  # OSError: no answer in time
-        name = self.definition.name
-        pubs, subs, _ = master.getSystemState()
-        listeners = next((n for t, n in subs if t == "/%s/BM_input" % name), [])
-        talkers = next((n for t, n in pubs if t == "/%s/BM_output" % name), [])
-        uris = {}
-        for n in listeners:
-            if n != self._self_name:
-                try:
-                    uris[n] = master.lookupNode(n)
-                except rosgraph.masterapi.Error:
-                    continue
-        # one killed outright stays registered: live ones first (its restart under another name)
-        nodes = [n for n in uris if not _refuses(uris[n])] or list(uris)
-        nodes = [n for n in nodes if n in talkers] or nodes  # a tool may listen to BM_input too
-        if not nodes:
-            return None
-        if len(nodes) > 1:
-            log.warning("several nodes subscribe /%s/BM_input (%s); using %s", name, ", ".join(nodes), nodes[0])
-        node = nodes[0]
-        self.cpp_uri = uris[node]
-        self.cpp_node = node
-        self.library = node in next((n for t, n in pubs if t == "/%s/BM_info" % name), [])
-        self.cancellable = node in next((n for t, n in subs if t == "/%s/BM_cancel" % name), [])
-        return node
-
-    def _missing(self) -> List[str]:
-        """What is not connected yet between this bridge and the C++ node, in words."""
-        name = self.definition.name
-        node = self._find_node()
-        if node is None:
-            return ["no node subscribes /%s/BM_input (is the C++ node running?)" % name]
-        if self._gone():  # killed outright: the master still lists it, but nothing listens at its port
-            return ["the C++ node %s is registered with the master but not running (its process is gone: start it "
-                    "again)" % node]
-        sync = [("/%s/BM_input" % name, self._in_pub)]
-        if self.cancellable:
-            sync.append(("/%s/BM_cancel" % name, self._cancel_pub))
-        deaf = [topic for topic, pub in sync + sorted(self._pubs.items()) if not pub.impl.has_connection(node)]
-        mute = [sub.resolved_name for sub in [self._out_sub] + self._subs if not sub.impl.has_connection(self.cpp_uri)]
-        out = []
-        if deaf:
-            out.append("%s does not receive %s" % (node, _some(deaf)))
-        if mute:
-            out.append("%s does not publish %s to the bridge" % (node, _some(mute)))
-        return out
-
-    def _wait_connected(self, timeout: float, check: bool = False) -> List[str]:
-        """What is still missing after ``timeout`` ([] once connected). With ``check`` (at start),
-        a library node's BM_info is compared with the definition as soon as it arrives: a
-        definition that does not match it (an output of another type: a data topic the node never
-        publishes) stops the bridge at once, every difference named, instead of after the wait."""
-        end = time.monotonic() + timeout
-        while True:
-            try:
-                missing = self._missing()
-            except OSError as exc:
-                missing = ["the ROS master does not answer: %s" % exc]
-            if check and self.library and self.cpp_node and self.cpp_node != self._checked:
-                with self._cond:
-                    informed = self.cpp_node in self._infos
-                if informed:
-                    self._check_signatures(wait=0)  # BindingError (exit 2) on a difference
-            if not missing:
-                self._ready = True
-                return []
-            if time.monotonic() >= end or stop_requested():
-                return missing
-            time.sleep(0.05)
-
-    def _gone(self) -> bool:
-        """True if the C++ node's process is gone: its XML-RPC port refuses connections.
-
-        A node that is merely slow is not gone: only the call's deadline ends its call.
-        """
-        return _refuses(self.cpp_uri)
-
     # -- what the C++ node provides (BM_info of bmtree's library) ----------------------
     def _on_info(self, msg: Any) -> None:
         try:
@@ -296,57 +184,6 @@ class CppBridge(BasicModule):
         if extra:
             log.warning("the C++ node %s also provides %s, which %s does not list (not callable through the bridge)",
                         self.cpp_node, ", ".join(extra), self.definition.source or self.definition.name)
-
-    # -- ROS callbacks ---------------------------------------------------------------
-    def _on_data(self, msg: Any, topic: str) -> None:
-        if msg._connection_header.get("callerid") != self.cpp_node:
-            return  # our own input, or another node's: never an output of the C++ node
-        with self._cond:
-            call = self._call
-            if call is not None and topic in call.fresh:
-                if call.skip.get(topic):
-                    call.skip[topic] -= 1
-                    return
-                call.fresh[topic].append(msg)
-                if call.output is not None:  # before BM_output nobody waits for data: no wake-up
-                    self._cond.notify_all()
-
-    def _on_output(self, msg: Any) -> None:
-        if msg._connection_header.get("callerid") != self.cpp_node:
-            return
-        try:
-            out = load_payload(msg.data, self.max_bytes)
-        except ProtocolError as exc:
-            out = {"status": "failed", "error": "malformed BM_output from %s: %s" % (self.cpp_node, exc)}
-        with self._cond:
-            call = self._call
-            answers = out.get("call_id")
-            if isinstance(answers, str) and (call is None or answers != call.call_id) and (
-                    self._owed is None or answers != self._owed_id):
-                # a library node names the call it answers: this one is not ours (it began before
-                # this bridge started: the previous bridge's, killed during it)
-                log.warning("ignored a BM_output from %s for call %s, which this bridge did not send (a call of "
-                            "a previous bridge?)", self.cpp_node, answers)
-                topics = out.get("outparam_topics")
-                if call is not None and isinstance(topics, list):  # its values came (or come) first on each topic
-                    for t in topics:
-                        if isinstance(t, str) and t in call.fresh:
-                            if call.fresh[t]:
-                                call.fresh[t].pop(0)
-                            else:
-                                call.skip[t] = call.skip.get(t, 0) + 1
-                return
-            if call is None and self._owed is not None and not self._owed[2]:
-                log.info("the C++ node %s answered %s after the call had timed out; it takes calls again",
-                         self.cpp_node, self._owed[0])
-                self._owed = (self._owed[0], self._owed[1], time.monotonic())
-                return
-            if call is None or call.output is not None:
-                log.warning("ignored a BM_output from %s with no call outstanding", self.cpp_node)
-                return
-            call.output = out
-            call.output_at = time.monotonic()
-            self._cond.notify_all()
 
     # -- a call ----------------------------------------------------------------------
     def _execute(self, name: str, inputs: Dict[str, Any]) -> Dict[str, Any]:
@@ -461,41 +298,6 @@ class CppBridge(BasicModule):
             self._owed_id = call.call_id
             self._call = None  # its late BM_output is the owed one, not a call's
 
-    def _say_gone(self) -> None:
-        """One line in the bridge's log when its C++ node's process is gone (once per node): an error
-        if it died (killed, crashed: it is still registered), a warning if it exited (Ctrl-C, rosnode
-        kill: roscpp unregistered it)."""
-        import rosgraph
-
-        uri, node = self.cpp_uri, self.cpp_node
-        if not uri or uri == self._gone_said:
-            return
-        self._gone_said = uri
-        now: Optional[str] = ""  # the node's URI on the master now ("": not known, None: unregistered)
-        try:  # bounded: asked from a call's thread, whose answer a master that does not answer must not hold
-            now = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT).lookupNode(node)
-        except rosgraph.masterapi.MasterError:  # "unknown node"
-            now = None
-        except (rosgraph.masterapi.MasterException, OSError):
-            pass
-        if now is None:
-            log.warning("the C++ node %s of module %r has exited (it unregistered from the master); calls are "
-                        "refused until it is started again", node, self.definition.name)
-        elif now and now != uri:
-            log.warning("the C++ node %s of module %r at %s is gone; a new node of that name runs at %s (the next "
-                        "call is sent to it)", node, self.definition.name, uri, now)
-        else:
-            log.error("the C++ node %s of module %r died (killed or crashed: nothing listens at %s%s); calls are "
-                      "refused until it is started again", node, self.definition.name, uri,
-                      ", and it is still registered with the master" if now else "")
-
-    def _watch(self) -> None:
-        """A thread: notices, between calls too, that the C++ node's process is gone (kill -9, a crash)."""
-        while not self._watch_stop.wait(_WATCH):
-            uri = self.cpp_uri
-            if uri and uri != self._gone_said and not stop_requested() and _refuses(uri):
-                self._say_gone()
-
     def _send_cancel(self, call: _Call) -> None:
         """Tell the C++ node to stop ``call`` (if it takes cancels; never raises)."""
         if not self.cancellable or call.cancel_sent:
@@ -526,56 +328,6 @@ class CppBridge(BasicModule):
         if left > 0:
             time.sleep(left)
         self._owed = None
-
-    def _lacking(self, call: _Call) -> List[str]:
-        """Output values listed in BM_output that have not arrived yet, in words."""
-        topics = call.output.get("outparam_topics") if call.output else None
-        if not isinstance(topics, list):
-            return []
-        out = []
-        for topic in sorted(set(t for t in topics if isinstance(t, str))):
-            want = topics.count(topic)
-            got = len(call.fresh.get(topic, []))
-            if topic in call.fresh and got < want:
-                out.append("%d of %d values arrived on %s" % (got, want, topic))
-        return out
-
-    def _outputs(self, call: _Call) -> Dict[str, Any]:
-        """The function's outputs by name; Failure/Rejected for an error or a malformed BM_output."""
-        out = call.output or {}
-        if out.get("error"):
-            error = str(out.get("error"))
-            if out.get("status") == "rejected":
-                raise Rejected(error)
-            raise Failure(error)
-        names = out.get("outparam_names")
-        topics = out.get("outparam_topics")
-        if not (isinstance(names, list) and isinstance(topics, list) and len(names) == len(topics)
-                and all(isinstance(x, str) for x in names + topics)):
-            raise Failure("malformed BM_output from %s: expected lists of strings 'outparam_names' and "
-                          "'outparam_topics' of equal length, got %s" % (self.cpp_node, json.dumps(out)[:200]))
-        module = self.definition.name
-        wanted = {p.name: data_topic(module, p.rostype) for p in call.fn.outputs}
-        values: Dict[str, Any] = {}
-        problems = []
-        seen: Dict[str, int] = {}
-        for name, topic in zip(names, topics):
-            k = seen.get(topic, 0)
-            seen[topic] = k + 1
-            if name not in wanted:
-                problems.append("unknown output %r" % name)
-            elif topic != wanted[name]:
-                problems.append("output %r came on %s, its type's topic is %s" % (name, topic, wanted[name]))
-            elif k < len(call.fresh.get(topic, [])):
-                values[name] = call.fresh[topic][k]
-        missing = [n for n in wanted if n not in names]
-        if missing:
-            problems.append("missing output %s" % ", ".join(repr(m) for m in missing))
-        if problems:
-            raise Failure("%s: the C++ node's BM_output does not match the definition: %s" % (
-                call.fn.qualified, "; ".join(problems)))
-        return values
-
 
 def _method(name: str) -> Any:
     def call(self: CppBridge, **inputs: Any) -> Dict[str, Any]:

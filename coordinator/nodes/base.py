@@ -16,6 +16,7 @@ import py_trees
 
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
+from coordinator.nodes.writtenkeys import NEVER, join, meet
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeFile, TreeNode, nodes_of, top_of
 
@@ -30,35 +31,6 @@ __all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFA
 
 NO_DEFAULT = object()
 _NOTHING: FrozenSet[str] = frozenset()
-
-
-class _Never(frozenset):  # type: ignore[type-arg]
-    """The keys written when a node ends in a way it never can: all of them, vacuously (see ``NEVER``)."""
-
-    __slots__ = ()
-
-
-NEVER: FrozenSet[str] = _Never()
-"""What the data-flow hooks say a node writes on an ending it cannot have (a ``force_failure`` never
-succeeds): told apart by identity, it takes no part in a ``meet``. Code that does not know it reads it
-as an empty set, nothing written, which is the cautious reading."""
-
-
-def meet(sets: Iterable[FrozenSet[str]]) -> FrozenSet[str]:
-    """The keys written whichever of these alternative paths was taken: what every possible one writes
-    (``NEVER`` when none is possible). A path that cannot happen must not shrink what the others give."""
-    out = NEVER
-    for s in sets:
-        if s is not NEVER:
-            out = s if out is NEVER else out & s
-    return out
-
-
-def join(a: FrozenSet[str], b: FrozenSet[str]) -> FrozenSet[str]:
-    """The keys written when both happened, one after the other (``NEVER`` when either cannot)."""
-    if a is NEVER or b is NEVER:
-        return NEVER
-    return a | b if b else a
 
 
 def fixed(*values: Any) -> bool:
