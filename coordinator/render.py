@@ -3,7 +3,9 @@
 py_trees names graph nodes after behaviours and makes repeated names unique by appending ``*``
 (``speech.say``, ``speech.say*``, …), and it shows only the name: a named ``timeout`` hides its
 seconds, a call its inputs. Here each node's label is its own name, then, on a second line, what
-its kind and parameters are when a name hides them, and a call's inputs as written.
+its kind and parameters are when a name hides them, and a leaf's main argument as written where its
+name does not say it: a call's inputs, a ``set``'s values, a ``fail``'s text, a ``wait_event``'s
+``where:`` (cut to :data:`MAX_DETAIL` characters).
 """
 from __future__ import annotations
 
@@ -61,7 +63,7 @@ def _dot_names(root: behaviour.Behaviour) -> Dict[str, behaviour.Behaviour]:
 
 
 def _detail(b: behaviour.Behaviour) -> str:
-    """What the name does not say: a named node's kind and parameters; a call's inputs."""
+    """What the name does not say: a named node's kind and parameters; a leaf's main argument."""
     node = getattr(b, "bmtree_node", None)
     if node is None:
         return ""
@@ -69,11 +71,29 @@ def _detail(b: behaviour.Behaviour) -> str:
     default = node.nodekind.default_name(node)
     if node.name != default:
         parts.append(default)
-    inputs = getattr(node.spec, "inputs", None) if node.kind == "call" else None
-    if inputs:
-        parts.append(", ".join("%s: %s" % (k, _shown(v)) for k, v in inputs.items()))
+    main = _argument(node)
+    if main:
+        parts.append(main)
     text = " · ".join(parts)
     return text if len(text) <= MAX_DETAIL else text[:MAX_DETAIL - 1] + "…"
+
+
+def _argument(node: Any) -> str:
+    """A leaf's main argument as written, where its default name does not say it: a call's inputs, a
+    ``set``'s values (its name says only the keys), a ``fail``'s text, a ``wait_event``'s ``where:``."""
+    spec = node.spec
+    if node.kind == "call":
+        values = getattr(spec, "inputs", None)
+    elif node.kind == "set":
+        values = spec
+    elif node.kind == "fail":
+        return _shown(spec) if spec is not None else ""
+    elif node.kind == "wait_event":
+        where = getattr(spec, "where", None)
+        return "where: %s" % getattr(where, "text", where) if where is not None else ""
+    else:
+        return ""
+    return ", ".join("%s: %s" % (k, _shown(v)) for k, v in values.items()) if isinstance(values, dict) else ""
 
 
 def _shown(value: Any) -> str:

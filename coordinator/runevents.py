@@ -20,7 +20,8 @@ from typing import Any, Dict, Iterable, List, Optional, TextIO, Tuple
 import py_trees
 from py_trees.common import Status
 
-__all__ = ["Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "cleanup_said",
+__all__ = ["Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
+           "halted_word", "cleanup_said",
            "CLEANUP_NOTICES", "IncludeArgs", "include_label"]
 
 log = logging.getLogger("bmtree.coordinator")
@@ -144,6 +145,25 @@ def status_word(status: Any) -> str:
     is ``INTERRUPTED``; machine-readable records keep ``INVALID``."""
     text = str(getattr(status, "value", status))
     return "INTERRUPTED" if text == "INVALID" else text
+
+
+def stop_status(reason: str) -> str:
+    """The status of a run stopped from outside, from the runner's reason for it (the ``ended_reason`` a
+    tree's cleanup reads): ``INVALID`` (shown ``INTERRUPTED``) for a Ctrl-C or another signal
+    (``interrupted while …``), ``FAILURE`` for a time limit (``stopped after 60 s while …``), as the
+    run's ``end`` record says it once it comes."""
+    return "INVALID" if reason.startswith("interrupted") else "FAILURE"
+
+
+def halted_word(b: Any) -> str:
+    """What a behaviour halted while running is shown as: ``HALTED``; the top node of a tree with
+    ``cleanup:`` (``with_cleanup``, which stands for the whole run: it ends so only when root was stopped
+    from outside) the run's status, ``INTERRUPTED`` for a Ctrl-C, as the watch and its page show it. ``b``
+    says how root ended by its ``ended`` and ``ended_reason`` (a WithCleanup's; a replay's stand-in's)."""
+    reason = getattr(b, "ended_reason", None)
+    if getattr(b, "ended", "") == "stopped" and isinstance(reason, str):
+        return status_word(stop_status(reason))
+    return "HALTED"
 
 
 def cleanup_said(said: Any) -> str:
@@ -289,7 +309,7 @@ class Display(RunObserver):
                 extra = " (%s)" % b.feedback_message if status == Status.FAILURE and b.feedback_message else ""
                 self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, status.value, self._label(b), extra))
             elif before == Status.RUNNING:
-                self.stream.write("[%7.3fs] %-9s %s\n" % (now, "HALTED", self._label(b)))
+                self.stream.write("[%7.3fs] %-9s %s\n" % (now, halted_word(b), self._label(b)))
         self.stream.flush()
 
     def _label(self, b: Any) -> str:

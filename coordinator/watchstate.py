@@ -6,6 +6,10 @@ or from the run's own stream in-process) and can be caught up at once from a
 (:class:`SnapshotSink`) so that a watcher that attaches mid-run sees the present
 state without the history. Plain data only: the terminal and web views draw it.
 
+Calls the run's stop from outside halted (Ctrl-C, ``--max-duration``) and those of a tree's cleanup
+cut short are shown as ``bmtree run``'s summary and ``bmtree replay`` show them (:meth:`WatchState.call_label`,
+:mod:`coordinator.watchstops`), and the top node of a tree with ``cleanup:`` halted so as the run's status.
+
 One master may carry two runs' streams (a forgotten terminal): the state stays on the
 first run it shows (or the one ``only`` names, ``watch --run``) and keeps the other runs'
 records aside (:class:`OtherRuns`), with a notice of the watch's own for each.
@@ -15,11 +19,12 @@ from __future__ import annotations
 import json
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Set
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
-from coordinator.runevents import IncludeArgs, cleanup_said
+from coordinator.runevents import IncludeArgs, cleanup_said, status_word
 from coordinator.runstream import VERSION, Sink, to_json
 from coordinator.watchruns import OtherRuns, run_matches
+from coordinator.watchstops import StopCalls, run_stop_status
 
 __all__ = ["WatchState", "SnapshotSink", "StateSink", "SNAPSHOT_VERSION"]
 
@@ -71,6 +76,8 @@ class WatchState:
         #: the values each include's arguments had (its label says them: ``fetch_item(item="milk")``)
         self.args = IncludeArgs({})
         self._cleanup: Optional[Set[int]] = None  # the ids of the tree's cleanup (cached)
+        self._parts: Optional[Tuple[Any, Any, Any]] = None  # its with_cleanup top, root, the cleanup's top (cached)
+        self.stops = StopCalls()  # the calls the stop from outside halted, and those of a cut cleanup
         self.end: Optional[Dict[str, Any]] = None
         self.paused = False
         self.t = 0.0
@@ -109,7 +116,7 @@ class WatchState:
                 self._reset(run)
             self.tree = {k: v for k, v in rec.items() if k != "nodes"}
             self.nodes = [n for n in rec.get("nodes") or [] if isinstance(n, dict)]
-            self.args, self._cleanup = IncludeArgs.of_nodes(self.nodes), None
+            self.args, self._cleanup, self._parts = IncludeArgs.of_nodes(self.nodes), None, None
             for key, value in (rec.get("blackboard") or {}).items():
                 if str(key) not in self.blackboard:  # the same run's tree again must not undo its writes
                     self._write(str(key), value)
@@ -140,7 +147,7 @@ class WatchState:
             if n and n <= self.tick:
                 return  # already in the snapshot
             self.tick = n or self.tick + 1
-            self.tick_t = float(rec.get("t") or self.t)
+            before, self.tick_t = self.tick_t, float(rec.get("t") or self.t)
             self.args.tick(rec.get("changes") or [], self.tick_t)
             for row in rec.get("loops") or []:  # for_each nodes that moved to another element
                 self.loops[int(row[0])] = [int(row[1]), int(row[2])]
@@ -153,6 +160,9 @@ class WatchState:
                     self.last[i] = new
                 if new != "INVALID" or old not in OUTCOMES:  # a reset keeps why it failed, for "was FAILURE"
                     self.feedback[i] = str(change[2]) if len(change) > 2 else ""
+            top, root, clean = self.parts()
+            self.stops.tick({int(c[0]) for c in rec.get("changes") or [] if str(c[1]) == "INVALID"},
+                            root if top is not None else self._top(), clean, before, self.tick_t)
         elif kind == "call_start":
             self.pending[str(rec.get("call_id"))] = rec
         elif kind == "call_answer":  # answered while the run is paused: its leaf takes it at the next tick
@@ -168,6 +178,9 @@ class WatchState:
                 self.calls.append(done)
                 del self.calls[:-KEEP]
                 self.ncalls += 1
+                if rec.get("status") == "halted":
+                    self.stops.halted(str(rec.get("call_id")), rec.get("node") in self.cleanup_ids,
+                                      float(rec.get("t") or 0.0))
         elif kind == "write":
             self._write(str(rec.get("key")), rec.get("value"))
             self.args.write(str(rec.get("key")), rec.get("value"), float(rec.get("t") or 0.0))
@@ -234,6 +247,7 @@ class WatchState:
         for key in [k for k in board if k not in order] + order:
             self._write(str(key), board[key])
         self.paused = bool(rec.get("paused"))
+        self.stops = StopCalls(rec.get("stopped") or [], rec.get("cut") or [])
         self.args.values.update((int(k), dict(v)) for k, v in (rec.get("args") or {}).items() if isinstance(v, dict))
         if rec.get("end"):
             self.end = rec["end"]
@@ -253,15 +267,18 @@ class WatchState:
                     "pending": list(self.pending.values()), "calls": self.calls[-calls:],
                     "events": self.events[-events:], "control": self.control[-events:],
                     "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused,
-                    "end": self.end, "args": {str(k): v for k, v in self.args.values.items()}}
+                    "end": self.end, "args": {str(k): v for k, v in self.args.values.items()},
+                    "stopped": sorted(self.stops.stopped), "cut": sorted(self.stops.cut)}
 
     def view(self) -> Dict[str, Any]:
         """Everything a view draws, as plain data (the web page's JSON): the snapshot, with the
-        watch's own notices among the events (``watch``: true) and ``calls_total``."""
+        watch's own notices among the events (``watch``: true), ``calls_total``, the calls as shown
+        (:meth:`shown_calls`) and each node's shown status (``words``, :meth:`label`)."""
         with self.lock:
             snap = self.snapshot(calls=KEEP, events=KEEP)
             snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started", "control")},
                         nodes=self.nodes, version=self.version, events=self.all_events()[-KEEP:],
+                        calls=self.shown_calls(), words={str(n.get("id")): self.label(n.get("id")) for n in self.nodes},
                         calls_total=self.calls_total, others=self.others.summary(),
                         labels={str(i): self.name(i) for i in self.args.values if self.name(i) != self._node_name(i)},
                         pending_title=self.pending_title(),
@@ -300,13 +317,40 @@ class WatchState:
     def label(self, i: int) -> str:
         """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED (a running node its parent
         stopped), ``was SUCCESS`` / ``was FAILURE`` (it ended so and was reset since: a selector
-        clears the children it moved past, a stopped tree its finished nodes) or '' (never ticked)."""
+        clears the children it moved past, a stopped tree its finished nodes) or '' (never ticked).
+        The top node of a tree with ``cleanup:`` stands for the run: halted (root was stopped from
+        outside, then the cleanup ran), it shows the run's status, INTERRUPTED for a Ctrl-C
+        (``bmtree run`` and ``replay`` print it so: :func:`coordinator.runevents.halted_word`)."""
         s = self.status.get(i, "INVALID")
         if s == "INVALID":
             if self.halted.get(i):
-                return "HALTED"
+                top = self.parts()[0]
+                stopped = run_stop_status(self.end, self.blackboard) if top is not None and i == top else ""
+                return status_word(stopped) if stopped else "HALTED"
             return "was %s" % self.last[i] if i in self.last else ""
         return s
+
+    def call_label(self, c: Dict[str, Any]) -> Tuple[str, str]:
+        """A finished call's (status, error) as shown: ``interrupted`` (``halted  stopped after 60 s``)
+        for one the stop from outside halted, why the cleanup was cut short for one of its calls halted
+        then, as ``bmtree run``'s summary and ``bmtree replay`` say (:mod:`coordinator.watchstops`)."""
+        with self.lock:
+            return self.stops.label(c, self.end, self.blackboard)
+
+    def call_settled(self, c: Dict[str, Any]) -> bool:
+        """Whether :meth:`call_label` of a finished call is final (``--plain`` holds its line until then)."""
+        with self.lock:
+            return self.stops.settled(c, self.end, self.blackboard, self.tick_t)
+
+    def shown_calls(self) -> List[Dict[str, Any]]:
+        """The finished calls kept, each with the status and error :meth:`call_label` shows."""
+        with self.lock:
+            out = []
+            for c in self.calls:
+                status, error = self.call_label(c)
+                same = status == str(c.get("status")) and error == str(c.get("error") or "")
+                out.append(c if same else dict(c, status=status, error=error))
+            return out
 
     def _node_name(self, i: int) -> str:
         names = getattr(self, "_names", None)
@@ -325,17 +369,28 @@ class WatchState:
         without ``cleanup:``."""
         with self.lock:
             if self._cleanup is None:
-                top = [n for n in self.nodes if n.get("parent") is None]
-                below = [n.get("id") for n in self.nodes if top and n.get("parent") == top[0].get("id")]
                 under: Set[int] = set()
-                if top and top[0].get("kind") == "with_cleanup" and len(below) == 2:
-                    todo = [below[1]]
-                    while todo:
-                        i = todo.pop()
-                        under.add(i)
-                        todo.extend(n.get("id") for n in self.nodes if n.get("parent") == i and n.get("id") not in under)
+                todo = [self.parts()[2]] if self.parts()[2] is not None else []
+                while todo:
+                    i = todo.pop()
+                    under.add(i)
+                    todo.extend(n.get("id") for n in self.nodes if n.get("parent") == i and n.get("id") not in under)
                 self._cleanup = under
             return self._cleanup
+
+    def _top(self) -> Any:
+        return next((n.get("id") for n in self.nodes if n.get("parent") is None), None)
+
+    def parts(self) -> Tuple[Any, Any, Any]:
+        """The ids of a tree's ``with_cleanup`` top node, of its root and of its cleanup's top node;
+        (None, None, None) for a tree without ``cleanup:``."""
+        with self.lock:
+            if self._parts is None:
+                top = [n for n in self.nodes if n.get("parent") is None]
+                below = [n.get("id") for n in self.nodes if top and n.get("parent") == top[0].get("id")]
+                self._parts = ((top[0].get("id"), below[0], below[1]) if top and top[0].get("kind") == "with_cleanup"
+                               and len(below) == 2 else (None, None, None))
+            return self._parts
 
     def pending_title(self) -> str:
         """The pending calls' panel title: during a tree's cleanup, whose calls they are (``pending

@@ -24,10 +24,12 @@ from coordinator.watchtext import cut as _cut
 
 __all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
 
-# "was SUCCESS" / "was FAILURE": the node's last outcome, faded, after py_trees reset it (WatchState.label)
+# "was SUCCESS" / "was FAILURE": the node's last outcome, faded, after py_trees reset it (WatchState.label);
+# INTERRUPTED: the top node of a tree with cleanup: after a Ctrl-C (the run's status)
 STYLE = {"RUNNING": "bold yellow", "SUCCESS": "green", "FAILURE": "bold red", "HALTED": "magenta",
-         "was SUCCESS": "dim green", "was FAILURE": "dim red", "": "dim"}
-MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "was SUCCESS": "+", "was FAILURE": "x", "": "-"}
+         "INTERRUPTED": "bold magenta", "was SUCCESS": "dim green", "was FAILURE": "dim red", "": "dim"}
+MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "INTERRUPTED": "~", "was SUCCESS": "+",
+        "was FAILURE": "x", "": "-"}
 
 
 def _short(value: Any, width: int = 60) -> str:
@@ -80,12 +82,12 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
         n = by_id[i]
         label = state.label(i)
         line = Text("  " * depth)
-        line.append("%s " % MARK[label], style=STYLE[label])
+        line.append("%s " % MARK.get(label, "~"), style=STYLE.get(label, ""))
         line.append(state.name(i), style="bold" if label == "RUNNING" else "dim" if label.startswith("was") else "")
         if n.get("shape") not in (None, "leaf"):
             line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
         if label:
-            line.append("  %s" % label, style=STYLE[label])
+            line.append("  %s" % label, style=STYLE.get(label, ""))
         if label == "RUNNING" and i in state.loops:  # a for_each: the element it runs
             line.append("  item %d of %d" % tuple(state.loops[i]), style="dim")
         if hidden:
@@ -149,10 +151,11 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                                                   style="magenta")) for c in state.control]
         timed.sort(key=lambda x: x[0])
         ev = [text for _t, text in timed]
-        tw = max([16] + [len(str(c.get("target"))) for c in state.calls])
-        sw = max([9] + [len(str(c.get("status"))) for c in state.calls])
+        shown = state.shown_calls()  # those the stop from outside halted: "interrupted", as the summary says
+        tw = max([16] + [len(str(c.get("target"))) for c in shown])
+        sw = max([9] + [len(str(c.get("status"))) for c in shown])
         calls = [Text(call_text(c, width, min(24, tw), sw), style="red" if c.get("status") != "succeeded" else "")
-                 for c in state.calls]
+                 for c in shown]
         end = []
         if state.end and result != "none":
             style = STYLE.get(str(state.end.get("status")), "")
@@ -206,19 +209,38 @@ def event_text(rec: Dict[str, Any], width: int = 60) -> str:
 
 
 class LinePrinter:
-    """One line per change (statuses, calls, events, writes, control, the end), for logs and pipes."""
+    """One line per change (statuses, calls, events, writes, control, the end), for logs and pipes.
+
+    A call that ended halted is printed once it is known whether the stop from outside halted it
+    (:meth:`WatchState.call_settled`), as ``interrupted`` then, as the run's summary says it."""
 
     def __init__(self, out: TextIO):
         self.out = out
         self._caught: Any = None
         self._end: Optional[Tuple[int, str]] = None  # the end's line, held until its last tick is printed
         self._noted = 0  # the watch's own notices printed (another run started)
+        self._held: List[Dict[str, Any]] = []  # call_end records that ended halted, until their label is known
 
     def finish(self) -> None:
-        """Print the end's line if it is still held (its last tick never came)."""
+        """Print the held lines (the calls' and the end's), if their tick or end never came."""
+        lines, self._held = [self._call_line(c, None) for c in self._held], []
         if self._end is not None:
-            self._write([self._end[1]])
+            lines.append(self._end[1])
             self._end = None
+        self._write(lines)
+
+    def _call_line(self, rec: Dict[str, Any], state: Optional[WatchState]) -> str:
+        status, error = state.call_label(rec) if state is not None else (rec.get("status"), rec.get("error"))
+        status = "lost" if status == "module_lost" else status  # (9 wide: its error says which module was lost)
+        outputs = values_text(rec.get("outputs")) if not error else ""
+        return "[%7.3fs] %-9s %s %s" % (float(rec.get("t") or 0.0), status, rec.get("target"), error or (
+            "→ " + _cut(outputs, 100) if outputs else ""))
+
+    def _settled(self, state: WatchState) -> List[str]:
+        """The lines of the held calls whose label is now known (in the order they came)."""
+        done = [c for c in self._held if state.call_settled(c)]
+        self._held = [c for c in self._held if not any(c is d for d in done)]
+        return [self._call_line(c, state) for c in done]
 
     def _write(self, lines: List[str]) -> None:
         for line in lines:
@@ -235,6 +257,9 @@ class LinePrinter:
         self._noted = len(state.notes)
         if rec.get("run") and state.run and rec.get("run") != state.run:
             kind = None  # another run's record: the state keeps it aside, the notice above said so
+        if kind == "call_end" and rec.get("status") == "halted":
+            self._held.append(rec)
+        lines += self._settled(state)
         if kind == "tree":
             lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
         elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
@@ -250,19 +275,16 @@ class LinePrinter:
             for ch in rec.get("changes") or []:
                 status = ch[1]
                 if status == "INVALID":
-                    if state.halted.get(ch[0]):
-                        lines.append("[%7.3fs] %-9s %s" % (t, "HALTED", names.get(ch[0], ch[0])))
+                    if state.halted.get(ch[0]):  # (the top node of a tree with cleanup: the run's status)
+                        word = state.label(ch[0]) if state.status.get(ch[0], "INVALID") == "INVALID" else "HALTED"
+                        lines.append("[%7.3fs] %-9s %s" % (t, word, names.get(ch[0], ch[0])))
                     continue
                 extra = " (%s)" % ch[2] if len(ch) > 2 and ch[2] else ""
                 lines.append("[%7.3fs] %-9s %s%s" % (t, status, names.get(ch[0], ch[0]), extra))
         elif kind == "call_start":
             lines.append("[%7.3fs] call      %s %s" % (t, rec.get("target"), _short(rec.get("inputs"))))
-        elif kind == "call_end":
-            # the column is 9 wide: module_lost says "lost" (its error says which module was lost)
-            status = "lost" if rec.get("status") == "module_lost" else rec.get("status")
-            outputs = values_text(rec.get("outputs")) if not rec.get("error") else ""
-            lines.append("[%7.3fs] %-9s %s %s" % (t, status, rec.get("target"), rec.get("error") or (
-                "→ " + _cut(outputs, 100) if outputs else "")))
+        elif kind == "call_end" and rec.get("status") != "halted":
+            lines.append(self._call_line(rec, state))
         elif kind == "call_answer":
             lines.append("[%7.3fs] answered  %s (%s), taken at the next tick" % (t, rec.get("target"), rec.get("answer")))
         elif kind == "event":

@@ -58,7 +58,9 @@ const nameOf = (s, n) => (s.labels || {})[String(n.id)] || n.name;
 
 function label(s, i) {
   // "was SUCCESS" / "was FAILURE": its last outcome, drawn faded, after py_trees reset it (a
-  // selector clears the children it moved past, a stopped tree its finished nodes)
+  // selector clears the children it moved past, a stopped tree its finished nodes); the server says
+  // each node's (`words`: the watch's own, also INTERRUPTED for the top node of a tree with cleanup)
+  if (s.words) return s.words[String(i)] || "";
   const st = s.status[String(i)] || "INVALID";
   if (st !== "INVALID") return st;
   if (s.halted.indexOf(i) >= 0) return "HALTED";

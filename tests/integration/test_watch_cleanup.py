@@ -1,7 +1,9 @@
 """``bmtree watch`` (a real tmux terminal, and ``--web`` in headless chromium) of a ``bmtree run --sim``
 of a tree with ``cleanup:``, stopped with Ctrl-C (SIGINT) while root drives: root halted, the cleanup
 running (its pending calls said to be the cleanup's), then ending; the notices, and the end line with
-the run's result (root's, ``INTERRUPTED``) and the cleanup's own. Then ``bmtree replay`` of that run."""
+the run's result (root's, ``INTERRUPTED``) and the cleanup's own; root's call the Ctrl-C halted said
+``interrupted`` and the top node ``INTERRUPTED``, as ``bmtree run`` says them. Then ``bmtree replay`` of
+that run."""
 from __future__ import annotations
 
 import signal
@@ -56,6 +58,9 @@ def test_watch_and_the_page_show_a_cleanup_after_ctrl_c_and_replay_lists_it(tmp_
         # the cleanup drives back: its pending call is the cleanup's, root's drive was halted
         shown = term.wait_screen("go back  RUNNING", "pending calls of the cleanup (root stopped)")
         assert "~ drive  HALTED" in shown and "running the cleanup" in shown, shown
+        # root's call the Ctrl-C halted: "interrupted" in the call log, as the run's summary says it
+        shown = term.wait_screen("navigation.go_to interrupted")
+        assert "halted by the tree" not in shown, shown
         wait_until(driver, lambda d: node_status(d, "go back") == "RUNNING")
         wait_until(driver, lambda d: text(d, "pendingh") == "pending calls of the cleanup (root stopped)")
         assert node_status(driver, "drive") == "HALTED" and "navigation.go_to" in text(driver, "pending")
@@ -70,9 +75,17 @@ def test_watch_and_the_page_show_a_cleanup_after_ctrl_c_and_replay_lists_it(tmp_
         wait_until(driver, lambda d: "result: INTERRUPTED" in text(d, "result"))
         assert "cleanup (root stopped): succeeded in" in text(driver, "result"), text(driver, "result")
         assert node_status(driver, "cleanup") == "SUCCESS" and text(driver, "pendingh") == "pending calls"
+        # the top node stands for the run; root's call the Ctrl-C halted is said so, not "halted by the tree"
+        wait_until(driver, lambda d: node_status(d, "go_and_back") == "INTERRUPTED")
+        assert node_status(driver, "errand") == "HALTED"
+        calls = driver.execute_script("return [...document.querySelectorAll('#calls tr')].map(r => r.textContent)")
+        assert any("navigation.go_tointerrupted" in c for c in calls), calls
+        assert not any("halted by the tree" in c for c in calls), calls
         assert web.wait(30) == 0, out.text()
         history = term.wait_screen("result: INTERRUPTED", "cleanup (root stopped): succeeded in", timeout=60)
         assert "reason: interrupted while 'drive' was running" in history, history
+        assert "go_and_back [with_cleanup]  INTERRUPTED" in history and "halted by the tree" not in history, history
+        assert any("navigation.go_to" in line and " interrupted " in line for line in history.splitlines()), history
         assert "Traceback" not in out.all_text()
         # replay: the cleanup's notices under their own heading, not the ROS graph's
         replay = subprocess.run(bmtree_cmd("replay", "last"), capture_output=True, text=True, env=run.env, timeout=60)
