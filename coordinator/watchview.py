@@ -250,7 +250,11 @@ class LinePrinter:
     def record(self, rec: Dict[str, Any], state: WatchState) -> None:
         kind = rec.get("type")
         t = float(rec.get("t") or 0.0)
-        names = {n.get("id"): n.get("name") for n in state.nodes}
+        plain = {n.get("id"): n.get("name") for n in state.nodes}
+
+        def name(i: Any) -> Any:  # an include with the values of its arguments, as the other views show it
+            return state.name(i) if i in plain else plain.get(i, i)
+
         lines = []
         self._noted = min(self._noted, len(state.notes))  # another run shown (--follow): its notes start anew
         lines += ["[%7.3fs] notice    %s" % (float(n.get("t") or 0.0), n.get("text")) for n in state.notes[self._noted:]]
@@ -264,7 +268,7 @@ class LinePrinter:
             lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
         elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
             self._caught = rec.get("run")  # the periodic snapshots after the first say nothing new
-            running = ["%s RUNNING" % names.get(int(k), k) for k, v in (rec.get("status") or {}).items()
+            running = ["%s RUNNING" % name(int(k)) for k, v in (rec.get("status") or {}).items()
                        if v == "RUNNING"]
             pending = ["%s since %.3fs" % (c.get("target"), float(c.get("t") or 0.0)) for c in rec.get("pending") or []]
             done = max(int(rec.get("ncalls") or 0), len(rec.get("calls") or []))
@@ -277,10 +281,10 @@ class LinePrinter:
                 if status == "INVALID":
                     if state.halted.get(ch[0]):  # (the top node of a tree with cleanup: the run's status)
                         word = state.label(ch[0]) if state.status.get(ch[0], "INVALID") == "INVALID" else "HALTED"
-                        lines.append("[%7.3fs] %-9s %s" % (t, word, names.get(ch[0], ch[0])))
+                        lines.append("[%7.3fs] %-9s %s" % (t, word, name(ch[0])))
                     continue
                 extra = " (%s)" % ch[2] if len(ch) > 2 and ch[2] else ""
-                lines.append("[%7.3fs] %-9s %s%s" % (t, status, names.get(ch[0], ch[0]), extra))
+                lines.append("[%7.3fs] %-9s %s%s" % (t, status, name(ch[0]), extra))
         elif kind == "call_start":
             lines.append("[%7.3fs] call      %s %s" % (t, rec.get("target"), _short(rec.get("inputs"))))
         elif kind == "call_end" and rec.get("status") != "halted":

@@ -173,8 +173,9 @@ def test_includes_show_their_values_live_in_watch_and_in_replay(tmp_path, sim_de
     assert 'RUNNING   search_room(room="kitchen", object="apple")' in live.getvalue()
     assert "$room" not in live.getvalue()
     log = read_log(log_path)
-    state, _printed = _watched(log)
+    state, printed = _watched(log)
     assert 'search_room(room="kitchen", object="apple") [include]' in _screen(state)
+    assert 'RUNNING   search_room(room="kitchen", object="apple")' in printed and "$room" not in printed  # --plain
     include = next(n["id"] for n in log.tree["nodes"] if n["kind"] == "include")
     assert state.view()["labels"] == {str(include): 'search_room(room="kitchen", object="apple")'}
     late = WatchState()   # a watch that attaches late loads the values from a snapshot
