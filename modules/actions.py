@@ -12,14 +12,18 @@ result that comes back first is dropped and the goal never ends. :class:`Action`
 ``run`` returns the outputs of a SUCCEEDED goal and raises :class:`ActionFailed` (a
 :class:`~modules.basicmodule.Failure`: the call answers ``failed``) otherwise. When the call is
 cancelled (tree halt, timeout, Ctrl-C on ``bmtree run``) it cancels the goal, waits a bounded
-time for the server to end it, and raises, so the runtime answers ``cancelled``.
+time for the server to end it, and raises, so the runtime answers ``cancelled``. When the module's
+node stops (Ctrl-C, ``rosnode kill``) it cancels its running goals the same way, and their calls
+answer ``failed: /move_base: the module's node stops: goal cancelled`` (the coordinator did not
+cancel them; the runtime answers what the function raised, as for any call in flight when its
+node stops).
 """
 from __future__ import annotations
 
 import logging
 import threading
 import time
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Dict, Optional, Set
 
 from modules.basicmodule import BasicModule, Failure
 
@@ -61,7 +65,7 @@ class _RosClient:
     connected (why not), how old is the server's last status, send a goal. Unit tests give a
     stand-in with the same methods."""
 
-    def __init__(self, namespace: str, action_type: Any):
+    def __init__(self, namespace: str, action_type: Any, stale_after: Optional[float] = None):
         import actionlib
         import rospy
 
@@ -76,16 +80,26 @@ class _RosClient:
 
         self.where = rospy.resolve_name(namespace)
         self._rospy = rospy
+        self.stale_after = stale_after  # seconds without a status after which a connected server is not taken
         self.client = _Timed(namespace, action_type)
 
     def missing(self) -> str:
         """Empty once a server is connected both ways (actionlib's own ``wait_for_server`` test, without
-        its ROS-time timeout: with ``use_sim_time`` and no clock that never ends), else what is not."""
+        its ROS-time timeout: with ``use_sim_time`` and no clock that never ends), else what is not.
+
+        The server is the node of the last status, while this node is still connected to its status
+        topic (actionlib keeps that last message for ever: a server that died would be named still)
+        and its status is not older than ``stale_after``."""
         c = self.client
         last = c.last_status_msg
         if last is None:
             return "nothing publishes %s/status" % self.where
         server = last._connection_header.get("callerid", "?")
+        if not any(x.callerid_pub == server and not getattr(x, "done", False) for x in c.status_sub.impl.connections):
+            return "nothing publishes %s/status" % self.where  # its server left (stopped or died): rospy closed the link
+        age = self.status_age()
+        if self.stale_after is not None and age is not None and age > self.stale_after:
+            return "its server %s has published nothing on %s/status for %.1fs" % (server, self.where, age)
         if not (c.pub_goal.impl.has_connection(server) and c.pub_cancel.impl.has_connection(server)):
             return "its server %s has not subscribed to %s/goal and /cancel" % (server, self.where)
         for sub, topic in ((c.result_sub, "result"), (c.feedback_sub, "feedback")):
@@ -123,7 +137,8 @@ class Action:
         cancel_timeout: seconds a cancelled call waits for the server to end the goal; default
             0.8 of the runtime's cancel grace (0.8 s), so the module is free when the grace ends.
         silence_timeout: seconds without a status from the server (5 a second normally) after
-            which the goal is taken as LOST (the server died); None never.
+            which the goal is taken as LOST (the server died), and a connected server as no server
+            (the call is not sent); None never.
         client: a stand-in for the ROS client (tests); default made on first use, after
             ``rospy.init_node``.
     """
@@ -140,6 +155,8 @@ class Action:
         self._client = client
         self._lock = threading.Lock()
         self._active: Dict[Any, threading.Event] = {}  # running goals' handles and ends, cancelled if the node stops
+        self._stopping = False  # the node stops: set by its shutdown hook, before rospy.is_shutdown()
+        self._stop_cancelled: Set[Any] = set()  # the goals that hook cancelled
 
     @property
     def where(self) -> str:
@@ -190,6 +207,7 @@ class Action:
         finally:
             with self._lock:
                 self._active.pop(handle, None)
+                self._stop_cancelled.discard(handle)
         state = handle.get_goal_status() if done.is_set() else None
         text = handle.get_goal_status_text() if done.is_set() else ""
         if ctx.cancelled.is_set():
@@ -198,8 +216,13 @@ class Action:
                             self._cancel_timeout())
             raise ActionFailed("%s: call cancelled, goal %s" % (self.where, state_name(state) if state is not None
                                                                  else "still running"), self.where, state, text)
-        if state is None and client.shutting_down():
-            raise ActionFailed("%s: the module's node stops: goal cancelled" % self.where, self.where)
+        if state != SUCCEEDED and self._stops(client):
+            # cancelled by the node's stop, not by the coordinator: a server that honours the cancel
+            # ends it PREEMPTED "cancelled by the client", which would read as a navigation failure
+            if state is None:
+                log.warning("%s did not end the goal within %gs of its cancel as the node stops: it may still run it",
+                            self.where, self._cancel_timeout())
+            raise ActionFailed("%s: the module's node stops: goal cancelled" % self.where, self.where, state, text)
         if lost:
             raise ActionFailed("%s: goal LOST: %s" % (self.where, lost), self.where, LOST, lost)
         if state == SUCCEEDED:
@@ -211,7 +234,7 @@ class Action:
     def _get_client(self) -> Any:
         with self._lock:
             if self._client is None:
-                self._client = _RosClient(self.namespace, self.action_type)
+                self._client = _RosClient(self.namespace, self.action_type, stale_after=self.silence_timeout)
                 self._client.on_shutdown(self._cancel_all)
             return self._client
 
@@ -220,12 +243,18 @@ class Action:
         the cancel timeout) for the server to end them: rospy closes its publishers right after this
         hook, and a cancel still in the publisher's queue would be lost."""
         with self._lock:
+            self._stopping = True
             running = dict(self._active)
+            self._stop_cancelled.update(running)
         for h in running:
             _cancel(h)
         end = time.monotonic() + self._cancel_timeout()
         for done in running.values():
             done.wait(max(0.0, end - time.monotonic()))
+
+    def _stops(self, client: Any) -> bool:
+        """The module's node stops (rospy's ``is_shutdown()`` is true only after its shutdown hooks)."""
+        return self._stopping or client.shutting_down()
 
     def _cancel_timeout(self) -> float:
         if self.cancel_timeout is not None:
@@ -244,6 +273,8 @@ class Action:
                 return client
             if ctx.cancelled.is_set():
                 raise ActionFailed("%s: call cancelled before the goal was sent" % self.where, self.where)
+            if self._stops(client):
+                raise ActionFailed("%s: the module's node stops: no goal sent" % self.where, self.where)
             if time.monotonic() >= end:
                 raise ActionFailed("no action server on %s within %gs: %s" % (self.where, self.connect_timeout, why),
                                    self.where)
@@ -256,9 +287,12 @@ class Action:
         while not done.is_set():
             wake.clear()
             now = time.monotonic()
-            if ctx.cancelled.is_set() or client.shutting_down():
+            if ctx.cancelled.is_set() or self._stops(client):
                 if deadline is None:
-                    _cancel(handle)
+                    with self._lock:
+                        cancelled = handle in self._stop_cancelled
+                    if not cancelled:  # not by the node's shutdown hook already
+                        _cancel(handle)
                     deadline = now + self._cancel_timeout()
                     continue
                 if now >= deadline:

@@ -102,9 +102,11 @@ def test_fifty_goals_answered_at_once_all_succeed(move_base, tmp_path, ros_graph
     assert "not tracking" not in module_log, module_log  # no transition of any goal was dropped
 
 
-def test_a_module_node_stopped_during_a_goal_cancels_it(move_base, tmp_path, ros_graph):
-    """Ctrl-C to the module's node: move_base must not drive on for a node that is gone."""
+def test_a_module_node_stopped_during_a_goal_cancels_it(move_base, tmp_path, ros_graph, ros_probe):
+    """Ctrl-C to the module's node: move_base must not drive on for a node that is gone, and the call's
+    answer says the node stopped, not that navigation failed (the server honours the cancel: PREEMPTED)."""
     log = move_base("slow")
+    answers = ros_probe.collect("/function/output", nodes=("/bm_mobile_base",))
     tree = tmp_path / "tree.yaml"
     tree.write_text("format: 1\nroot:\n  call: mobile_base.go_to\n  inputs: {target: %s}\n  timeout: none\n" % TARGET)
     run = subprocess.Popen(bmtree_cmd("run", "-q", "--modules", DEFINITION, str(tree)), stdout=subprocess.DEVNULL,
@@ -115,7 +117,28 @@ def test_a_module_node_stopped_during_a_goal_cancels_it(move_base, tmp_path, ros
         until(lambda: "preempted" in log.read_text(), 5, log.read_text)
         assert move_base.module.wait(10) == 0
         ros_graph.nodes.remove(move_base.module)
+        answer = json.loads(answers.wait_for(lambda t: json.loads(t).get("function") == "go_to", 10)[0])
+        assert (answer["status"], answer["error"]) == ("failed", "/move_base: the module's node stops: goal cancelled")
     finally:
+        ros_probe.close_collector(answers)
         if run.poll() is None:
             run.kill()
             run.wait(10)
+
+
+def test_a_server_that_was_stopped_is_not_named_as_the_server(move_base, tmp_path, ros_graph):
+    """The server was connected, then stopped (SIGTERM): the call says nothing publishes its status, not
+    that the dead server has not subscribed to the goal topic (actionlib keeps its last status for ever)."""
+    log = move_base("succeed")
+    out = _run(tmp_path, "  call: mobile_base.go_to\n  inputs: {target: %s}\n" % TARGET)
+    assert out.returncode == 0, out.stdout + out.stderr  # connected once: the module has the server's last status
+    server = next(p for p in ros_graph.nodes if p is not move_base.module and "move_base_server.py" in " ".join(p.args))
+    server.send_signal(signal.SIGTERM)
+    server.wait(10)
+    ros_graph.nodes.remove(server)
+    out = _run(tmp_path, "  call: mobile_base.go_to\n  inputs: {target: %s}\n  timeout: 30\n" % TARGET)
+    assert out.returncode == 1, out.stdout + out.stderr
+    line = _calls(out)[0]
+    assert "failed" in line and "no action server on /move_base within 5s: nothing publishes /move_base/status" in line, \
+        line
+    assert log.read_text().count("goal") == 1

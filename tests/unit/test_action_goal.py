@@ -262,6 +262,82 @@ def test_a_server_that_falls_silent_loses_the_goal():
     assert client.handles[0].cancels == 1
 
 
+def test_a_goal_cancelled_because_the_node_stops_says_so():
+    """The node's shutdown hook cancels the goal; the server honours it (PREEMPTED, its own text), which
+    must not read as the server's failure. The coordinator did not cancel the call: it answers ``failed``."""
+    client = Client()
+    s = Served(client)
+    call = s.call()
+    time.sleep(0.1)
+    client.handles[0].on_cancel = lambda h: later(0.05, lambda: h.end(PREEMPTED, "cancelled by the client"))
+    stop = threading.Thread(target=s.impl._move_base._cancel_all)  # rospy.on_shutdown runs it (is_shutdown(): False)
+    t0 = time.monotonic()
+    stop.start()
+    r = s.result(call)
+    stop.join(2.0)
+    assert (r.status, r.error) == ("failed", "/move_base: the module's node stops: goal cancelled")
+    assert client.handles[0].cancels == 1  # by the hook only, not again by the call's own wait
+    assert not stop.is_alive() and time.monotonic() - t0 < 0.5
+
+
+def test_a_goal_the_server_does_not_end_when_the_node_stops_is_waited_for_a_bounded_time():
+    client = Client()
+    s = Served(client, cancel_timeout=0.3)
+    call = s.call()
+    time.sleep(0.1)
+    with Logged() as logged:
+        s.impl._move_base._cancel_all()
+        r = s.result(call, timeout=2.0)
+    assert (r.status, r.error) == ("failed", "/move_base: the module's node stops: goal cancelled")
+    assert "/move_base did not end the goal within 0.3s of its cancel as the node stops" in logged.text
+
+
+def test_a_call_while_the_node_stops_sends_no_goal():
+    client = Client(missing="nothing publishes /move_base/status")
+    s = Served(client, connect_timeout=30)
+    s.impl._move_base._cancel_all()
+    r = s.result(s.call(), timeout=1.0)
+    assert (r.status, r.error) == ("failed", "/move_base: the module's node stops: no goal sent")
+    assert client.goals == []
+
+
+class Link:
+    """A rospy subscriber connection's part that _RosClient.missing looks at."""
+
+    def __init__(self, publisher, done=False):
+        self.callerid_pub, self.done = publisher, done
+
+
+def ros_client(status_from, links, stale_after=5.0, age=0.1):
+    """A _RosClient over a stand-in actionlib ActionClient: the last status came from ``status_from``
+    (None: none came), ``links`` its subscribers' connections."""
+    from types import SimpleNamespace as NS
+
+    from modules.actions import _RosClient
+
+    rc = _RosClient.__new__(_RosClient)
+    rc.where, rc.stale_after = "/move_base", stale_after
+    last = None if status_from is None else NS(_connection_header={"callerid": status_from})
+    pub = NS(impl=NS(has_connection=lambda node: node == "/move_base_server"))
+    sub = NS(impl=NS(connections=links))
+    rc.client = NS(last_status_msg=last, status_at=time.monotonic() - age, status_sub=sub, result_sub=sub,
+                   feedback_sub=sub, pub_goal=pub, pub_cancel=pub)
+    return rc
+
+
+def test_a_server_that_left_is_no_server_though_actionlib_keeps_its_last_status():
+    assert ros_client("/move_base_server", [Link("/move_base_server")]).missing() == ""
+    assert ros_client(None, []).missing() == "nothing publishes /move_base/status"
+    # stopped: rospy dropped (or is closing) the connection; its last status is still there
+    assert ros_client("/move_base_server", []).missing() == "nothing publishes /move_base/status"
+    assert ros_client("/move_base_server", [Link("/move_base_server", done=True)]).missing() == \
+        "nothing publishes /move_base/status"
+    # killed, the connection not (yet) dropped: its status is older than the silence timeout
+    assert ros_client("/move_base_server", [Link("/move_base_server")], age=7.0).missing() == \
+        "its server /move_base_server has published nothing on /move_base/status for 7.0s"
+    assert ros_client("/move_base_server", [Link("/move_base_server")], stale_after=None, age=70.0).missing() == ""
+
+
 def test_action_failed_carries_the_state_and_text():
     exc = ActionFailed("m", "/move_base", ABORTED, "why")
     assert (exc.namespace, exc.state, exc.text, str(exc)) == ("/move_base", ABORTED, "why", "m")
