@@ -14,6 +14,7 @@ from typing import Any, List, Tuple
 
 from coordinator.errors import TreeError
 from coordinator.nodes.task import CLEANUP_KEYS, DEFAULT_CLEANUP_TIMEOUT, ENDINGS, TASK, task_node
+from coordinator.nodes.timeouts import long_seconds
 from coordinator.treeast import TreeFile, TreeNode
 
 __all__ = ["CLEANUP_TOP_KEYS", "included_cleanup_warning", "parse_cleanup", "reserved_key_problems"]
@@ -34,6 +35,7 @@ def parse_cleanup(p: Any, data: Any, tree: TreeFile) -> None:
                       "default %g), got %r" % (DEFAULT_CLEANUP_TIMEOUT, value))
         else:
             tree.cleanup_timeout = float(value)
+            long_seconds(p, value, at, "cleanup_timeout")   # 3000: milliseconds by habit, as timeout: says
         if "cleanup" not in data:
             p.warn(data.key_pos["cleanup_timeout"], "cleanup_timeout without cleanup: there is no cleanup to limit")
     if "cleanup" not in data:

@@ -185,6 +185,10 @@ class Controller(RunObserver):
 
             names = {b.name for b in preorder(self.root)}
             return False, "no node named %r in this tree%s" % (cmd.get("node"), did_you_mean(cmd.get("node"), names))
+        if what != "clear":
+            nodes, refused = self._still_ticked(nodes, cmd.get("node"))
+            if refused:
+                return False, refused
         if what == "break":
             for b in nodes:
                 self._wrap(b)
@@ -202,7 +206,34 @@ class Controller(RunObserver):
             self.force[b] = Status(outcome)
         return True, "%r will end in %s the next time it is ticked" % (cmd.get("node"), outcome)
 
+    def _task(self) -> Any:
+        """The tree's top when it has a ``cleanup:`` (a WithCleanup: root, then the cleanup), else None."""
+        from coordinator.nodes.task import WithCleanup
+
+        return self.root if isinstance(self.root, WithCleanup) else None
+
+    def _still_ticked(self, nodes: List[Any], name: Any) -> Tuple[List[Any], str]:
+        """Once root has ended (its cleanup runs), only the cleanup's nodes are ticked again: the
+        nodes of ``nodes`` in the cleanup, or why a command on ``name`` is refused."""
+        from coordinator.runstream import preorder
+
+        task = self._task()
+        if task is None or task.phase == "root":
+            return nodes, ""
+        cleanup = list(preorder(task.cleanup))
+        live = [b for b in nodes if any(b is c for c in cleanup)]
+        if live:
+            return live, ""
+        names = list(dict.fromkeys(b.name for b in cleanup))
+        return [], ("root has ended and the cleanup is running: %r is not a node of the cleanup, so it will "
+                    "not be ticked again; steer a node of the cleanup instead (%s)" % (name, ", ".join(names)))
+
     def _set(self, key: Any, text: Any) -> Tuple[bool, str]:
+        from coordinator.nodes.task import CLEANUP_KEYS
+
+        if key in CLEANUP_KEYS and self._task() is not None:
+            return False, ("%r is read-only: bmtree sets 'ended' and 'ended_reason' when root ends, to tell the "
+                           "cleanup how it ended; set another key" % key)
         bb = self.ctx.blackboard
         if not isinstance(key, str) or key not in bb:
             return False, "no tree-blackboard key %r%s (the keys are: %s)" % (

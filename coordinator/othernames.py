@@ -141,15 +141,16 @@ CONDITIONS: Dict[str, str] = {
                   "condition holds)",
     "_while": "a sequence with memory: false of check: 'condition' and the node: the node is halted once the "
               "condition is false (see 'Reacting while an action runs' in trees/README.md)",
-    "_onhalted": "the tree's cleanup: (beside root:) runs once after root ends, however it ended, also halted "
-                 "(see 'Cleaning up' in trees/README.md)",
-    "_onsuccess": "a sequence of the node and set: {key: value}: what comes after the node runs when it succeeded",
+    "_onhalted": "what it does as the tree's cleanup: (a node beside root:), which runs once after root ends, "
+                 "however it ended, also when it was halted (see 'Cleaning up' in trees/README.md)",
+    "_onsuccess": "a sequence of the node and set: {key: value} (what comes after the node runs only when it "
+                  "succeeded)",
     "_onfailure": "a selector of the node and a sequence of set: {key: value} and fail: \"why\" (the branch still "
                   "fails)",
     "_post": "a sequence of the node and set: {key: value}, or force_success over the node first, to set it "
              "however the node ended",
-    "_autoremap": "include shares the tree blackboard: the subtree reads and writes the caller's keys by their own "
-                  "names, and args: sets its inputs; outputs: copies its keys to other names (%s)" % _SUBTREES,
+    "_autoremap": "include alone: it shares the tree blackboard (the subtree reads and writes the caller's keys by "
+                  "their own names); args: sets its inputs and outputs: copies its keys to other names (%s)" % _SUBTREES,
 }
 
 
@@ -206,7 +207,8 @@ def option_hint(option: Any, kind: str, allowed: Tuple[str, ...]) -> str:
     that this kind writes otherwise, how."""
     text = str(option).lower()
     if text in CONDITIONS:
-        return " (BehaviorTree.CPP's %s condition has no option in bmtree: write %s)" % (option, CONDITIONS[text])
+        what = "" if text == "_autoremap" else " condition"   # a port option, not a pre/post condition
+        return " (BehaviorTree.CPP's %s%s has no option in bmtree: write %s)" % (option, what, CONDITIONS[text])
     other = OTHER_OPTIONS.get(text)
     return takes(kind, allowed) + (": %s" % other[1] if other and set(other[0]) & set(allowed) else "")
 

@@ -2,16 +2,20 @@
 YAML read as a mapping or a list, the closest name, how to split a node with two kinds."""
 from __future__ import annotations
 
+import json
 import re
 from typing import Any, Dict, List, Mapping, Tuple
 
+import yaml
+
 from comm.errors import did_you_mean
+from coordinator.errors import Pos
 from coordinator.nodes import REGISTRY
 from coordinator.othernames import foreign_option, option_hint, takes
-from coordinator.yamlsrc import LMap
+from coordinator.yamlsrc import LMap, pos_of
 
 __all__ = ["LEAF_OPTIONS", "XML_HINT", "closest", "foreign_hint", "foreign_option", "key_fix", "looks_like_xml",
-           "misplaced", "nearby", "nest_hint", "unquoted"]
+           "literal_of", "misplaced", "nearby", "nest_hint", "quoted_mapping", "quoted_mapping_message", "unquoted"]
 
 _KINDS = frozenset(REGISTRY)
 _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
@@ -151,3 +155,40 @@ def key_fix(value: Any) -> Tuple[str, Any]:
     if name is None:
         return "", None
     return ": an output is written to a tree key by its plain name: write %s" % name, name
+
+
+def quoted_mapping(text: Any) -> str:
+    """A YAML flow mapping written in quotes, so text: ``{x: 1, y: 2}`` for ``"{x: 1, y: 2}"`` (a ``{…}``
+    template whose hole is no expression); '' for anything else (``"{pos}"`` is a template)."""
+    if not isinstance(text, str):
+        return ""
+    shown = text.strip()
+    if not (shown.startswith("{") and shown.endswith("}")) or shown.startswith("{{") or ":" not in shown:
+        return ""
+    from coordinator.expr import Expr, ExprError
+
+    try:
+        if Expr.parse(shown[1:-1]) is not None:
+            return ""
+    except ExprError:
+        pass
+    try:
+        value = yaml.safe_load(shown)
+    except yaml.YAMLError:
+        return ""
+    return shown if isinstance(value, dict) and value else ""
+
+
+def quoted_mapping_message(text: str, key: Any = None) -> str:
+    """Why a mapping in quotes is not taken as one, and what to write (``key: {x: 1, y: 2}``)."""
+    shown = quoted_mapping(text)
+    return ("%s is text in quotes (a {…} template), not a mapping: write the mapping without quotes: %s%s"
+            % (json.dumps(text, ensure_ascii=False), "" if key is None else "%s: " % key, shown))
+
+
+def literal_of(p: Any, raw: Any, key: Any, at: Pos) -> Any:
+    """``p.literal_at(raw, key, at)`` (the parser's), saying a mapping written in quotes with its key."""
+    if quoted_mapping(raw[key]):
+        p.err(pos_of(raw, key, at), quoted_mapping_message(raw[key], key))
+        return None
+    return p.literal_at(raw, key, at)

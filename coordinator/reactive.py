@@ -45,6 +45,25 @@ def _guarded(child: TreeNode) -> bool:
     return False
 
 
+def _never_fails(node: TreeNode) -> str:
+    """Why ``node`` surely never ends in FAILURE (``no timeout``), or '' when it may (or bmtree cannot
+    tell: an include, a loop, a call). A selector's later children run only after one failed."""
+    kind, spec = node.kind, node.spec
+    if kind == "wait_event":
+        return "no timeout: it waits until the event comes" if getattr(spec, "timeout", 0) is None else ""
+    if kind == "wait":
+        fixed = isinstance(spec, (int, float)) and not isinstance(spec, bool)
+        return "a wait of fixed seconds always succeeds" if fixed else ""
+    if kind == "force_success":
+        return "force_success always succeeds"
+    whys = [_never_fails(c) for c in node.children]
+    if kind == "sequence" and whys and all(whys):
+        return whys[0]
+    if kind == "selector":
+        return next((w for w in whys if w), "")
+    return ""
+
+
 def _named(n: TreeNode, seen_from: Pos) -> str:
     """``the call 'drive' at line 8``; ``the sequence at line 5`` for one without a name of its own."""
     from coordinator.nodes.base import where
@@ -68,7 +87,9 @@ def restart_problems(node: TreeNode) -> List[Tuple[Pos, str]]:
         part, why = found
         said = "%s can be RUNNING (%s)" % (_named(child, at), why) if part is child else \
             "%s can be RUNNING (%s: %s)" % (_named(child, at), _named(part, at), why)
-        out.append((at, _message(node, said, _named(later, at))))
+        never = _never_fails(child) if node.kind == "selector" else ""
+        out.append((at, _unreached(node, child, said, never, _named(later, at)) if never
+                    else _message(node, said, _named(later, at))))
     return out
 
 
@@ -90,3 +111,11 @@ def _message(node: TreeNode, said: str, later: str) -> str:
                "that starts with a check (a higher priority that takes over while its condition holds); for "
                "fallbacks that take time, use memory: true (the default), or see %s" % SECTION)
     return "%s, %s. %s" % (head, what, fix[0].upper() + fix[1:])
+
+
+def _unreached(node: TreeNode, child: TreeNode, said: str, never: str, later: str) -> str:
+    """A selector's child that can be RUNNING and never fails: the later children never run at all."""
+    limit = "; to give up waiting after a while, give the wait_event a timeout:" if child.kind == "wait_event" else ""
+    return ("selector with memory: false (line %d) tries its next child only after one failed: %s and cannot fail "
+            "(%s), so %s never runs. To run both at once and stop at the first that ends, write a parallel with "
+            "policy: one%s (see %s)" % (node.pos.line, said, never, later, limit, SECTION))

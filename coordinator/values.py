@@ -84,6 +84,10 @@ def template(text: str, base: int = 0) -> Union[str, Template]:
         try:
             expr = Expr.parse(inner)
         except ExprError as exc:
+            from coordinator.parsehints import quoted_mapping, quoted_mapping_message
+
+            if quoted_mapping(text):   # "{x: 1, y: 2}": a mapping in quotes
+                raise RefError(quoted_mapping_message(text), base)
             raise RefError("in {%s}: %s" % (inner, exc), base + i + 1 + exc.offset)
         if buf:
             parts.append("".join(buf))

@@ -383,7 +383,9 @@ class SetKind(NodeKind):
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> Dict[str, Any]:
         m = p.keys(node, value, at, "tree key: value")
-        spec = SetSpec((k, p.literal_at(m, k, at)) for k in (m or {}))
+        from coordinator.parsehints import literal_of  # (it imports the node kinds)
+
+        spec = SetSpec((k, literal_of(p, m, k, at)) for k in (m or {}))
         spec.pos = {k: m.val_pos[k] for k in (m or {})}
         return spec
 

@@ -132,6 +132,19 @@ def test_cleanup_timeout_must_be_positive_seconds(tmp_path, sim_defs, value):
                                                             "seconds (the cleanup's time limit, default 30), got ")
 
 
+def test_a_cleanup_timeout_in_milliseconds_by_habit_is_a_warning(tmp_path, sim_defs):
+    """As ``timeout: 3000`` is (the same warning): 3000 seconds is 50 minutes."""
+    cleanup = "cleanup: {call: speech.say, inputs: {text: bye}}\n"
+    tree = load_tree(_write(tmp_path, HEAD + ROOT + cleanup + "cleanup_timeout: 3000\n"), sim_defs)
+    assert [str(w) for w in tree.warnings] == [
+        tree.path + ":8:18: warning: cleanup_timeout is 3000 seconds (50 min): durations are in seconds; for 3000 "
+        "milliseconds write 3"]
+    assert tree.cleanup_timeout == 3000.0   # still what was written
+    for seconds in ("10", "3600"):   # seconds, or whole half hours: no warning
+        tree = load_tree(_write(tmp_path, HEAD + ROOT + cleanup + "cleanup_timeout: %s\n" % seconds), sim_defs)
+        assert tree.warnings == []
+
+
 def test_cleanup_timeout_without_cleanup_is_a_warning(tmp_path, sim_defs):
     tree = load_tree(_write(tmp_path, HEAD + ROOT + "cleanup_timeout: 5\n"), sim_defs)
     assert [str(w).split(": ", 1)[1] for w in tree.warnings] == [

@@ -139,13 +139,17 @@ def test_an_output_written_to_a_port_is_told_to_write_the_key_with_no_knock_on_e
      "holds))"),
     ("  wait: 1\n  _onHalted: 'x := 1'\n",
      "t.yaml:4:3: unknown option '_onHalted' for wait (BehaviorTree.CPP's _onHalted condition has no option in "
-     "bmtree: write the tree's cleanup: (beside root:) runs once after root ends, however it ended, also halted "
-     "(see 'Cleaning up' in trees/README.md))"),
+     "bmtree: write what it does as the tree's cleanup: (a node beside root:), which runs once after root ends, "
+     "however it ended, also when it was halted (see 'Cleaning up' in trees/README.md))"),
     ("  include: sub.yaml\n  _autoremap: true\n",
-     "t.yaml:4:3: unknown option '_autoremap' for include (BehaviorTree.CPP's _autoremap condition has no option "
-     "in bmtree: write include shares the tree blackboard: the subtree reads and writes the caller's keys by their "
-     "own names, and args: sets its inputs; outputs: copies its keys to other names (see 'Subtrees' in "
-     "trees/README.md))"),
+     "t.yaml:4:3: unknown option '_autoremap' for include (BehaviorTree.CPP's _autoremap has no option "
+     "in bmtree: write include alone: it shares the tree blackboard (the subtree reads and writes the caller's "
+     "keys by their own names); args: sets its inputs and outputs: copies its keys to other names (see 'Subtrees' "
+     "in trees/README.md))"),
+    ("  wait: 1\n  _onSuccess: 'x := 1'\n",
+     "t.yaml:4:3: unknown option '_onSuccess' for wait (BehaviorTree.CPP's _onSuccess condition has no option in "
+     "bmtree: write a sequence of the node and set: {key: value} (what comes after the node runs only when it "
+     "succeeded))"),
     ("  parallel: [{wait: 1}]\n  failure_count: 2\n",
      "t.yaml:4:3: unknown option 'failure_count' for parallel (parallel takes name, policy, succeed_on, "
      "synchronise): BehaviorTree.CPP's success_count and failure_count are parallel's policy: all (every child "
@@ -214,3 +218,25 @@ def test_a_set_of_text_that_is_an_expression_over_keys_is_a_warning(tmp_path, ca
         "\"$(counter + 1)\"?",
         "t.yaml:8:12: warning: size: 'len(rooms)' is stored as that text, not worked out: did you mean "
         "\"$(len(rooms))\"?"]
+
+
+def test_a_mapping_written_in_quotes_is_said_to_be_text(tmp_path, capsys):
+    """``target: "{x: 1, y: 2}"`` is a {…} template (text), not the geometry_msgs/Point meant: write it
+    without quotes (a call's input, a set's value by their key; elsewhere the mapping alone)."""
+    status, lines = check(tmp_path, capsys, """  sequence:
+    - call: navigation.approach
+      inputs: {target: "{x: 1, y: 2}"}
+    - set: {where: "{x: 1}"}
+    - switch: "{a: b}"
+      cases: {x: {wait: 1}}
+    - call: speech.say
+      inputs: {text: "{where}"}
+""")
+    assert status == 2
+    assert lines == [
+        "t.yaml:5:25: \"{x: 1, y: 2}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
+        "quotes: target: {x: 1, y: 2}",
+        "t.yaml:6:21: \"{x: 1}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
+        "quotes: where: {x: 1}",
+        "t.yaml:7:16: \"{a: b}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
+        "quotes: {a: b}"]

@@ -210,3 +210,21 @@ def test_a_reactive_selector_may_give_priority_to_a_guarded_branch(tmp_path):
     # the same guard in a reactive sequence restarts the later child after it succeeded: still an error
     (found,) = errors(tmp_path, root.replace("- selector:", "- sequence:"))
     assert found.startswith("t.yaml:8:13: sequence with memory: false (line 5)")
+
+
+def test_a_selector_child_that_cannot_fail_is_said_to_keep_the_later_ones_from_running(tmp_path):
+    """A wait_event without timeout never fails: the selector's later child never runs at all (not "once it
+    has failed"); with a timeout it can fail, and the restart is the problem."""
+    root = ("  selector:\n    memory: false\n    children:\n      - wait_event: battery.low\n"
+            "      - call: navigation.go_to\n        inputs: {place: dock}\n")
+    assert errors(tmp_path, root) == [
+        "t.yaml:6:9: selector with memory: false (line 3) tries its next child only after one failed: the "
+        "wait_event 'battery.low' at line 6 can be RUNNING (a wait_event waits for its event) and cannot fail (no "
+        "timeout: it waits until the event comes), so the call 'navigation.go_to' at line 7 never runs. To run "
+        "both at once and stop at the first that ends, write a parallel with policy: one; to give up waiting after "
+        "a while, give the wait_event a timeout: (see 'Reacting while an action runs' in trees/README.md)"]
+    (found,) = errors(tmp_path, root.replace("wait_event: battery.low", "{wait_event: battery.low, timeout: 5}"))
+    assert "so once it has failed and the call 'navigation.go_to' at line 7 runs" in found, found
+    (found,) = errors(tmp_path, root.replace("wait_event: battery.low", "{force_success: {call: battery.level}}"))
+    assert "and cannot fail (force_success always succeeds), so the call 'navigation.go_to' at line 7 never " \
+           "runs. To run both at once and stop at the first that ends, write a parallel with policy: one (see " in found
