@@ -189,7 +189,13 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
         out.write("the run succeeded; the tree recovered from %d failure%s, the first at %.3fs: %s\n" % (
             len(others), "" if len(others) == 1 else "s", shown.t, where(shown)))
     else:
-        out.write("no leaf failed in this run\n")
+        said = end.get("cleanup") if isinstance(end.get("cleanup"), dict) else {}
+        if said.get("status") not in (None, "SUCCESS"):   # root's result first: the cleanup's is beside it
+            out.write("the run %s: no leaf of root failed\n" % ("succeeded" if end.get("status") == "SUCCESS"
+                                                                 else "ended %s" % end.get("status")))
+        else:
+            out.write("no leaf failed in this run\n")
+        _cleanup_failure(replay, out, label)
         return
     if end.get("reason") and end.get("status") != "SUCCESS" and ended is not None:
         out.write("the run ended %s: %s\n" % (end.get("status"), end.get("reason")))
@@ -206,7 +212,29 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
             out.write("  +%7.3fs  %s%s\n" % (f.t, where(f), got_past(f)))
         if len(others) > 5:
             out.write("  … and %d more\n" % (len(others) - 5))
+    _cleanup_failure(replay, out, label)
     replay.snapshot(out, stopped if ended is None and stopped else "")
+
+
+def _cleanup_failure(replay: Replay, out: TextIO, label: Callable[[Dict[str, Any]], Tuple[str, str]]) -> None:
+    """For ``--failure``: that the tree's cleanup failed or was cut short, why, and its last call that did
+    not succeed (not the failure that ended the run: the run's result stays root's); nothing otherwise."""
+    end = replay.log.end or {}
+    said = end.get("cleanup") if isinstance(end.get("cleanup"), dict) else {}
+    if said.get("status") in (None, "SUCCESS"):
+        return
+    out.write("the cleanup (root %s) %s: %s; the run's result stays root's\n" % (
+        said.get("ended"), "failed" if said.get("status") == "FAILURE" else "was cut short",
+        said.get("reason") or "no reason given"))
+    starts = {str(r.get("call_id")): r for r in replay.log.of_type("call_start")}
+    bad = [r for r in replay.log.of_type("call_end") if r.get("node") in replay.cleanup_ids
+           and r.get("status") != "succeeded"]
+    if bad:
+        start = starts.get(str(bad[-1].get("call_id")), {})
+        status, error = label(bad[-1])
+        out.write("its call that did not succeed:\n%s\n" % call_line(
+            float(start.get("t") or 0.0), bad[-1].get("target"), status, float(bad[-1].get("duration") or 0.0),
+            error, start.get("inputs")))
 
 
 def _test_command(log: RunLog, scenario: str) -> str:

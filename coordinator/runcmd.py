@@ -24,7 +24,7 @@ from coordinator.cliutil import (
 )
 from coordinator.errors import TreeError, TreeErrors, UsageError
 
-__all__ = ["DEMO_TREE", "cmd_demo", "cmd_run"]
+__all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -39,6 +39,28 @@ def _report(result: Any, tree_name: str) -> None:
 
     for line in summary_lines(result, tree_name):
         print(line)
+
+
+def interrupted_line(result: Any, started: bool) -> str:
+    """What ``bmtree run`` says when a stop signal ended it (``started``: the tree was ticking; ``result``:
+    the run's, None if it had none): what happened to the calls, then how the cleanup, if any, went."""
+    if not started:
+        return "interrupted during start-up: nothing was called"
+    mine = {id(c) for c in getattr(result, "cleanup_calls", None) or []}
+    sent = result is not None and any(id(c) not in mine for c in result.calls)
+    line = "interrupted: running calls were cancelled" if sent else "interrupted before any call was sent"
+    status = getattr(result, "cleanup_status", None)
+    if status is None:
+        return line + (", and the cleanup did not run" if getattr(result, "ended", "") else "")
+    why = result.cleanup_reason or "no reason given"
+    if status.value == "SUCCESS":
+        return line + ", then the cleanup ran"
+    if status.value == "INVALID" or why.startswith("interrupted"):
+        where = why.partition(" while ")[2]
+        return line + ", then the cleanup was cut short by a second Ctrl-C" + (" while %s" % where if where else "")
+    if why.startswith("did not end within"):
+        return line + ", then the cleanup was cut short: %s" % why
+    return line + ", then the cleanup failed: %s" % why
 
 
 def _warn_without_blackboard() -> None:
@@ -364,12 +386,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
         stopped_at = interrupts.last_signal
-        sent = runner is not None and runner.result is not None and bool(runner.result.calls)
-        cleaned = runner is not None and runner.result is not None and runner.result.cleanup_status is not None
-        err("interrupted: running calls were cancelled, then the cleanup ran" if cleaned else
-            "interrupted: running calls were cancelled" if sent else
-            "interrupted during start-up: nothing was called" if runner is None else
-            "interrupted before any call was sent")
+        err(interrupted_line(runner.result if runner is not None else None, runner is not None))
         if runner is not None and runner.result is not None and tree is not None:
             with interrupts.held(again_exits=False):  # what it did and where its log is, before a second Ctrl-C
                 _report(runner.result, tree.name)

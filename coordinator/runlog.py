@@ -22,7 +22,7 @@ from comm.nodelife import registering
 from coordinator.runstream import Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
-           "new_log_path", "prune", "empty_file", "last_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
+           "new_log_path", "prune", "empty_file", "last_alive", "writer_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
 
 DEFAULT_KEEP = 50
 MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
@@ -345,6 +345,29 @@ def _tail_record(path: str) -> Optional[Dict[str, Any]]:
     return None
 
 
+def writer_alive(head: Dict[str, Any]) -> bool:
+    """True if the process that writes the run log whose ``tree`` record is ``head`` still runs: the
+    ``pid`` it recorded is alive here, a bmtree process (its command line says so) started no later than
+    the run (not another process that got the pid since). Without ``/proc`` (not Linux) it is not known:
+    False, as for a log without a pid."""
+    pid, started = head.get("pid"), head.get("started")
+    if not isinstance(pid, int) or isinstance(pid, bool) or pid <= 0 or not isinstance(started, (int, float)):
+        return False
+    try:
+        with open("/proc/%d/cmdline" % pid, "rb") as fh:
+            cmdline = fh.read().replace(b"\0", b" ")
+        with open("/proc/%d/stat" % pid, "rb") as fh:
+            fields = fh.read().rsplit(b")", 1)[1].split()
+        with open("/proc/stat", "rb") as fh:
+            boot = next(float(line.split()[1]) for line in fh if line.startswith(b"btime "))
+        since = boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")   # field 22, starttime (ticks after boot)
+    except (OSError, ValueError, IndexError, StopIteration):
+        return False
+    if fields[0] == b"Z":   # exited, not yet reaped: not writing
+        return False
+    return (b"bmtree" in cmdline or b"coordinator" in cmdline) and since <= started + 2.0  # btime is whole seconds
+
+
 def list_runs(directory: str) -> List[RunSummary]:
     """Every run log of ``directory``, oldest first; unreadable files are skipped."""
     out = []
@@ -360,11 +383,14 @@ def list_runs(directory: str) -> List[RunSummary]:
             started = float(head.get("started") or 0.0)
             if end is None and started:  # killed: it lived until its log was last written or touched
                 duration = last_alive(started, duration, os.path.getmtime(path))
+            running = end is None and writer_alive(head)
             out.append(RunSummary(
                 path=path, name=str(head.get("name", "?")), started=started,
                 duration=float(duration) if duration is not None else None,
-                status=str(end.get("status")) if end else "UNFINISHED",
-                reason=str(end.get("reason") or "") if end else "the log ends without an end record (killed?)"))
+                status=str(end.get("status")) if end else "RUNNING" if running else "UNFINISHED",
+                reason=str(end.get("reason") or "") if end else
+                "still running (pid %s)" % head.get("pid") if running else
+                "the log ends without an end record (killed?)"))
         except (OSError, ValueError, TypeError, UnicodeDecodeError, RecursionError):
             continue  # not a log bmtree wrote, or damaged: `bmtree replay FILE` says what is wrong
     return out

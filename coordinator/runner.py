@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -33,7 +33,8 @@ from coordinator.runevents import (  # noqa: F401 - Display and NoticeLines: whe
 from coordinator.running import while_running
 
 __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line",
-           "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "stop_label", "summary_lines"]
+           "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "shown_status", "stop_label",
+           "summary_lines"]
 
 
 @dataclass
@@ -56,6 +57,7 @@ class RunResult:
     cleanup_calls: List[CallRecord] = field(default_factory=list)
     cleanup_started: Optional[float] = None
     cleanup_duration: Optional[float] = None
+    cleanup_cut_calls: List[CallRecord] = field(default_factory=list)  # those the cut of the cleanup halted
 
     @property
     def succeeded(self) -> bool:
@@ -150,9 +152,22 @@ def cleanup_stop_label(reason: str) -> Tuple[str, str]:
     return "halted", reason.split(" while ", 1)[0] or "the cleanup was cut short"
 
 
-def _cut_short(reason: str) -> bool:
-    """The cleanup's reason says it was ended from outside (its time limit, a stop), not by itself."""
-    return reason.startswith(("did not end within", "interrupted"))
+def shown_status(result: RunResult, c: CallRecord, cleanup: Optional[Set[int]] = None,
+                 cut: Optional[Set[int]] = None) -> Tuple[str, str]:
+    """(status, error) of call ``c`` as an end-of-run summary shows it (and the kit's ``run.label``): a
+    call the stop from outside halted says so (:func:`stop_label`), and so does one halted when the
+    cleanup was cut short (:func:`cleanup_stop_label`: the calls :meth:`WithCleanup.end_cleanup` halted,
+    as ``bmtree replay`` finds them: halted after the tick before the one that halted the cleanup).
+    ``cleanup``, ``cut``: the ids of the cleanup's calls and of the cut ones, when known already."""
+    status, error = str(c.status), c.error
+    if status != "halted" or c.ended is None:
+        return status, error
+    if id(c) in (cut if cut is not None else {id(k) for k in result.cleanup_cut_calls}):
+        return cleanup_stop_label(result.cleanup_reason)
+    cleanup = cleanup if cleanup is not None else {id(k) for k in result.cleanup_calls}
+    if result.stopped_at is not None and c.ended >= result.stopped_at and id(c) not in cleanup:
+        return stop_label(result.status == Status.INVALID, result.reason)
+    return status, error
 
 
 def summary_lines(result: RunResult, tree_name: str) -> List[str]:
@@ -165,18 +180,12 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
         lines.append("reason: %s" % result.reason)
     lines.append("calls:")
     cleanup = {id(c) for c in result.cleanup_calls}
+    cut = {id(c) for c in result.cleanup_cut_calls}
     for c in [c for c in result.calls if id(c) not in cleanup] + [None] + list(result.cleanup_calls):
         if c is None:
             lines.extend(cleanup_lines(result))
             continue
-        status, error = c.status, c.error
-        if (result.stopped_at is not None and str(status) == "halted" and c.ended is not None
-                and c.ended >= result.stopped_at and id(c) not in cleanup):
-            status, error = stop_label(result.status == Status.INVALID, result.reason)
-        elif (id(c) in cleanup and str(status) == "halted" and c.ended is not None and _cut_short(result.cleanup_reason)
-              and result.cleanup_started is not None and result.cleanup_duration is not None
-              and c.ended >= result.cleanup_started + result.cleanup_duration - 1e-6):
-            status, error = cleanup_stop_label(result.cleanup_reason)
+        status, error = shown_status(result, c, cleanup, cut)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:
@@ -362,6 +371,7 @@ class TreeRunner:
             result.cleanup_status, result.cleanup_reason = task.cleanup_status, task.cleanup_reason
             result.cleanup_calls = [c for c in result.calls if c.owner in under]
             result.cleanup_started = task.cleanup_started
+            result.cleanup_cut_calls = list(task.cut_calls)
             if task.cleanup_started is not None:
                 result.cleanup_duration = (task.cleanup_ended if task.cleanup_ended is not None else now) \
                     - task.cleanup_started

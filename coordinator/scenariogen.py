@@ -178,7 +178,10 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     end = log.end
     seen = log  # what the tree acted on
     stop_at: Optional[float] = None
-    if cut_short(log):
+    stopped = _cleanup_stop(log)
+    if stopped is not None:  # the cleanup ran after the stop: root stops then, the cleanup runs as it did
+        stop_at = stopped
+    elif cut_short(log):
         seen, stop_at = seen_until(log)
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
@@ -220,7 +223,12 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     elif tree.get("max_duration") is not None:
         scenario["max_duration"] = tree["max_duration"]
     status = "failure" if stop_at is not None else str((end or {}).get("status", "")).lower()
+    if stopped is not None:  # what the cleanup was told (ended_reason) is the replayed stop's reason
+        calls = _restated(calls, str(end.get("reason") or ""), replayed_reason(end, stopped))
     scenario["expect"] = {"status": status, "calls": calls}
+    cleanup = (end or {}).get("cleanup")
+    if isinstance(cleanup, dict) and cleanup.get("status") is not None:
+        scenario["expect"]["cleanup"] = "success" if cleanup.get("status") == "SUCCESS" else "failure"
     folder = os.path.dirname(os.path.abspath(out_path))
     data: Dict[str, Any] = {"tree": _relative(path, folder)}
     modules = _module_paths(log, folder)
@@ -228,6 +236,39 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
         data["modules"] = modules
     data["scenarios"] = [scenario]
     return data
+
+
+def _cleanup_stop(log: RunLog) -> Optional[float]:
+    """For an interrupted run (Ctrl-C, SIGTERM) of a tree with ``cleanup:``: when root was stopped (its
+    stop's tick, which the cleanup's ticks follow), the scenario's ``max_duration``; else None."""
+    end = log.end
+    if end is None or end.get("status") != "INVALID" or not isinstance(end.get("cleanup"), dict):
+        return None
+    from coordinator.replaystate import Replay
+
+    stop = Replay(log).stop_tick()
+    return None if stop is None else math.ceil(float(log.records[stop].get("t") or 0.0) * 1e6) / 1e6
+
+
+def replayed_reason(end: Dict[str, Any], stop_at: float) -> str:
+    """The reason a scenario that stops at ``stop_at`` (``max_duration``) gives for the stop the run's
+    ``end`` says (``interrupted while 'go' was running`` -> ``stopped after 4.3 s while 'go' was running``)."""
+    reason = str(end.get("reason") or "")
+    return "stopped after %g s%s" % (stop_at, reason[len("interrupted"):] if reason.startswith("interrupted") else "")
+
+
+def _restated(value: Any, said: str, replayed: str) -> Any:
+    """``value`` (the expected calls) with the run's reason ``said`` in its texts (what the cleanup wrote
+    of ``ended_reason``) as the scenario's run gives it (``replayed``)."""
+    if not said:
+        return value
+    if isinstance(value, str):
+        return value.replace(said, replayed)
+    if isinstance(value, list):
+        return [_restated(v, said, replayed) for v in value]
+    if isinstance(value, dict):
+        return {k: _restated(v, said, replayed) for k, v in value.items()}
+    return value
 
 
 def _relative(path: str, folder: str) -> str:
@@ -268,7 +309,12 @@ def write_scenario(log: RunLog, out_path: str) -> None:
                               "bmtree does not overwrite it (choose a new name)" % out_path)
     data = scenario_from_log(log, out_path)
     end = log.end
-    if cut_short(log):
+    if _cleanup_stop(log) is not None:
+        how = ("# The run was interrupted (%s) at %gs, then its cleanup ran: this stops root\n"
+               "# then (max_duration: a stop, so its status is failure, and the cleanup reads\n"
+               "# 'stopped after %g s' as ended_reason), then the cleanup runs as it did.\n" % (
+                   end.get("reason"), data["scenarios"][0]["max_duration"], data["scenarios"][0]["max_duration"]))
+    elif cut_short(log):
         how = ("# The run %s: this stops at its last recorded tick, %gs, after the\n"
                "# same calls; the calls still running then hang.\n" % (
                    "has no end (it was killed)" if end is None else "was interrupted (%s)" % end.get("reason"),

@@ -119,6 +119,7 @@ class WithCleanup(py_trees.composites.Composite):
         self.cleanup_ended: Optional[float] = None
         self.cleanup_cut = False    # ended from outside (its time limit, a stop): not by itself
         self.cleanup_told = False   # the runner reported its failure
+        self.cut_calls: List[Any] = []   # the calls the cut (its time limit, a stop) halted: CallRecords
 
     @property
     def root(self) -> py_trees.behaviour.Behaviour:
@@ -180,10 +181,12 @@ class WithCleanup(py_trees.composites.Composite):
         limit, a second stop); a running cleanup is halted (its calls cancelled)."""
         if self.phase == "done":
             return
+        self.cleanup_ended = self.ctx.clock.now()   # first: the calls the halt ends end at or after it
         if self.cleanup.status == Status.RUNNING:
+            running = [c for c in self.ctx.calls if c.ended is None]
             self.cleanup.stop(Status.INVALID)
+            self.cut_calls = [c for c in running if c.ended is not None and str(c.status) == "halted"]
         self.cleanup_status, self.cleanup_reason = status, reason
-        self.cleanup_ended = self.ctx.clock.now()
         self.phase = "done"
         self.current_child = None
         self.status = self.root_status if self.root_status in (Status.SUCCESS, Status.FAILURE) else Status.INVALID

@@ -25,7 +25,7 @@ from coordinator.context import CallRecord, RunContext, plain
 from coordinator.errors import TreeErrors, UsageError
 from coordinator.language import load_tree
 from coordinator.nodes.base import NEVER, Flow
-from coordinator.runner import RunResult, TreeRunner
+from coordinator.runner import RunResult, TreeRunner, shown_status
 from coordinator.testing.limits import (
     DEFAULT_MAX_DURATION,
     DEFAULT_MAX_TICKS,
@@ -70,14 +70,25 @@ class TreeRun:
         KeyError for one the definitions do not have (a misspelt target must not pass
         ``assert not run.calls(...)``)."""
         __tracebackhide__ = True
+        self._known(target, "calls")
+        return [c for c in self.result.calls if target is None or c.target == target]
+
+    def _known(self, target: Optional[str], method: str) -> None:
+        """KeyError, naming ``run.<method>(...)``, for a ``target`` the definitions do not have."""
+        __tracebackhide__ = True
         if target is not None and target not in self._functions and all(c.target != target for c in self.result.calls):
             mod = str(target).partition(".")[0]
             same = sorted(f for f in self._functions if f.partition(".")[0] == mod)
-            raise KeyError("run.calls(%r): no function %r in the module definitions%s" % (
-                target, target, did_you_mean(target, self._functions) or (
+            raise KeyError("run.%s(%r): no function %r in the module definitions%s" % (
+                method, target, target, did_you_mean(target, self._functions) or (
                     " (module %s has %s)" % (mod, ", ".join(same)) if same
                     else " (modules: %s)" % ", ".join(sorted({f.partition(".")[0] for f in self._functions})))))
-        return [c for c in self.result.calls if target is None or c.target == target]
+
+    def label(self, call: CallRecord) -> Tuple[str, str]:
+        """(status, error) of ``call`` as the run's summary and ``bmtree replay`` show it: a call halted by
+        a stop from outside, or when the cleanup was cut short, says so (``("halted", "did not end within
+        10 s (cleanup_timeout)")``, ``("interrupted", "")``) where its record keeps ``halted by the tree``."""
+        return shown_status(self.result, call)
 
     @property
     def targets(self) -> List[str]:
@@ -118,8 +129,9 @@ class TreeRun:
         """The calls the cleanup made (all, or those of ``module.function``); they are among
         :meth:`calls` too."""
         __tracebackhide__ = True
+        self._known(target, "cleanup_calls")
         mine = {id(c) for c in self.result.cleanup_calls}
-        return [c for c in self.calls(target) if id(c) in mine]
+        return [c for c in self.result.calls if id(c) in mine and (target is None or c.target == target)]
 
     def said(self) -> List[str]:
         """Convenience for the speech module: every ``text`` passed to ``speech.say``."""
