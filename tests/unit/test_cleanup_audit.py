@@ -18,7 +18,6 @@ from coordinator.clock import SimClock
 from coordinator.replay import Replay, _jump_to_failure
 from coordinator.replay import _report as replay_report
 from coordinator.runcmd import interrupted_line
-from coordinator.runevents import RunObserver
 from coordinator.runlog import RunLogWriter, list_runs, read_log
 from coordinator.runner import summary_lines
 from coordinator.runstream import RunStream
@@ -26,6 +25,7 @@ from coordinator.scenariogen import write_scenario
 from coordinator.testing import kit
 from coordinator.testing.kit import TreeTest
 from coordinator.testing.scenario import run_scenario_file
+from tests.stopkit import GO_CLEANUP, GO_ROOT, CtrlC, Kept
 
 WAITS = """format: 1
 name: go
@@ -45,41 +45,7 @@ cleanup:
       inputs: {text: "bye {ended}: {ended_reason}"}
 """
 
-GO = """format: 1
-name: go
-root:
-  sequence:
-    - call: navigation.go_to
-      inputs: {place: kitchen}
-    - call: speech.say
-      inputs: {text: arrived}
-cleanup:
-  sequence:
-    - call: speech.say
-      inputs: {text: "{ended}"}
-    - call: navigation.where_am_i
-cleanup_timeout: 4
-"""
-
-
-class CtrlC(RunObserver):
-    """Ctrl-C (KeyboardInterrupt in the ticking thread) after the first tick at or after each time."""
-
-    def __init__(self, *at):
-        self.at = list(at)
-
-    def on_tick(self, root, changes, now):
-        if self.at and now >= self.at[0]:
-            self.at.pop(0)
-            raise KeyboardInterrupt
-
-
-class Keep(RunObserver):
-    def __init__(self):
-        self.result = None
-
-    def on_end(self, result):
-        self.result = result
+GO = GO_ROOT + GO_CLEANUP
 
 
 def _tree(tmp_path, text, sim_defs):
@@ -89,7 +55,7 @@ def _tree(tmp_path, text, sim_defs):
 
 
 def _interrupted(t, *at, log=None):
-    keep = Keep()
+    keep = Kept()
     observers = [CtrlC(*at), keep] + ([RunStream([RunLogWriter(log, fsync=False)])] if log else [])
     with pytest.raises(KeyboardInterrupt):
         t.run(observers=observers)

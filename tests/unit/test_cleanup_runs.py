@@ -16,16 +16,9 @@ from coordinator.runner import Display, summary_lines
 from coordinator.runstream import RunStream
 from coordinator.testing.kit import Coverage, TreeTest
 from coordinator.testing.scenario import run_scenario_file
+from tests.stopkit import GO_ROOT, CtrlC, Kept
 
-TREE = """format: 1
-name: go
-root:
-  sequence:
-    - call: navigation.go_to
-      inputs: {place: kitchen}
-    - call: speech.say
-      inputs: {text: arrived}
-cleanup:
+TREE = GO_ROOT + """cleanup:
   sequence:
     - call: speech.say
       inputs: {text: "{ended}: {ended_reason}"}
@@ -113,33 +106,13 @@ def test_the_cleanup_has_its_own_time_limit(go):
     assert run.duration == pytest.approx(15.0) and run.result.cleanup_duration == pytest.approx(10.0)
 
 
-class _Interrupt(RunObserver):
-    """Raises KeyboardInterrupt (a Ctrl-C) after the ticks at these simulated times (once each)."""
-
-    def __init__(self, *at):
-        self.at = list(at)
-
-    def on_tick(self, root, changes, now):
-        if self.at and now >= self.at[0]:
-            self.at.pop(0)
-            raise KeyboardInterrupt
-
-
 def test_ctrl_c_halts_root_runs_the_cleanup_then_the_run_is_interrupted(go):
     go.mocks["navigation.go_to"].hang()
     go.mocks["navigation.where_am_i"].succeed(delay=2.0)
-    seen = []
-
-    class Keep(RunObserver):
-        def on_end(self, result):
-            seen.append(result)
-
-        def on_notice(self, notice, now):
-            seen.append(notice)
-
+    kept = Kept()
     with pytest.raises(KeyboardInterrupt):
-        go.run(observers=[_Interrupt(3.0), Keep()])
-    notice, result = seen
+        go.run(observers=[CtrlC(3.0), kept])
+    notice, result = kept.seen
     assert notice.what == "cleanup" and notice.text == (
         "interrupted while 'navigation.go_to' was running: running the cleanup (at most 10 s; Ctrl-C again ends it "
         "at once)")
@@ -153,15 +126,10 @@ def test_a_second_ctrl_c_ends_the_cleanup_at_once(go, monkeypatch):
     monkeypatch.setattr(runner_module, "BURST", 0.0)   # the second one is not the same burst
     go.mocks["navigation.go_to"].hang()
     go.mocks["navigation.where_am_i"].hang()
-    seen = []
-
-    class Keep(RunObserver):
-        def on_end(self, result):
-            seen.append(result)
-
+    kept = Kept()
     with pytest.raises(KeyboardInterrupt):
-        go.run(observers=[_Interrupt(3.0, 4.0), Keep()])
-    result = seen[0]
+        go.run(observers=[CtrlC(3.0, 4.0), kept])
+    result = kept.result
     where = result.cleanup_calls[1]
     assert result.cleanup_status == Status.INVALID and where.status == "halted"
     assert result.cleanup_reason == "interrupted again while 'navigation.where_am_i' was running"
@@ -171,21 +139,16 @@ def test_a_second_ctrl_c_ends_the_cleanup_at_once(go, monkeypatch):
 def test_a_signal_repeated_in_the_same_burst_does_not_end_the_cleanup(go, monkeypatch):
     monkeypatch.setattr(runner_module, "BURST", 3600.0)
     go.mocks["navigation.go_to"].hang()
-    seen = []
-
-    class Keep(RunObserver):
-        def on_end(self, result):
-            seen.append(result)
-
+    kept = Kept()
     with pytest.raises(KeyboardInterrupt):
-        go.run(observers=[_Interrupt(3.0, 3.0), Keep()])
-    assert seen[0].cleanup_status == Status.SUCCESS
+        go.run(observers=[CtrlC(3.0, 3.0), kept])
+    assert kept.result.cleanup_status == Status.SUCCESS
 
 
 def test_ctrl_c_during_the_cleanup_after_root_ended_keeps_roots_result(go):
     go.mocks["navigation.go_to"].succeed(room="kitchen", delay=1.0)
     go.mocks["navigation.where_am_i"].hang()
-    run = go.run(observers=[_Interrupt(2.0)])
+    run = go.run(observers=[CtrlC(2.0)])
     assert run.succeeded and run.cleanup_status == "INVALID"
     assert run.cleanup_reason == "interrupted while 'navigation.where_am_i' was running"
 

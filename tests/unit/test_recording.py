@@ -23,6 +23,7 @@ from coordinator.testing.kit import TreeTest
 from coordinator.testing.mocks import fail, succeed
 from coordinator.testing.scenario import run_scenario_file
 from tests.conftest import DATA, ROOT, TREES
+from tests.stopkit import CtrlC
 
 GO = os.path.join(DATA, "record", "go_kitchen.yaml")
 GO_RETRY = os.path.join(DATA, "record", "go_kitchen_retry.yaml")
@@ -592,22 +593,6 @@ def test_a_killed_run_becomes_a_scenario_of_what_the_tree_saw_until_its_last_tic
     before_any_tick.write_text(json.dumps(records[0]) + "\n")
     with pytest.raises(RunLogError, match="no end record and no tick"):
         write_scenario(read_log(str(before_any_tick)), str(tmp_path / "s.yaml"))
-
-
-class CtrlC(RunObserver):
-    """Presses Ctrl-C (KeyboardInterrupt in the ticking thread, as bmtree run's handler does) at ``at`` seconds."""
-
-    def __init__(self, at):
-        self.at, self.start = at, None
-
-    def on_start(self, tree, root, ctx):
-        self.clock = ctx.clock
-        self.start = ctx.clock.now()
-
-    def on_tick(self, root, changes, now):
-        if self.at is not None and now - self.start >= self.at:
-            self.at = None  # once
-            raise KeyboardInterrupt
 
 
 def test_an_interrupted_run_becomes_a_scenario_that_passes_and_replay_says_how_to_test_it(sim_defs, tmp_path,

@@ -9,7 +9,7 @@ from rich.console import Console
 
 from coordinator.replay import Replay
 from coordinator.replay import _report as replay_report
-from coordinator.runevents import Display, IncludeArgs, RunObserver, include_label, status_word
+from coordinator.runevents import Display, IncludeArgs, include_label, status_word
 from coordinator.runlog import RunLogWriter, read_log
 from coordinator.runner import summary_lines
 from coordinator.runstream import RunStream
@@ -19,34 +19,9 @@ from coordinator.watchstate import WatchState
 from coordinator.watchtext import result_text
 from coordinator.watchtext import summary_lines as watch_summary
 from coordinator.watchview import LinePrinter, render
+from tests.stopkit import GO_CLEANUP, GO_ROOT, CtrlC, Kept
 
-TREE = """format: 1
-name: go
-root:
-  sequence:
-    - call: navigation.go_to
-      inputs: {place: kitchen}
-    - call: speech.say
-      inputs: {text: arrived}
-cleanup:
-  sequence:
-    - call: speech.say
-      inputs: {text: "{ended}"}
-    - call: navigation.where_am_i
-cleanup_timeout: 4
-"""
-
-
-class _Interrupt(RunObserver):
-    """A Ctrl-C after the tick at this simulated time."""
-
-    def __init__(self, at):
-        self.at = at
-
-    def on_tick(self, root, changes, now):
-        if self.at is not None and now >= self.at:
-            self.at = None
-            raise KeyboardInterrupt
+TREE = GO_ROOT + GO_CLEANUP
 
 
 def _interrupted_run(tmp_path, sim_defs, where_am_i):
@@ -56,15 +31,10 @@ def _interrupted_run(tmp_path, sim_defs, where_am_i):
     t.mocks["navigation.go_to"].hang()
     t.mocks["navigation.where_am_i"].script(where_am_i)
     log_path = str(tmp_path / "run.jsonl")
-    seen = []
-
-    class Keep(RunObserver):
-        def on_end(self, result):
-            seen.append(result)
-
+    kept = Kept()
     with pytest.raises(KeyboardInterrupt):
-        t.run(observers=[_Interrupt(3.0), Keep(), RunStream([RunLogWriter(log_path, fsync=False)])])
-    return seen[0], read_log(log_path)
+        t.run(observers=[CtrlC(3.0), kept, RunStream([RunLogWriter(log_path, fsync=False)])])
+    return kept.result, read_log(log_path)
 
 
 def _watched(log):

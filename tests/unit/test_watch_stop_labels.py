@@ -13,7 +13,7 @@ from rich.console import Console
 
 from coordinator.replay import Replay
 from coordinator.replay import _report as replay_report
-from coordinator.runevents import Display, RunObserver, halted_word, stop_status
+from coordinator.runevents import Display, halted_word, stop_status
 from coordinator.runlog import RunLogWriter, read_log
 from coordinator.runner import summary_lines
 from coordinator.runstream import RunStream
@@ -21,58 +21,22 @@ from coordinator.testing.kit import TreeTest
 from coordinator.testing.mocks import hang, succeed
 from coordinator.watchstate import WatchState
 from coordinator.watchview import LinePrinter, render
-
-ROOT = """format: 1
-name: go
-root:
-  sequence:
-    - call: navigation.go_to
-      inputs: {place: kitchen}
-    - call: speech.say
-      inputs: {text: arrived}
-"""
-CLEANUP = """cleanup:
-  sequence:
-    - call: speech.say
-      inputs: {text: "{ended}"}
-    - call: navigation.where_am_i
-cleanup_timeout: 4
-"""
-
-
-class _Interrupt(RunObserver):
-    """A Ctrl-C after the tick at this simulated time."""
-
-    def __init__(self, at):
-        self.at = at
-
-    def on_tick(self, root, changes, now):
-        if self.at is not None and now >= self.at:
-            self.at = None
-            raise KeyboardInterrupt
-
-
-class _Keep(RunObserver):
-    def __init__(self):
-        self.result = None
-
-    def on_end(self, result):
-        self.result = result
+from tests.stopkit import GO_CLEANUP, GO_ROOT, CtrlC, Kept
 
 
 def _run(tmp_path, sim_defs, cleanup, ctrl_c, where_am_i=None):
     """The tree (with its cleanup or not) stopped at 3 s by a Ctrl-C or by max_duration: its result,
     its run log and what the live display printed."""
     path = tmp_path / "go.yaml"
-    path.write_text(ROOT + (CLEANUP if cleanup else ""))
+    path.write_text(GO_ROOT + (GO_CLEANUP if cleanup else ""))
     t = TreeTest(str(path), definitions=sim_defs)
     t.mocks["navigation.go_to"].hang()
     t.mocks["navigation.where_am_i"].script(where_am_i or succeed(1.0))
-    log_path, keep, shown = str(tmp_path / "run.jsonl"), _Keep(), io.StringIO()
+    log_path, keep, shown = str(tmp_path / "run.jsonl"), Kept(), io.StringIO()
     observers = [keep, RunStream([RunLogWriter(log_path, fsync=False)]), Display(shown, tty=False)]
     if ctrl_c:
         with pytest.raises(KeyboardInterrupt):
-            t.run(observers=[_Interrupt(3.0)] + observers)
+            t.run(observers=[CtrlC(3.0)] + observers)
     else:
         t.run(max_duration=3.0, observers=observers)
     return keep.result, read_log(log_path), shown.getvalue()
