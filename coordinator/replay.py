@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, Optional, Set, TextIO, Tuple
 from coordinator.context import LATE_ANSWER
 from coordinator.replaystate import Failure, Replay
 from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word
-from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log
+from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log, writer_alive
 from coordinator.runner import Display, call_line, cleanup_stop_label, late_line, stop_label
 
 __all__ = ["Failure", "Replay", "find_run", "cmd_runs", "cmd_replay"]
@@ -98,7 +98,10 @@ def _report(replay: Replay, out: TextIO) -> None:
     end = log.end
     name = log.tree.get("name", "?")
     out.write("\n")
-    if end is None:
+    if end is None and writer_alive(log.tree):
+        out.write("%s: RUNNING: still running (pid %s); its log so far goes to %.3fs: `bmtree watch` shows it live\n"
+                  % (name, log.tree.get("pid"), replay.t))
+    elif end is None:
         out.write("%s: UNFINISHED: last seen alive at %.2fs (its log's last record is at %.3fs%s), and the log has "
                   "no end: the process was killed?\n" % (
                       name, log.last_alive, replay.t, "; that record was cut" if log.truncated else ""))

@@ -13,6 +13,7 @@ import time
 import pytest
 import yaml
 
+from coordinator import cli
 from coordinator import runner as runner_module
 from coordinator.clock import SimClock
 from coordinator.replay import Replay, _jump_to_failure
@@ -210,13 +211,12 @@ def _log_of(directory, name, pid, started):
     path = os.path.join(directory, "20261125-120000-%s-go.jsonl" % name)
     with open(path, "w") as fh:
         fh.write(json.dumps({"v": 1, "type": "tree", "run": name, "t": 0.0, "started": started, "name": "go",
-                             "pid": pid, "nodes": []}) + "\n")
+                             "pid": pid, "nodes": [{"id": 0, "name": "go", "parent": None, "kind": "sequence"}]}) + "\n")
         fh.write(json.dumps({"v": 1, "type": "tick", "run": name, "t": 0.5, "n": 1, "changes": []}) + "\n")
     return path
 
 
-@pytest.mark.skipif(not os.path.isdir("/proc"), reason="a process's start time is read from /proc")
-def test_runs_lists_a_run_whose_writer_still_runs_as_running(tmp_path):
+def test_runs_lists_a_run_whose_writer_still_runs_as_running(tmp_path, capsys):
     proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", "bmtree", "run"])
     try:
         time.sleep(0.1)
@@ -230,7 +230,12 @@ def test_runs_lists_a_run_whose_writer_still_runs_as_running(tmp_path):
         assert [by[k].status for k in ("bbbbbb", "cccccc")] == ["UNFINISHED"] * 2
         if b"bmtree" not in open("/proc/self/cmdline", "rb").read():
             assert by["dddddd"].status == "UNFINISHED"
+        capsys.readouterr()
+        assert cli.main(["replay", by["aaaaaa"].path]) == 0   # replay says so too
+        assert "go: RUNNING: still running (pid %d)" % proc.pid in capsys.readouterr().out
     finally:
         proc.kill()
         proc.wait()
     assert list_runs(runs)[0].status == "UNFINISHED"   # its writer is gone
+    assert cli.main(["replay", by["aaaaaa"].path]) == 0
+    assert "go: UNFINISHED: last seen alive" in capsys.readouterr().out
