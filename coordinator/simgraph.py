@@ -14,7 +14,7 @@ from modules.sim.world import World
 
 __all__ = ["SIM_MODULES", "start_sim", "UserModule", "ModuleStartError"]
 
-SIM_MODULES = ("navigation", "vision", "speech")
+SIM_MODULES = ("navigation", "vision", "speech", "battery")
 
 
 class UserModule(NamedTuple):

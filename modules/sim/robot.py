@@ -3,29 +3,57 @@
 Each runs as its own node. Navigation writes the robot's room to the ROS parameter
 ``/sim/robot_room`` before it answers, and the others read it when a call needs it: the
 master orders the two, so a call made after navigation answered always sees the new room
-(a topic would not: ROS orders messages per connection, not across topics).
+(a topic would not: ROS orders messages per connection, not across topics). The same goes for
+the distance driven (``/sim/odometer``, for the battery; also published on the topic of that name
+while driving, so the battery drains midway) and the place the robot stands at (``/sim/robot_at``).
+
+A module emits the world's scheduled ``events`` of its own from :meth:`SimModule._start`: as a node,
+once its events have a listener (the coordinator: in practice the run's start); in process, when
+whoever serves it calls ``_start()``.
 """
 from __future__ import annotations
 
+import logging
+import math
 import threading
-from typing import Any, Dict, List, Optional
+import time
+from typing import Any, Callable, Dict, List, Optional
 
 from modules.outcome import Outcome
 from modules.runtime import BasicModule, Failure
-from modules.sim.world import Fault, World
+from modules.sim.world import Fault, ScheduledEvent, World
 
-__all__ = ["SimModule", "Navigation", "Vision", "Speech", "SIM_CLASSES", "ROOM_PARAM", "SAID_TOPIC"]
+__all__ = ["SimModule", "RobotState", "Navigation", "Vision", "Speech", "ROOM_PARAM", "SAID_TOPIC",
+           "ODOMETER_PARAM", "ODOMETER_TOPIC", "AT_PARAM"]
 
 ROOM_PARAM = "/sim/robot_room"
 SAID_TOPIC = "/sim/speech/said"
+ODOMETER_PARAM = ODOMETER_TOPIC = "/sim/odometer"   # metres driven since navigation started
+AT_PARAM = "/sim/robot_at"   # the room or place the robot stands at ("" while driving or after a halted drive)
+
+log = logging.getLogger("bmtree.module")
 
 
 class RobotState:
-    """Where the robot is, shared in-process (unit tests) or mirrored from ROS."""
+    """Where the robot is, shared in-process (unit tests) or mirrored from ROS; ``listeners`` are
+    called (without the lock) after each stretch :meth:`moved` adds to the odometer."""
 
     def __init__(self, room: str, x: float, y: float):
         self.room, self.x, self.y = room, x, y
+        self.at = room
+        self.odometer = 0.0
         self.lock = threading.Lock()
+        self.listeners: List[Callable[[], None]] = []
+
+    def moved(self, x: float, y: float) -> float:
+        """The robot drove to (x, y): its position and odometer (returned) change; listeners are told."""
+        with self.lock:
+            self.odometer += math.hypot(x - self.x, y - self.y)
+            self.x, self.y, self.at = x, y, ""
+            odometer = self.odometer
+        for listener in list(self.listeners):
+            listener()
+        return odometer
 
 
 class SimModule(BasicModule):
@@ -56,6 +84,29 @@ class SimModule(BasicModule):
         import rospy
 
         self._rospy = rospy  # the node's own ~faults are applied by the module node, as for any module
+        publisher = getattr(node, "event_publisher", None)
+        if publisher is None:
+            self._start()
+            return
+
+        def start_when_heard() -> None:  # an event emitted before anyone listens is lost
+            while publisher.get_num_connections() < 1 and not rospy.is_shutdown():
+                time.sleep(0.02)
+            if not rospy.is_shutdown():
+                self._start()
+
+        threading.Thread(target=start_when_heard, name="%s-events" % self.module_name, daemon=True).start()
+
+    def _start(self) -> None:
+        """Schedule this module's events of the world's ``events`` on the module's clock, from now."""
+        assert self._server is not None, "module not bound to a server"
+        for ev in self.world.events:
+            if ev.module == self.module_name:
+                self._server.scheduler.call_later(ev.at, lambda ev=ev: self._emit_scheduled(ev))
+
+    def _emit_scheduled(self, ev: ScheduledEvent) -> None:
+        log.info("the world's scheduled event %s (at %g s): %s", ev.qualified, ev.at, ev.params)
+        self.emit(ev.name, **ev.params)
 
     def _here(self) -> str:
         if self._rospy is not None and not isinstance(self, Navigation):
@@ -73,16 +124,28 @@ class Navigation(SimModule):
     module_name = "navigation"
     step = 0.02
 
+    def __init__(self, world: Optional[World] = None, state: Optional[RobotState] = None):
+        super().__init__(world, state)
+        self._odometer_pub: Any = None
+
     def setup(self, node: Any) -> None:
+        from std_msgs.msg import Float64
+
         super().setup(node)
+        self._odometer_pub = self._rospy.Publisher(ODOMETER_TOPIC, Float64, queue_size=100)
+        with self.state.lock:
+            odometer, at = self.state.odometer, self.state.at
+        self._rospy.set_param(ODOMETER_PARAM, odometer)
+        self._rospy.set_param(AT_PARAM, at)
         self._rospy.set_param(ROOM_PARAM, self._here())
 
     def shutdown(self) -> None:
         if self._rospy is not None:  # a later graph on this master must not see a stale room
-            try:
-                self._rospy.delete_param(ROOM_PARAM)
-            except (KeyError, OSError):
-                pass
+            for param in (ROOM_PARAM, ODOMETER_PARAM, AT_PARAM):
+                try:
+                    self._rospy.delete_param(param)
+                except (KeyError, OSError):
+                    pass
         super().shutdown()
 
     def _drive(self, x: float, y: float) -> bool:
@@ -91,13 +154,22 @@ class Navigation(SimModule):
             x0, y0 = self.state.x, self.state.y
         total = self.world.travel_time((x0, y0), (x, y))
         steps = max(1, int(total / self.step))
-        for i in range(1, steps + 1):
-            if not ctx.sleep(total / steps):
-                return False
-            with self.state.lock:
-                self.state.x = x0 + (x - x0) * i / steps
-                self.state.y = y0 + (y - y0) * i / steps
-        return True
+        try:
+            for i in range(1, steps + 1):
+                if not ctx.sleep(total / steps):
+                    return False
+                odometer = self.state.moved(x0 + (x - x0) * i / steps, y0 + (y - y0) * i / steps)
+                if self._odometer_pub is not None:
+                    from std_msgs.msg import Float64
+
+                    self._odometer_pub.publish(Float64(odometer))
+            return True
+        finally:
+            if self._rospy is not None:  # before the answer, so the battery's next reading counts it
+                with self.state.lock:
+                    odometer, at = self.state.odometer, self.state.at
+                self._rospy.set_param(ODOMETER_PARAM, odometer)
+                self._rospy.set_param(AT_PARAM, at)
 
     def _where(self) -> Dict[str, Any]:
         with self.state.lock:
@@ -112,9 +184,10 @@ class Navigation(SimModule):
         if not self._drive(x, y):
             return self._where()
         with self.state.lock:
-            self.state.room = room
+            self.state.room, self.state.at = room, place.data
         if self._rospy is not None:  # before the answer, so the next call sees it
             self._rospy.set_param(ROOM_PARAM, room)
+            self._rospy.set_param(AT_PARAM, place.data)
         self.emit("arrived", place=place.data)
         return dict(self._where(), success=True)
 
@@ -185,5 +258,3 @@ class Speech(SimModule):
         self.context.sleep(min(float(seconds.data), 0.2))
         return {"success": False, "text": ""}
 
-
-SIM_CLASSES = {"navigation": Navigation, "vision": Vision, "speech": Speech}

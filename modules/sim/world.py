@@ -12,7 +12,8 @@ import yaml
 from comm.errors import did_you_mean
 from modules.outcome import Outcome, OutcomeError, OutcomeKind, fail, outcome_from_dict
 
-__all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault", "INJECTED", "describe_faults"]
+__all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault", "INJECTED", "describe_faults", "BatterySpec",
+           "ScheduledEvent"]
 
 DEFAULT_WORLD = os.path.join(os.path.dirname(__file__), "world.yaml")
 
@@ -40,7 +41,7 @@ def _crash_text(value: Any) -> str:
     return CRASH_TEXT if value is True or value is None or value == "" else str(value)
 
 
-_WORLD_KEYS = ("rooms", "places", "objects", "people", "start", "speed", "faults")
+_WORLD_KEYS = ("rooms", "places", "objects", "people", "start", "speed", "faults", "battery", "events")
 
 
 def _sim_functions() -> List[str]:
@@ -49,6 +50,14 @@ def _sim_functions() -> List[str]:
 
     defs = load_definitions([os.path.dirname(os.path.abspath(__file__))])
     return sorted(fn.qualified for d in defs.values() for fn in d.functions.values())
+
+
+def _sim_events() -> Dict[str, Any]:
+    """``module.event`` -> its EventDefinition, of every simulated module (what ``events`` may emit)."""
+    from modules.definition import load_definitions
+
+    defs = load_definitions([os.path.dirname(os.path.abspath(__file__))])
+    return {"%s.%s" % (d.name, e.name): e for d in defs.values() for e in d.events.values()}
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -155,6 +164,94 @@ class Thing:
 
 
 @dataclass
+class BatterySpec:
+    """The world's ``battery:`` (percentages 0-100); a key left out takes the default here."""
+
+    level: float = 100.0            # at start
+    drain_per_metre: float = 0.1    # per metre navigation drives
+    drain_per_second: float = 0.0   # per second of time (not while charging)
+    low: float = 20.0               # battery.low is emitted when the level falls to it or below
+    charge_per_second: float = 10.0
+    dock: str = ""                  # where battery.charge works: a room or place ("": the start room)
+
+    @classmethod
+    def parse(cls, raw: Any, source: str) -> BatterySpec:
+        if raw is None:
+            return cls()
+        if not isinstance(raw, dict):
+            raise WorldError("%s: battery must be a mapping of %s" % (source, ", ".join(_BATTERY_KEYS)))
+        values: Dict[str, Any] = {}
+        for key, value in raw.items():
+            if key not in _BATTERY_KEYS:
+                raise WorldError("%s: battery.%s: unknown key%s (battery has %s)" % (
+                    source, key, did_you_mean(str(key), _BATTERY_KEYS), ", ".join(_BATTERY_KEYS)))
+            if key == "dock":
+                values[key] = "" if value is None else str(value)
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+                raise WorldError("%s: battery.%s must be a non-negative number, got %r" % (source, key, value))
+            values[key] = float(value)
+        spec = cls(**values)
+        if spec.level > 100 or spec.low > 100:
+            raise WorldError("%s: battery.level and battery.low are percentages (0-100)" % source)
+        return spec
+
+
+_BATTERY_KEYS = ("level", "drain_per_metre", "drain_per_second", "low", "charge_per_second", "dock")
+
+
+@dataclass
+class ScheduledEvent:
+    """One entry of the world's ``events:``: ``module.event`` emitted ``at`` seconds after its module
+    started emitting (its node heard its first listener: in practice the run's start)."""
+
+    at: float
+    module: str
+    name: str
+    params: Dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def qualified(self) -> str:
+        return "%s.%s" % (self.module, self.name)
+
+
+def _parse_events(raw: Any, source: str) -> List[ScheduledEvent]:
+    """The world's ``events:``, each checked against its simulated module's definition."""
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        raise WorldError("%s: events must be a list of {at: seconds, event: module.event, params: {...}}" % source)
+    known = _sim_events()
+    out = []
+    for i, entry in enumerate(raw):
+        where = "%s: events[%d]" % (source, i)
+        if not isinstance(entry, dict):
+            raise WorldError("%s must be a mapping {at: seconds, event: module.event, params: {...}}" % where)
+        unknown = sorted(str(k) for k in entry if k not in ("at", "event", "params"))
+        if unknown:
+            raise WorldError("%s: unknown key %r%s (an event has at, event, params)" % (
+                where, unknown[0], did_you_mean(unknown[0], ("at", "event", "params"))))
+        at = entry.get("at")
+        if isinstance(at, bool) or not isinstance(at, (int, float)) or at < 0:
+            raise WorldError("%s.at must be a non-negative number of seconds, got %r" % (where, at))
+        name = str(entry.get("event", ""))
+        ev = known.get(name)
+        if ev is None:
+            raise WorldError("%s.event: %r is not an event of the simulated robot%s (its events: %s)" % (
+                where, name, did_you_mean(name, sorted(known)), ", ".join(sorted(known))))
+        params = entry.get("params") or {}
+        if not isinstance(params, dict):
+            raise WorldError("%s.params must be a mapping of the event's parameters" % where)
+        try:
+            ev.build_values(params)
+        except ValueError as exc:
+            raise WorldError("%s.params: %s" % (where, exc))
+        module, event = name.split(".", 1)
+        out.append(ScheduledEvent(float(at), module, event, dict(params)))
+    return out
+
+
+@dataclass
 class World:
     rooms: Dict[str, Tuple[float, float]]
     places: Dict[str, Thing]
@@ -164,6 +261,8 @@ class World:
     speed: float = 1.0
     faults: Dict[str, Fault] = field(default_factory=dict)
     written_faults: Dict[str, Any] = field(default_factory=dict)  # as the file writes them (for other nodes)
+    battery: BatterySpec = field(default_factory=BatterySpec)
+    events: List[ScheduledEvent] = field(default_factory=list)
 
     def faults_of(self, module: str) -> Dict[str, Any]:
         """The faults of ``module``'s functions, as written, by function name (for its node's ``~faults``)."""
@@ -251,7 +350,9 @@ class World:
             world = cls(rooms=rooms, places=things("places"), objects=things("objects"), people=things("people"),
                         start=str(data.get("start", next(iter(rooms), ""))), speed=float(data.get("speed", 1.0)),
                         faults={k: Fault.parse(k, v) for k, v in (data.get("faults") or {}).items()},
-                        written_faults={str(k): v for k, v in (data.get("faults") or {}).items()})
+                        written_faults={str(k): v for k, v in (data.get("faults") or {}).items()},
+                        battery=BatterySpec.parse(data.get("battery"), source),
+                        events=_parse_events(data.get("events"), source))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, WorldError):
                 raise
@@ -260,6 +361,11 @@ class World:
             raise WorldError("%s: start: unknown room %r%s" % (source, world.start, why("start")))
         if world.speed <= 0:
             raise WorldError("%s: speed must be positive" % source)
+        if not world.battery.dock:
+            world.battery.dock = world.start
+        elif world.locate(world.battery.dock) is None:
+            raise WorldError("%s: battery.dock: unknown room or place %r%s" % (
+                source, world.battery.dock, did_you_mean(world.battery.dock, list(rooms) + list(world.places))))
         return world
 
     def locate(self, place: str) -> Optional[Tuple[str, float, float]]:

@@ -267,10 +267,10 @@ def test_the_default_name_of_a_wait_shows_its_duration_as_written(tmp_path, defs
      ["t.yaml:14:19: warning: recall of 'arms/pick/grasp_pose': no definition of module 'arms' is loaded "
       "(did you mean 'arm'?): the recall finds it only if a module of that name stored it"]),
     ("{w: sucess}",
-     ["t.yaml:14:19: warning: recall of 'sucess': no function of the known modules (arm, house, navigation, "
+     ["t.yaml:14:19: warning: recall of 'sucess': no function of the known modules (arm, battery, house, navigation, "
       "speech, vision) has an output 'sucess' (did you mean 'success'?)"]),
     ("{w: never_stored}",
-     ["t.yaml:14:19: warning: recall of 'never_stored': no function of the known modules (arm, house, "
+     ["t.yaml:14:19: warning: recall of 'never_stored': no function of the known modules (arm, battery, house, "
       "navigation, speech, vision) has an output 'never_stored': the recall finds it only if a module whose "
       "definition is not given stored it"]),
 ])

@@ -29,7 +29,7 @@ def test_reference_definitions_load():
 
 def test_sim_definitions_cover_the_manuals_figure():
     defs = load_definitions([SIM_DIR])
-    assert set(defs) == {"navigation", "vision", "speech"}
+    assert set(defs) == {"battery", "navigation", "vision", "speech"}
     assert {"go_to", "approach"} <= set(defs["navigation"].functions)
     assert {"find_object", "find_person"} <= set(defs["vision"].functions)
     assert defs["speech"].function("listen").output("text").rostype == "std_msgs/String"

@@ -108,7 +108,7 @@ def test_run_sim_checks_a_faults_only_world_before_anything_starts(no_master, tm
 def test_an_unknown_module_under_sim_suggests_module_not_modules(no_master, capsys):
     assert main(["run", "--sim", GRASP]) == 2
     err = capsys.readouterr().err
-    assert "grasp.yaml:12:15: unknown module 'gripper' (known: navigation, speech, vision; --sim starts your module " \
+    assert "grasp.yaml:12:15: unknown module 'gripper' (known: battery, navigation, speech, vision; --sim starts your module " \
            "beside the simulated robot with --module DEF.json=FILE.py:CLASS)" in err, err
     assert "--modules FILE.json" not in err
     assert main(["check", GRASP]) == 2  # elsewhere a definition is what is missing

@@ -30,7 +30,7 @@ def test_help_describes_the_script(capsys):
 def test_a_script_without_module_says_what_it_needs(tmp_path, monkeypatch, capsys):
     code, err = _main(tmp_path, monkeypatch, capsys, "functions:\n  go_to: {fail: blocked}\n", "m1.yaml")
     assert code == 2
-    assert err == ("m1.yaml:1:1: a mock node's script needs 'module: NAME', the module it plays (known: navigation, "
+    assert err == ("m1.yaml:1:1: a mock node's script needs 'module: NAME', the module it plays (known: battery, navigation, "
                    "speech, vision); then 'functions' and 'events' (--help)\n")
 
 

@@ -157,7 +157,7 @@ def test_a_misspelt_call_target_is_an_error_not_an_empty_list():
     with pytest.raises(KeyError, match="no function 'navigation.goto' in the module definitions "
                                        "\\(did you mean 'navigation.go_to'\\?\\)"):
         run.calls("navigation.goto")
-    with pytest.raises(KeyError, match="no function 'gripper.close' .*modules: navigation, speech, vision"):
+    with pytest.raises(KeyError, match="no function 'gripper.close' .*modules: battery, navigation, speech, vision"):
         run.calls("gripper.close")
     assert run.calls("navigation.where_am_i") == []       # known, never called
     assert len(run.calls("navigation.go_to")) == 1

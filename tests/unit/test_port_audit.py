@@ -87,7 +87,7 @@ def _cwd(tmp_path, monkeypatch):
 # 3. an unknown module is one error: what its nodes write still counts as written ---------------------------
 def test_a_wait_event_of_an_unknown_module_or_event_writes_its_outputs_for_the_data_flow(tmp_path, capsys):
     status, lines = check(tmp_path, capsys, """  sequence:
-    - wait_event: battery.low
+    - wait_event: charger.low
       outputs: {percentage: pct}
     - check: 'pct > 20'
     - wait_event: navigation.arived
@@ -96,7 +96,7 @@ def test_a_wait_event_of_an_unknown_module_or_event_writes_its_outputs_for_the_d
 """)
     assert status == 2
     assert [line.split(": ", 1)[0] for line in lines] == ["t.yaml:4:19", "t.yaml:7:19"], lines
-    assert lines[0].startswith("t.yaml:4:19: unknown module 'battery'")
+    assert lines[0].startswith("t.yaml:4:19: unknown module 'charger'")
     assert lines[1] == "t.yaml:7:19: module 'navigation' has no event 'arived' (did you mean 'arrived'?)"
 
 

@@ -346,7 +346,7 @@ def test_node_option_from_a_parameter_is_checked_like_the_option(no_master, caps
     with pytest.raises(SystemExit) as exc:
         sim_main(["sim", "_module:=navi"])
     assert exc.value.code == 2
-    assert "private parameter ~module: 'navi' is not one of navigation, speech, vision" in capsys.readouterr().err
+    assert "private parameter ~module: 'navi' is not one of battery, navigation, speech, vision" in capsys.readouterr().err
 
 
 def test_run_options_from_private_parameters(no_master, monkeypatch):
