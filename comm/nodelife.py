@@ -187,6 +187,11 @@ class StopSignals:
         def steps() -> None:
             if not rospy.is_shutdown():
                 rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
+                # a shutdown another thread began (the master kicked this node out) woke us with rospy's
+                # first hooks and runs the others still (the node notes why there): wait for them
+                deadline = time.monotonic() + 2.0
+                while not rospy.is_shutdown() and time.monotonic() < deadline:
+                    time.sleep(0.01)
             if cleanup is not None:
                 cleanup()
 

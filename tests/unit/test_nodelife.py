@@ -176,3 +176,24 @@ def test_a_signal_is_a_keyboard_interrupt_but_waits_for_the_end_of_a_registratio
 def test_without_interrupts_registering_is_a_plain_block():
     with registering():
         pass
+
+
+def test_leaving_waits_for_a_shutdown_another_thread_began_to_run_its_hooks():
+    """The master kicking a node out shuts rospy down from an XML-RPC thread: rospy's first hooks wake
+    the node's main thread, the later ones note why (a module node's exit code 3). Leaving must not
+    read that before they ran (a kicked-out module node exited 0 about one run in twenty)."""
+    script = textwrap.dedent("""
+        import threading, time
+        import rospy, rospy.core
+        from comm.nodelife import StopSignals
+        stop = StopSignals()
+        rospy.core.set_initialized(True)
+        woke, noted = threading.Event(), []
+        rospy.core.add_client_shutdown_hook(woke.set)
+        rospy.core.add_preshutdown_hook(lambda reason: (time.sleep(0.3), noted.append(reason)))
+        threading.Thread(target=rospy.signal_shutdown, args=("new node registered with same name",)).start()
+        assert woke.wait(5)
+        stop.leave(lambda: print("NOTED", noted, flush=True))
+    """)
+    out = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "NOTED ['new node registered with same name']", out.stdout + out.stderr
