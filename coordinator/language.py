@@ -398,6 +398,10 @@ class Parser:
         """A value (references, ``$( … )`` expressions and ``{…}`` templates parsed) or None after reporting."""
         value = raw[key]
         where = pos_of(raw, key, at)
+        if isinstance(value, str) and parsehints.quoted_mapping(value):   # "{x: 1, y: 2}": no mapping, text
+            named = key if isinstance(key, str) and key not in REGISTRY else None   # (not `switch: …`)
+            self.err(where, parsehints.quoted_mapping_message(value, named))
+            return None
         if value.__class__ is LMap or value.__class__ is LList:
             hint = unquoted(raw, key, value)
             if hint:   # said if the value must be text (a kind's error at ``where`` says "takes text")

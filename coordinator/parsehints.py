@@ -9,13 +9,12 @@ from typing import Any, Dict, List, Mapping, Tuple
 import yaml
 
 from comm.errors import did_you_mean
-from coordinator.errors import Pos
 from coordinator.nodes import REGISTRY
 from coordinator.othernames import foreign_option, option_hint, takes
-from coordinator.yamlsrc import LMap, pos_of
+from coordinator.yamlsrc import LMap
 
 __all__ = ["LEAF_OPTIONS", "XML_HINT", "closest", "foreign_hint", "foreign_option", "key_fix", "looks_like_xml",
-           "literal_of", "misplaced", "nearby", "nest_hint", "quoted_mapping", "quoted_mapping_message", "unquoted"]
+           "misplaced", "nearby", "nest_hint", "quoted_mapping", "quoted_mapping_message", "unquoted"]
 
 _KINDS = frozenset(REGISTRY)
 _OPTION_NAMES = {k: frozenset(o.name for o in nk.options) for k, nk in REGISTRY.items()}
@@ -186,9 +185,3 @@ def quoted_mapping_message(text: str, key: Any = None) -> str:
             % (json.dumps(text, ensure_ascii=False), "" if key is None else "%s: " % key, shown))
 
 
-def literal_of(p: Any, raw: Any, key: Any, at: Pos) -> Any:
-    """``p.literal_at(raw, key, at)`` (the parser's), saying a mapping written in quotes with its key."""
-    if quoted_mapping(raw[key]):
-        p.err(pos_of(raw, key, at), quoted_mapping_message(raw[key], key))
-        return None
-    return p.literal_at(raw, key, at)

@@ -219,9 +219,7 @@ class CallKind(NodeKind):
             spec.timeout_pos = raw.val_pos["timeout"]
         found = p.target(node, value, at, "function")
         inputs_raw = p.mapping(raw, "inputs", at, "'inputs' must be a mapping of input name: value")
-        from coordinator.parsehints import literal_of  # (it imports the node kinds)
-
-        spec.inputs = {k: literal_of(p, inputs_raw, k, at) for k in inputs_raw}
+        spec.inputs = {k: p.literal_at(inputs_raw, k, at) for k in inputs_raw}
         spec.input_pos = {k: inputs_raw.val_pos[k] for k in inputs_raw}
         fn = None
         if found is not None:

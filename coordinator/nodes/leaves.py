@@ -383,9 +383,7 @@ class SetKind(NodeKind):
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> Dict[str, Any]:
         m = p.keys(node, value, at, "tree key: value")
-        from coordinator.parsehints import literal_of  # (it imports the node kinds)
-
-        spec = SetSpec((k, literal_of(p, m, k, at)) for k in (m or {}))
+        spec = SetSpec((k, p.literal_at(m, k, at)) for k in (m or {}))
         spec.pos = {k: m.val_pos[k] for k in (m or {})}
         return spec
 

@@ -240,3 +240,16 @@ def test_a_mapping_written_in_quotes_is_said_to_be_text(tmp_path, capsys):
         "quotes: where: {x: 1}",
         "t.yaml:7:16: \"{a: b}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
         "quotes: {a: b}"]
+
+
+def test_a_mapping_in_quotes_as_an_include_argument_or_a_default_names_its_key(tmp_path, capsys):
+    sub = "format: 1\ninputs: {target: {}}\nroot:\n  call: navigation.approach\n  inputs: {target: $target}\n"
+    status, lines = check(tmp_path, capsys, """  include: sub.yaml
+  args: {target: "{x: 1, y: 2}"}
+""", files={"sub.yaml": sub}, top='format: 1\ninputs:\n  spot: {default: "{x: 3}"}\n')
+    assert status == 2
+    assert lines[:2] == [
+        "t.yaml:3:20: \"{x: 3}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
+        "quotes: default: {x: 3}",
+        "t.yaml:6:19: \"{x: 1, y: 2}\" is text in quotes (a {…} template), not a mapping: write the mapping without "
+        "quotes: target: {x: 1, y: 2}"], lines
