@@ -62,3 +62,15 @@ def one_file_trees(tmp_path, bmtree_tree, definitions):
         return bmtree_tree(str(path), definitions=definitions, **kwargs)
 
     return make
+
+
+def documented_reactions():
+    """trees/README.md's two "Reacting while an action runs" patterns (an event beside the action, a value
+    polled beside it), each as a tree's ``root:`` (a sequence of the snippet's nodes): the tests run what
+    the reference shows, so the two cannot drift apart."""
+    import textwrap
+
+    with open(os.path.join(TREES, "README.md"), encoding="utf-8") as fh:
+        section = fh.read().split("\n## Reacting while an action runs\n", 1)[1].split("\n## ", 1)[0]
+    blocks = [b.split("```", 1)[0] for b in section.split("```yaml\n")[1:3]]
+    return tuple("  sequence:\n" + textwrap.indent(textwrap.dedent(b), "    ") for b in blocks)

@@ -12,7 +12,7 @@ from coordinator.language import load_tree
 from coordinator.testing import succeed
 from modules.definition import load_definitions, parse_definition
 from modules.sim import SIM_DIR
-from tests.conftest import one_file_trees
+from tests.conftest import documented_reactions, one_file_trees
 
 BATTERY = parse_definition({
     "Basic Module": "battery",
@@ -128,16 +128,7 @@ def test_nodes_that_end_in_their_tick_may_come_first(tmp_path, children):
 
 
 # the README's "Reacting while an action runs" -----------------------------------------------------------
-EVENT = """  parallel:
-    - call: navigation.go_to
-      name: drive
-      inputs: {place: kitchen}
-      timeout: 120
-    - sequence:
-        - wait_event: battery.low
-        - fail: "battery low"
-  policy: one
-"""
+EVENT, POLL = documented_reactions()
 
 
 def test_an_event_beside_the_action_halts_it(tree):
@@ -151,26 +142,6 @@ def test_an_event_beside_the_action_halts_it(tree):
     assert any(type(m).__name__ == "CancelRequest" for m in run.transport.sent)
     run = tree(EVENT).run()   # no event: the drive ends the parallel
     assert run.succeeded and [c.status for c in run.calls("navigation.go_to")] == ["succeeded"]
-
-
-POLL = """  sequence:
-    - call: battery.level
-      outputs: {percentage: battery}
-    - parallel:
-        - force_success:
-            repeat: 1000
-            child:
-              sequence:
-                - {call: battery.level, outputs: {percentage: battery}}
-                - wait: 1
-        - name: go
-          sequence:
-            memory: false
-            children:
-              - check: 'battery > 20'
-              - {call: navigation.go_to, name: drive, inputs: {place: kitchen}}
-      succeed_on: [go]
-"""
 
 
 def test_a_polled_value_checked_beside_the_action_halts_it_once_false(tree):

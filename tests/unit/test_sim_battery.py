@@ -18,42 +18,10 @@ from modules.runtime import ModuleServer
 from modules.sim import SIM_CLASSES, Battery, Navigation, Vision, World, WorldError
 from modules.sim.robot import RobotState
 from modules.sim.world import _default_data
-from tests.conftest import TREES, until
+from tests.conftest import TREES, documented_reactions, until
 from tests.unit.test_runtime import Served
 
-EVENT = """format: 1
-root:
-  parallel:
-    - call: navigation.go_to
-      name: drive
-      inputs: {place: kitchen}
-      timeout: 120
-    - sequence:
-        - wait_event: battery.low
-        - fail: "battery low"
-  policy: one
-"""
-
-POLL = """format: 1
-root:
-  sequence:
-    - call: battery.level
-      outputs: {percentage: battery}
-    - parallel:
-        - force_success:
-            repeat: 1000
-            child:
-              sequence:
-                - {call: battery.level, outputs: {percentage: battery}}
-                - wait: 1
-        - name: go
-          sequence:
-            memory: false
-            children:
-              - check: 'battery > 20'
-              - {call: navigation.go_to, name: drive, inputs: {place: kitchen}}
-      succeed_on: [go]
-"""
+EVENT, POLL = ("format: 1\nroot:\n" + root for root in documented_reactions())
 
 
 def world(**keys):
