@@ -242,6 +242,8 @@ class Action:
         """The node stops: the goals it started must not drive the robot on without it. Waits (at most
         the cancel timeout) for the server to end them: rospy closes its publishers right after this
         hook, and a cancel still in the publisher's queue would be lost."""
+        server = getattr(self.module, "_server", None)
+        calls = server.in_flight() if server is not None else []
         with self._lock:
             self._stopping = True
             running = dict(self._active)
@@ -251,6 +253,8 @@ class Action:
         end = time.monotonic() + self._cancel_timeout()
         for done in running.values():
             done.wait(max(0.0, end - time.monotonic()))
+        if running and server is not None:   # the calls those goals served answer before the topics close
+            server.answers_sent(calls, max(0.1, end - time.monotonic()))
 
     def _stops(self, client: Any) -> bool:
         """The module's node stops (rospy's ``is_shutdown()`` is true only after its shutdown hooks)."""

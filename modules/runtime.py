@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from comm.errors import ProtocolError
 from comm.messages import (
@@ -39,7 +39,7 @@ log = logging.getLogger("bmtree.module")
 class _Call:
     """One accepted call and where it stands: its code running, answered, holding the module."""
 
-    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late")
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent")
 
     def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
         self.ctx = ctx
@@ -49,6 +49,7 @@ class _Call:
         self.running = True       # the author's code runs, or is queued to
         self.answered = False
         self.late = False         # cancelled, and its code still ran when the grace was over
+        self.sent = False         # its answer was handed to the publisher
 
 
 CANCELLED_TEXT = "cancelled by the coordinator"
@@ -89,6 +90,8 @@ class ModuleServer:
         self.scheduler: Scheduler = scheduler if scheduler is not None else TimerThread("%s-timer" % definition.name)
         self.executor: Executor = executor if executor is not None else WorkerThreads("%s-call" % definition.name)
         self._lock = threading.Lock()
+        self._sent = threading.Condition(threading.Lock())   # notified once an answer is handed over ...
+        self._sent_waited = False                            # ... while someone waits for it (answers_sent)
         self._calls: Dict[str, _Call] = {}
         self._exclusive: Optional[_Call] = None
         self._waiting: Optional[_Call] = None  # the next exclusive call, while the holder is being cancelled
@@ -371,6 +374,19 @@ class ModuleServer:
             self._finish(call, self._result(call, CallStatus.REJECTED, outcome.reason or "rejected"))
         # HANG: no answer until a cancel
 
+    def in_flight(self) -> List[Any]:
+        """The calls accepted and not yet answered (or whose code still runs), for :meth:`answers_sent`."""
+        with self._lock:
+            return list(self._calls.values())
+
+    def answers_sent(self, calls: List[Any], timeout: float) -> bool:
+        """Wait up to ``timeout`` s until each of ``calls`` (from :meth:`in_flight`) has its answer handed to
+        the publisher: a node that stops lets the answers its stop caused go out before rospy closes its
+        topics. False if one did not within the time."""
+        self._sent_waited = True
+        with self._sent:
+            return self._sent.wait_for(lambda: all(c.sent for c in calls), timeout)
+
     def _finish(self, call: _Call, result: FunctionResult) -> None:
         """Answer once; free the module when the call is answered and its code has returned (and
         start the call waiting for it)."""
@@ -397,6 +413,10 @@ class ModuleServer:
                 text = self._result(call, CallStatus.FAILED, "the outputs are %d bytes encoded, over the limit of %d "
                                     "bytes (max_bytes) that a coordinator accepts" % (size, self.max_bytes)).encode()
             self._publish_result(text)
+            call.sent = True
+            if self._sent_waited:
+                with self._sent:
+                    self._sent.notify_all()
 
     def _cancelled(self, call: _Call) -> FunctionResult:
         return self._result(call, CallStatus.CANCELLED, CANCELLED_TEXT)

@@ -246,3 +246,17 @@ def test_a_calls_cancelled_flag_reads_as_true_only_once_cancelled():
     assert not ctx.cancelled and not ctx.cancelled() and not ctx.cancelled.is_set()
     assert ctx.cancel()
     assert ctx.cancelled and ctx.cancelled() and ctx.cancelled.wait(0)
+
+
+def test_a_stopping_node_can_wait_for_the_answers_of_its_calls_in_flight(sim_defs):
+    """What a node's shutdown hook uses (modules.actions): the answers its stop caused go out before rospy
+    closes the topics."""
+    world = World.from_dict(dict(rooms={"a": {"x": 0, "y": 0}}, start="a", faults={"speech.listen": {"hang": True}}))
+    s = Served(sim_defs["speech"], Speech(world))
+    hung = s.call("listen", seconds=1.0)
+    calls = s.server.in_flight()
+    assert [c.ctx.call_id for c in calls] == [hung]
+    assert not s.server.answers_sent(calls, 0.1)       # no answer yet: the time runs out
+    s.server.handle_cancel(CancelRequest(hung, "speech", "listen").encode())
+    assert s.server.answers_sent(calls, 5.0)
+    assert s.result(hung).status == "cancelled"
