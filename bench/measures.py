@@ -245,7 +245,8 @@ def _yaml_tree_text(n: int) -> str:
 
 
 def _offline(path: str) -> Any:
-    from coordinator.testing.mocks import InProcessTransport, Mocks
+    from coordinator.testing.inprocess import InProcessTransport
+    from coordinator.testing.mocks import Mocks
 
     defs: Dict[str, Any] = {}
     tree = load_tree(path, defs)

@@ -1,11 +1,11 @@
 """bmtree's test kit: mocked modules, a simulated clock, tree runs, ROS fixtures."""
 from __future__ import annotations
 
+from coordinator.testing.inprocess import InProcessTransport
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
 from coordinator.testing.limits import TickLimitError
 from coordinator.testing.mocks import (
     FunctionMock,
-    InProcessTransport,
     MockError,
     MockModule,
     Mocks,

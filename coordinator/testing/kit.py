@@ -26,6 +26,7 @@ from coordinator.errors import TreeErrors, UsageError
 from coordinator.language import load_tree
 from coordinator.nodes.base import NEVER, Flow
 from coordinator.runner import RunResult, TreeRunner, shown_status
+from coordinator.testing.inprocess import InProcessTransport
 from coordinator.testing.limits import (
     DEFAULT_MAX_DURATION,
     DEFAULT_MAX_TICKS,
@@ -34,7 +35,7 @@ from coordinator.testing.limits import (
     TickGuard,
     TickLimitError,
 )
-from coordinator.testing.mocks import InProcessTransport, Mocks
+from coordinator.testing.mocks import Mocks
 from coordinator.treeast import TreeFile, TreeNode, top_of, walk
 from modules.definition import DefinitionError, ModuleDefinition
 from modules.search import default_definitions

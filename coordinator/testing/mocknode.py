@@ -77,7 +77,7 @@ def scripted_module(definition: ModuleDefinition, script: Dict[str, Any]) -> Moc
 def load_script(path: str, definitions: Dict[str, ModuleDefinition]) -> Tuple[ModuleDefinition, MockModule]:
     """The module a script file plays and its scripted module; TreeErrors lists every problem of the
     file, each as ``path:line:column: message`` (the format: :data:`FORMAT`)."""
-    from coordinator.testing.scenario import _check_outputs, _check_reason
+    from coordinator.testing.scenariomocks import check_outputs, check_reason
 
     top = Pos(path, 1, 1)
     data = load_file(path)  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
@@ -121,8 +121,8 @@ def load_script(path: str, definitions: Dict[str, ModuleDefinition]) -> Tuple[Mo
                                         if isinstance(raw, LMap) else at, "%s: %s" % (fname, exc)))
                 continue
             found = _Found()
-            _check_reason(raw, at, found)
-            _check_outputs(fn, raw, found)
+            check_reason(raw, at, found)
+            check_outputs(fn, raw, found)
             errors.extend(found.errors)
     events = data.get("events")
     if events is not None and not isinstance(events, LList):

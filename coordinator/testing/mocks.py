@@ -3,7 +3,7 @@
 A mock is a scripted module (:class:`MockModule`): each function follows its script of
 outcomes (:mod:`modules.outcome`). The in-process transport serves it with the same
 :class:`~modules.runtime.ModuleServer` a robot's module node uses, on the run's simulated
-clock, so it refuses what the real module refuses with the same texts: an unknown function,
+clock (:mod:`coordinator.testing.inprocess`), so it refuses what the real module refuses with the same texts: an unknown function,
 missing or ill-typed inputs, a second non-concurrent call while one runs (``busy with call
 …``); it answers cancels the same way. A scripted output that breaks the definition is refused
 when scripted. Delays, hangs and events cost no time under a :class:`SimClock`. Values the
@@ -17,24 +17,11 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
-from blackboard.service import BlackboardService
-from blackboard.store import Store
 from comm.errors import ProtocolError, did_you_mean
-from comm.messages import (
-    BlackboardAnswer,
-    BlackboardRequest,
-    CancelRequest,
-    Event,
-    FunctionCall,
-    FunctionResult,
-)
 from comm.typewords import said_of
-from coordinator.clock import Clock
 from coordinator.context import plain
 from coordinator.testing.expected import legacy_times
-from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
-from modules.execution import ClockExecutor
 from modules.outcome import (
     Outcome,
     OutcomeError,
@@ -47,9 +34,9 @@ from modules.outcome import (
 )
 from modules.outcome import outcome_from_dict as _outcome_from_dict
 from modules.outcome import outcome_to_dict as _outcome_to_dict
-from modules.runtime import BasicModule, ModuleServer
+from modules.runtime import BasicModule
 
-__all__ = ["MockError", "StoredNameError", "FunctionMock", "Mocks", "MockModule", "mock_module", "InProcessTransport",
+__all__ = ["MockError", "StoredNameError", "FunctionMock", "Mocks", "MockModule", "mock_module",
            "StoredEntry", "stored_value",
            # the outcome type (modules.outcome), re-exported for test authors
            "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "reject", "respond",
@@ -407,97 +394,3 @@ def _scripted(target: str, name: str) -> Callable[..., Outcome]:
         return self._mocks[target].answer(inputs, self._mocks.errors)
     method.__name__ = name
     return method
-
-
-class InProcessTransport(Transport):
-    """The module runtime serving every mocked module, and an in-memory Blackboard, in the
-    coordinator's process on the run's clock."""
-
-    def __init__(self, mocks: Mocks, clock: Clock):
-        self.mocks = mocks
-        self.clock = clock
-        self._deliver: Callable[[Any], None] = lambda item: None
-        self._blackboard: Optional[BlackboardService] = None
-        self._blackboard_lock = threading.Lock()   # results (timer thread) and requests (tick thread) may race
-        self.sent: List[Any] = []
-        self._made: Dict[str, int] = {}  # calls sent, per module.function (for the events tied to them)
-        executor = ClockExecutor(clock)
-        self.servers: Dict[str, ModuleServer] = {
-            name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
-                               executor=executor, scheduler=clock)
-            for name, definition in mocks.definitions.items()}
-        if mocks.stored_values:
-            self._seed(clock.now())
-
-    def _seed(self, start: float) -> None:
-        """Store the values of :meth:`Mocks.stored` as the results of earlier calls would be, through
-        the real service: a second apart, the newest a second before ``start`` (the run's own
-        results are newer, by order and by stamp)."""
-        batches = self.mocks.stored_values
-        for i, entries in enumerate(batches):
-            by_function: Dict[Tuple[Optional[str], Optional[str]], List[Tuple[str, Any]]] = {}
-            for mod, fn, name, msg in entries:
-                by_function.setdefault((mod, fn), []).append((name, msg))
-            for (mod, fn), values in by_function.items():
-                result = FunctionResult(names=[n for n, _ in values], msgs=[m for _, m in values],
-                                        basic_mod=mod, function=fn)
-                self.blackboard.on_result(result.encode(), stamp=start - (len(batches) - i))
-
-    @property
-    def blackboard(self) -> BlackboardService:
-        """The in-memory Blackboard, made at the first result or request (a sqlite database costs
-        a fifth of a millisecond, and loading or checking a tree needs none)."""
-        service = self._blackboard
-        if service is None:
-            with self._blackboard_lock:
-                if self._blackboard is None:
-                    self._blackboard = BlackboardService(Store(":memory:"), self._on_answer, threaded=False)
-                service = self._blackboard
-        return service
-
-    def connect(self, deliver: Callable[[Any], None]) -> None:
-        self._deliver = deliver
-        for server in self.servers.values():
-            impl = server.impl
-            assert isinstance(impl, MockModule)
-            impl._start_events()
-
-    def _on_event(self, text: str) -> None:
-        self._deliver(Event.decode(text))
-
-    def _on_answer(self, text: str) -> None:
-        self._deliver(BlackboardAnswer.decode(text))
-
-    def _on_result(self, text: str) -> None:
-        self.blackboard.on_result(text, stamp=self.clock.now())
-        self._deliver(FunctionResult.decode(text))
-
-    def send_call(self, call: FunctionCall) -> None:
-        self.sent.append(call)
-        server = self.servers.get(call.basic_mod)
-        if server is not None:                               # else nobody listens, as on a robot
-            server.handle_call(call.encode())
-        if self.mocks.call_events:
-            self._events_after(call)
-
-    def _events_after(self, call: FunctionCall) -> None:
-        """Schedule the events tied to this call (:meth:`Mocks.event_after`) on the run's clock, from
-        now: an event at the call's answer time reaches the tree with the answer, before its next tick."""
-        target = "%s.%s" % (call.basic_mod, call.function)
-        n = self._made[target] = self._made.get(target, 0) + 1
-        for after, nth, at, mod, name, params in self.mocks.call_events:
-            server = self.servers.get(mod)
-            if after == target and nth == n and server is not None:
-                impl = server.impl
-                assert isinstance(impl, MockModule)
-                self.clock.call_later(at, lambda impl=impl, name=name, params=params: impl.emit(name, **params))
-
-    def send_cancel(self, cancel: CancelRequest) -> None:
-        self.sent.append(cancel)
-        server = self.servers.get(cancel.basic_mod)
-        if server is not None:
-            server.handle_cancel(cancel.encode())
-
-    def send_request(self, request: BlackboardRequest) -> None:
-        self.sent.append(request)
-        self.blackboard.on_request(request.encode())

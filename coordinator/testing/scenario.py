@@ -41,10 +41,10 @@ from typing import Any, Dict, List, Optional, Set, TextIO, Tuple, Union
 
 from py_trees.common import Status
 
-from comm.errors import ProtocolError, did_you_mean
-from comm.typewords import said_of
+from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.language import load_tree
+from coordinator.testing import scenariomocks as sm
 from coordinator.testing.expected import (
     ExpectedCall,
     calls_diff,
@@ -52,7 +52,6 @@ from coordinator.testing.expected import (
     expect_calls,
     expect_calls_in_order,
     expect_duration,
-    legacy_times,
 )
 from coordinator.testing.kit import Coverage, TreeRun, TreeTest
 from coordinator.testing.limits import (
@@ -64,12 +63,7 @@ from coordinator.testing.limits import (
     TickLimitError,
 )
 from coordinator.testing.mocks import (
-    MockError,
     Mocks,
-    StoredEntry,
-    StoredNameError,
-    outcome_from_dict,
-    stored_value,
 )
 from coordinator.testing.scenariokeys import (
     ScenarioDefinitions,
@@ -78,12 +72,10 @@ from coordinator.testing.scenariokeys import (
     check_duration,
     cleanup_problems,
     duration_of,
-    event_problem,
     expected_calls,
     listed_calls,
     modules_key,
 )
-from coordinator.testing.scenariokeys import function_of as _function
 from coordinator.treeast import TreeFile
 from coordinator.yamlsrc import LList, LMap, load_file, pos_of
 from modules.definition import ModuleDefinition
@@ -99,55 +91,6 @@ _SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LI
 _EXPECT_COMMON = ("status", "calls", "blackboard", "reason", "duration")   # what "expect is a mapping with" names
 _EXPECT_KEYS = _EXPECT_COMMON + ("cleanup",)   # cleanup: for a tree with cleanup:
 _TOP_KEYS = ("tree", "modules", "scenarios")
-_EVENT_KEYS = ("at", "event", "params", "after", "nth")
-_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
-
-
-class _Problems:
-    """The problems of a scenario file, collected: every one is reported, not only the first."""
-
-    def __init__(self) -> None:
-        self.errors: List[TreeError] = []
-
-    def add(self, at: Pos, message: str) -> None:
-        self.errors.append(TreeError(at, message))
-
-
-def _check_keys(m: LMap, allowed: Any, what: str, out: _Problems) -> None:
-    """Each key of ``m`` one of ``allowed``: else an error with the closest one, or all of them."""
-    for k in m:
-        if k not in allowed:
-            out.add(m.key_pos[k], "unknown %s key %r%s" % (what, k, did_you_mean(k, allowed) or " (%s keys: %s)" % (
-                what, ", ".join(allowed))))
-
-
-def _number(m: LMap, key: str, default: float, at: Pos, out: _Problems) -> float:
-    """``m[key]`` as a non-negative number of seconds, else ``default`` after a positioned error."""
-    value = m.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < float("inf"):  # NaN too
-        out.add(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))
-        return default
-    return float(value)
-
-
-def _count(m: LMap, key: str, default: int, at: Pos, out: _Problems) -> int:
-    """``m[key]`` as a whole number >= 1, else ``default`` after a positioned error."""
-    value = m.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        out.add(pos_of(m, key, at), "%s must be a whole number >= 1, got %r" % (key, value))
-        return default
-    return value
-
-
-def _mapping(m: Any, key: str, at: Pos, what: str, out: _Problems) -> Any:
-    """``m[key]`` as a mapping (empty when absent or null, or after a positioned error saying ``what``)."""
-    value = m.get(key)
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        out.add(pos_of(m, key, at), what)
-        return {}
-    return value
 
 
 class _Scenario:
@@ -166,17 +109,17 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
     checked all the same."""
     if not isinstance(sc, LMap):
         raise TreeErrors([TreeError(at, "a scenario is a mapping")])
-    out = _Problems()
-    _check_keys(sc, _SCENARIO_KEYS, "scenario", out)
-    inputs = _mapping(sc, "inputs", at, "inputs is a mapping of tree input: value", out)
-    mocks = _mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
+    out = sm.Problems()
+    sm.check_keys(sc, _SCENARIO_KEYS, "scenario", out)
+    inputs = sm.mapping(sc, "inputs", at, "inputs is a mapping of tree input: value", out)
+    mocks = sm.mapping(sc, "mocks", at, "mocks is a mapping of module.function: outcome (or a list of outcomes)", out)
     expect = _expectations(sc, at, out)
     calls = expected_calls(expect, at, defs, out.add)
     if expect:
         check_cleanup(expect, at, tree, out.add)
-    limits = {"max_duration": _number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
-              "max_ticks": _count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
-              "max_ticks_per_instant": _count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
+    limits = {"max_duration": sm.number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
+              "max_ticks": sm.count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
+              "max_ticks_per_instant": sm.count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
     if not isinstance(sc.get("name", ""), str):
         out.add(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))
     test = None
@@ -187,88 +130,25 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
             test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs), coverage=coverage)
             test.raise_limits_with = SCENARIO_RAISE_WITH
     mocked = test.mocks if test is not None else Mocks(defs)
-    stored = _stored(sc, at, defs, out)
+    stored = sm.stored(sc, at, defs, out)
     if stored:
         mocked.stored_values.extend(stored)
     for target, outcomes in mocks.items():
-        _script(mocked, mocks, target, outcomes, at, out)
+        sm.script(mocked, mocks, target, outcomes, at, out)
     events = sc.get("events") or []
     if not isinstance(events, list):
         out.add(pos_of(sc, "events", at), "events is a list of {at, event, params}")
         events = []
     for j, ev in enumerate(events):
         ev_at = events.item_pos[j] if isinstance(events, LList) else pos_of(sc, "events", at)
-        _event(mocked, ev, ev_at, defs, out)
+        sm.event(mocked, ev, ev_at, defs, out)
     if out.errors or test is None:
         raise TreeErrors(out.errors)
     return _Scenario(str(sc.get("name", "scenario %d" % (i + 1))), test, expect, limits,
                      {k for k in _LIMITS if k in sc}, calls)
 
 
-def _stored(sc: LMap, at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> List[List[StoredEntry]]:
-    """``stored``: the values the Blackboard node held before the run, a mapping of Blackboard name:
-    value or a list of them (oldest first, for a history), each checked where it is written."""
-    raw = sc.get("stored")
-    if raw is None:
-        return []
-    what = "stored is a mapping of Blackboard name (output or module/function/output): value, or a list of them"
-    if isinstance(raw, LMap):
-        batches, positions = [raw], [pos_of(sc, "stored", at)]
-    elif isinstance(raw, LList) and raw and all(isinstance(b, LMap) for b in raw):
-        batches, positions = list(raw), raw.item_pos
-    else:
-        out.add(pos_of(sc, "stored", at), what)
-        return []
-    found = []
-    for batch, b_at in zip(batches, positions):
-        entries = []
-        for name, value in batch.items():
-            try:
-                entries.append(stored_value(defs, name, value, legacy=True))
-            except StoredNameError as exc:
-                out.add(batch.key_pos.get(name, b_at), str(exc))
-            except MockError as exc:
-                out.add(batch.val_pos.get(name, b_at), str(exc))
-        found.append(entries)
-    return found
-
-
-def _event(mocked: Mocks, ev: Any, ev_at: Pos, defs: Dict[str, ModuleDefinition], out: _Problems) -> None:
-    """Check one event of ``events`` and schedule it (its problems to ``out``, each where it is written)."""
-    if not isinstance(ev, LMap) or "event" not in ev:
-        out.add(ev_at, "an event needs 'event: module.event' (and 'at', 'params')")
-        return
-    _check_keys(ev, _EVENT_KEYS, "event", out)
-    params = ev.get("params") or {}
-    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
-        out.add(pos_of(ev, "params", ev_at), "params is a mapping of name: value")
-        return
-    when = _number(ev, "at", 0.0, ev_at, out)
-    after = ev.get("after")
-    if after is not None:
-        fn, why = _function(defs, after)
-        if fn is None:
-            out.add(pos_of(ev, "after", ev_at), "after is the module.function whose call the event follows: %s" % why)
-            return
-    nth = _count(ev, "nth", 1, ev_at, out)
-    if "nth" in ev and after is None:
-        out.add(pos_of(ev, "nth", ev_at), "nth counts the calls of the function 'after' names: give 'after' too")
-    target = str(ev["event"])
-    mod, _, name = target.partition(".")
-    event = defs[mod].events.get(name) if mod in defs else None
-    if event is not None:  # older run logs recorded a time as its nanoseconds in text
-        types = {q.name: q.rostype for q in event.params}
-        params = {k: legacy_times(types[k], v) if k in types else v for k, v in params.items()}
-    try:
-        if after is None:
-            mocked.event(when, target, **dict(params))
-        else:
-            mocked.event_after(str(after), when, target, dict(params), nth)
-    except MockError as exc:
-        out.add(pos_of(ev, "event", ev_at) if event is None else ev_at, event_problem(str(exc), event, params))
-
-
-def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> None:
+def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: sm.Problems) -> None:
     """A scenario's ``inputs`` against the tree's: each declared, every required one given."""
     declared = tree.inputs
     for k in inputs:
@@ -281,98 +161,23 @@ def _check_inputs(tree: Any, inputs: Any, sc: LMap, at: Pos, out: _Problems) -> 
             "s" if len(missing) > 1 else "", ", ".join(missing), "them" if len(missing) > 1 else "it"))
 
 
-def _expectations(sc: LMap, at: Pos, out: _Problems) -> Any:
+def _expectations(sc: LMap, at: Pos, out: sm.Problems) -> Any:
     """A scenario's ``expect``, checked (its problems to ``out``)."""
-    expect = _mapping(sc, "expect", at, "expect is a mapping with " + ", ".join(_EXPECT_COMMON), out)
+    expect = sm.mapping(sc, "expect", at, "expect is a mapping with " + ", ".join(_EXPECT_COMMON), out)
     if not expect:
         return expect
-    _check_keys(expect, _EXPECT_KEYS, "expect", out)
+    sm.check_keys(expect, _EXPECT_KEYS, "expect", out)
     status = str(expect.get("status", "success"))
     if status.lower() not in ("success", "failure"):
         out.add(pos_of(expect, "status", at), "status is success or failure, got %r%s" % (
             status, did_you_mean(status.lower(), ("success", "failure"))))
     check_calls(expect, at, out.add)
     check_duration(expect, at, out.add)
-    _mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
+    sm.mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
     if "reason" in expect and not isinstance(expect["reason"], str):
         out.add(pos_of(expect, "reason", at), "reason is text that the run's reason must contain, got %r" % (
             expect["reason"],))
     return expect
-
-
-def _script(mocked: Mocks, mocks: Any, target: Any, outcomes: Any, at: Pos, out: _Problems) -> None:
-    """Script one mocked function (its problems to ``out``, each where it is written)."""
-    t_at = mocks.key_pos.get(target, at) if isinstance(mocks, LMap) else at
-    if not isinstance(target, str):
-        out.add(t_at, "mocks: %r is not a module.function" % (target,))
-        return
-    if isinstance(outcomes, list) and not outcomes:
-        out.add(pos_of(mocks, target, at), "mocks.%s: an empty list of outcomes (leave the function out for the "
-                                           "mock's default)" % target)
-        return
-    if isinstance(outcomes, LList):
-        outcomes_list, positions = list(outcomes), outcomes.item_pos
-    else:
-        outcomes_list, positions = [outcomes], [pos_of(mocks, target, at)]
-    try:
-        mock = mocked[target]
-    except MockError as exc:
-        out.add(t_at, str(exc))
-        return
-    written, before = [], len(out.errors)
-    for raw, where in zip(outcomes_list, positions):
-        try:
-            written.append(outcome_from_dict(_legacy_outputs(mock.fn, raw)))
-        except MockError as exc:  # at a misspelt key (fial:) when there is one
-            out.add(next((raw.key_pos[k] for k in raw if k not in _OUTCOME_KEYS), where)
-                    if isinstance(raw, LMap) else where, str(exc))
-            continue
-        _check_reason(raw, where, out)
-        _check_outputs(mock.fn, raw, out)
-    if len(out.errors) > before:
-        return
-    try:
-        mock.script(*written)
-    except MockError as exc:
-        out.add(t_at, str(exc))
-
-
-def _legacy_outputs(fn: Any, raw: Any) -> Any:
-    """A ``succeed``'s outputs with the times that older run logs recorded as nanoseconds in text
-    made ``{secs, nsecs}`` (scenarios written from those logs), by the outputs' types."""
-    outputs = raw.get("succeed") if isinstance(raw, dict) else None
-    if not isinstance(outputs, dict):
-        return raw
-    types = {q.name: q.rostype for q in fn.outputs}
-    return dict(raw, succeed={k: legacy_times(types[k], v) if k in types else v for k, v in outputs.items()})
-
-
-def _check_reason(raw: Any, where: Pos, out: _Problems) -> None:
-    """``fail``/``reject`` take the reason as text, ``hang`` takes ``true``."""
-    for kind in ("fail", "reject"):
-        if kind in raw and not isinstance(raw[kind], str):
-            out.add(pos_of(raw, kind, where), "%s takes the reason as text (%s: blocked by a chair), got %r" % (
-                kind, kind, raw[kind]))
-    if "hang" in raw and raw["hang"] is not True:
-        out.add(pos_of(raw, "hang", where), "hang takes true, got %r" % (raw["hang"],))
-
-
-def _check_outputs(fn: Any, raw: Any, out: _Problems) -> None:
-    """A ``succeed``'s outputs against the function's definition: each problem at its output."""
-    outputs = raw.get("succeed") if isinstance(raw, LMap) else None
-    if not isinstance(outputs, LMap):
-        return
-    params = {q.name: q for q in fn.outputs}
-    for name, value in outputs.items():
-        q = params.get(name)
-        if q is None:
-            out.add(outputs.key_pos[name], "%s has no output %r%s" % (fn.qualified, name, did_you_mean(
-                name, params) or " (its outputs: %s)" % (", ".join(params) or "none")))
-            continue
-        try:
-            q.convert(legacy_times(q.rostype, value))
-        except ProtocolError as exc:
-            out.add(outputs.val_pos[name], said_of("%s output %r" % (fn.qualified, name), exc))
 
 
 def load_scenario_file(path: str, definitions: Definitions = None,
@@ -385,8 +190,8 @@ def load_scenario_file(path: str, definitions: Definitions = None,
     data = load_file(path)  # at most MAX_BYTES, and never a device (bmtree test /dev/zero)
     if not isinstance(data, LMap) or "tree" not in data or not isinstance(data.get("scenarios"), LList):
         raise TreeErrors([TreeError(getattr(data, "pos", top), "a scenario file needs 'tree' and a list 'scenarios'")])
-    found = _Problems()
-    _check_keys(data, _TOP_KEYS, "top-level", found)
+    found = sm.Problems()
+    sm.check_keys(data, _TOP_KEYS, "top-level", found)
     errors = found.errors   # the scenario file's own
     tree_errors: List[TreeError] = []   # its tree's (and its warnings): said first
     before = len(errors)

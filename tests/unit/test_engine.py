@@ -15,7 +15,8 @@ from coordinator.context import RunContext
 from coordinator.language import load_tree
 from coordinator.runner import TreeRunner
 from coordinator.testing import MockError, TreeTest, fail, hang, succeed
-from coordinator.testing.mocks import InProcessTransport, Mocks
+from coordinator.testing.inprocess import InProcessTransport
+from coordinator.testing.mocks import Mocks
 
 
 def tree(tmp_path, body, name="t.yaml"):

@@ -160,7 +160,7 @@ def test_observers_see_the_run(tmp_path):
     from coordinator.clock import SimClock
     from coordinator.context import RunContext
     from coordinator.runner import TreeRunner
-    from coordinator.testing.mocks import InProcessTransport
+    from coordinator.testing.inprocess import InProcessTransport
 
     path = tmp_path / "t.yaml"
     path.write_text("format: 1\nname: obs\nroot:\n  sequence:\n    - call: speech.listen\n      inputs: {seconds: 1}\n"

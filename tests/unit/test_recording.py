@@ -680,7 +680,8 @@ def test_a_paused_run_times_its_calls_by_their_answers_and_replay_shows_the_cont
     from coordinator.control import Controller
     from coordinator.language import load_tree
     from coordinator.runner import Display, TreeRunner
-    from coordinator.testing.mocks import InProcessTransport, Mocks
+    from coordinator.testing.inprocess import InProcessTransport
+    from coordinator.testing.mocks import Mocks
 
     mocks = Mocks(sim_defs)
     mocks["navigation.go_to"].script(succeed(room="kitchen", delay=2.0))

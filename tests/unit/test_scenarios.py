@@ -207,8 +207,10 @@ def test_the_format_page_shows_the_shipped_file_and_every_key(tmp_path):
     f.write_text("tree: %s\nscenarios:\n%s" % (os.path.join(TREES, "find_apple.yaml"), blocks[1]))
     out = io.StringIO()
     assert run_scenario_file(str(f), out=out) == [True], out.getvalue()
-    for key in scenario._SCENARIO_KEYS + scenario._EXPECT_KEYS + scenario._EVENT_KEYS + (
-            "tree", "scenarios", "succeed", "fail", "reject", "hang", "delay"):
+    from coordinator.testing import scenariomocks
+
+    for key in scenario._SCENARIO_KEYS + scenario._EXPECT_KEYS + scenariomocks._EVENT_KEYS + (
+            "tree", "scenarios") + scenariomocks._OUTCOME_KEYS:
         assert "| `%s` |" % key in doc, key
     for default in (scenario.DEFAULT_MAX_DURATION, scenario.DEFAULT_MAX_TICKS, scenario.DEFAULT_MAX_TICKS_PER_INSTANT):
         assert "| `%g` |" % default in doc

@@ -13,7 +13,8 @@ from coordinator.clock import RealClock
 from coordinator.context import RunContext
 from coordinator.language import load_tree
 from coordinator.runner import TreeRunner
-from coordinator.testing.mocks import InProcessTransport, Mocks
+from coordinator.testing.inprocess import InProcessTransport
+from coordinator.testing.mocks import Mocks
 from modules.runtime import ModuleServer
 from modules.sim import SIM_CLASSES, Battery, Navigation, Vision, World, WorldError
 from modules.sim.robot import RobotState

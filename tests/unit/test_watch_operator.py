@@ -327,7 +327,8 @@ def test_a_call_answered_while_paused_shows_as_answered(sim_defs):
     from coordinator.control import Controller
     from coordinator.language import load_tree
     from coordinator.runner import TreeRunner
-    from coordinator.testing.mocks import InProcessTransport, Mocks, succeed
+    from coordinator.testing.inprocess import InProcessTransport
+    from coordinator.testing.mocks import Mocks, succeed
 
     mocks = Mocks(sim_defs)
     mocks["navigation.go_to"].script(succeed(room="kitchen", delay=2.0))

@@ -160,7 +160,8 @@ def test_the_live_summary_says_interrupted_for_calls_ctrl_c_halted(sim_defs):
     from coordinator.context import RunContext
     from coordinator.language import load_tree
     from coordinator.runner import TreeRunner
-    from coordinator.testing.mocks import InProcessTransport, Mocks
+    from coordinator.testing.inprocess import InProcessTransport
+    from coordinator.testing.mocks import Mocks
 
     mocks = Mocks(sim_defs)
     mocks["navigation.go_to"].script(succeed(room="kitchen", delay=4.0))
