@@ -213,11 +213,18 @@ class Controller(RunObserver):
         return self.root if isinstance(self.root, WithCleanup) else None
 
     def _still_ticked(self, nodes: List[Any], name: Any) -> Tuple[List[Any], str]:
-        """Once root has ended (its cleanup runs), only the cleanup's nodes are ticked again: the
-        nodes of ``nodes`` in the cleanup, or why a command on ``name`` is refused."""
+        """The nodes of ``nodes`` a command may steer, or why a command on ``name`` is refused: never the
+        top of a tree with a cleanup (forcing it would skip the cleanup), and once root has ended (its
+        cleanup runs) only the cleanup's nodes, the only ones ticked again."""
         from coordinator.runstream import preorder
 
         task = self._task()
+        if task is not None and any(b is task for b in nodes):
+            nodes = [b for b in nodes if b is not task]   # a node of root may have the tree's name too
+            if not nodes:
+                return [], ("%r is the tree's top (root, then the cleanup): it ends after its cleanup, whatever "
+                            "happens; steer root's top node %r (the cleanup still runs) or a node of the cleanup "
+                            "instead" % (name, task.root.name))
         if task is None or task.phase == "root":
             return nodes, ""
         cleanup = list(preorder(task.cleanup))

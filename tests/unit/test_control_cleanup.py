@@ -62,11 +62,27 @@ def test_commands_on_roots_nodes_are_refused_once_root_ended(go):
                "ticked again; steer a node of the cleanup instead (cleanup, speech.say, navigation.where_am_i)")
     assert answers[("cleanup", "force", "navigation.go_to")] == (False, refused % "navigation.go_to")
     assert answers[("cleanup", "break", "sequence")] == (False, refused % "sequence")
-    assert answers[("cleanup", "force", "go")] == (False, refused % "go")
+    assert answers[("cleanup", "force", "go")] == (False, TOP)
     assert answers[("cleanup", "force", "navigation.where_am_i")] == (
         True, "'navigation.where_am_i' will end in FAILURE the next time it is ticked")   # the cleanup's: steered
     assert run.failed and run.reason == "navigation.go_to failed: blocked"
     assert run.cleanup_status == "FAILURE" and run.duration < 10   # forced, not cut by cleanup_timeout
+
+
+TOP = ("'go' is the tree's top (root, then the cleanup): it ends after its cleanup, whatever happens; steer root's "
+       "top node 'sequence' (the cleanup still runs) or a node of the cleanup instead")
+
+
+def test_the_top_of_a_tree_with_a_cleanup_is_never_steered(go):
+    go.mocks["navigation.go_to"].hang()
+    run, answers = _run(go, {"root": [{"command": "force", "node": "go", "outcome": "SUCCESS"},
+                                      {"command": "break", "node": "go"},
+                                      {"command": "force", "node": "sequence", "outcome": "FAILURE"}]})
+    assert answers[("root", "force", "go")] == (False, TOP)
+    assert answers[("root", "break", "go")] == (False, TOP)
+    assert answers[("root", "force", "sequence")][0]
+    assert run.failed and run.ended == "failed"
+    assert [c.target for c in run.cleanup_calls()] == ["speech.say", "navigation.where_am_i"]   # it still ran
 
 
 def test_before_root_ends_its_nodes_and_the_cleanups_are_steered(go):
