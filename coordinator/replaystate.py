@@ -200,7 +200,7 @@ class Replay:
         running, not ended by the tree), or None."""
         root = self.main
         ticks = [i for i, r in enumerate(self.log.records) if r.get("type") == "tick"]
-        if not ticks or self.log.end is None:
+        if not ticks or (self.log.end is None and not self.cleanup_ids):  # killed: no stop, unless the cleanup ran
             return None
         if self.cleanup_ids:  # with cleanup: the stop halted root, the cleanup's ticks came after it
             return next((i for i in ticks if any(c[0] == root and c[1] == "INVALID"

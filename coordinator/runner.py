@@ -8,16 +8,15 @@ coverage of the test kit, the status changes that observers such as the display 
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import py_trees
 from py_trees.common import Status
 
 from comm.nodelife import BURST
-from coordinator.context import WAKE, CallRecord, RunContext, late_answer_text
+from coordinator.context import WAKE, CallRecord, RunContext
 from coordinator.nodes.task import WithCleanup
 from coordinator.reasons import FailureExplainer
 from coordinator.runevents import (  # noqa: F401 - Display and NoticeLines: where they were
@@ -30,12 +29,24 @@ from coordinator.runevents import (  # noqa: F401 - Display and NoticeLines: whe
     notify,
     status_word,
 )
+from coordinator.runlines import (  # noqa: F401 - where they were
+    call_line,
+    cleanup_lines,
+    cleanup_stop_label,
+    late_line,
+    short_json,
+    shown_status,
+    stop_label,
+    summary_lines,
+)
 from coordinator.running import while_running
 
 __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner", "Visited", "call_line",
            "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "shown_status", "stop_label",
            "summary_lines"]
 
+KILL_AFTER = 1e-6
+"""How long after ``kill_at`` a killed run ends (so that what came at ``kill_at`` itself is ticked)."""
 
 @dataclass
 class RunResult:
@@ -112,100 +123,6 @@ class Visited(py_trees.visitors.VisitorBase):
         self.visited.append((behaviour, behaviour.status))
 
 
-def short_json(value: Any, width: int = 60) -> str:
-    """``value`` as compact JSON, cut to ``width`` characters: inputs on a summary line stay one line."""
-    text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), default=str)
-    return text if len(text) <= width else text[:width - 1] + "…"
-
-
-def call_line(started: float, target: Any, status: Any, duration: Optional[float], error: Any,
-              inputs: Any = None) -> str:
-    """One call of an end-of-run summary (the live one and ``bmtree replay``'s print the same lines);
-    ``inputs`` are given for the failing call: what it was asked is half of why it failed."""
-    dur = "%.3fs" % duration if duration is not None else "-"
-    line = "  +%7.3fs  %-26s %-11s %8s  %s" % (started, target, status, dur, error or "")
-    if inputs is not None:
-        line += "%sinputs %s" % ("  " if error else "", short_json(inputs))
-    return line.rstrip()
-
-
-def late_line(text: str) -> str:
-    """Under its call in an end-of-run summary (live and ``bmtree replay``): the answer that came after
-    the call had ended (``text``: its notice, which says when). Not a call's line: no ``+`` time."""
-    return " " * 14 + "late answer: " + text
-
-
-def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
-    """(status, error) shown for a call halted because the run was stopped from outside, instead of
-    the call's own "halted by the tree": ``interrupted`` for Ctrl-C, the limit for ``max_duration``."""
-    if interrupted:
-        return "interrupted", ""
-    return "halted", reason.split(" while ", 1)[0] or "the run was stopped"
-
-
-def cleanup_stop_label(reason: str) -> Tuple[str, str]:
-    """(status, error) shown for a call of a tree's cleanup halted when the cleanup was cut short,
-    instead of the call's own "halted by the tree": ``interrupted`` for a Ctrl-C, else its time limit
-    (``halted  did not end within 30 s (cleanup_timeout)``)."""
-    if reason.startswith("interrupted"):
-        return "interrupted", ""
-    return "halted", reason.split(" while ", 1)[0] or "the cleanup was cut short"
-
-
-def shown_status(result: RunResult, c: CallRecord, cleanup: Optional[Set[int]] = None,
-                 cut: Optional[Set[int]] = None) -> Tuple[str, str]:
-    """(status, error) of call ``c`` as an end-of-run summary shows it (and the kit's ``run.label``): a
-    call the stop from outside halted says so (:func:`stop_label`), and so does one halted when the
-    cleanup was cut short (:func:`cleanup_stop_label`: the calls :meth:`WithCleanup.end_cleanup` halted,
-    as ``bmtree replay`` finds them: halted after the tick before the one that halted the cleanup).
-    ``cleanup``, ``cut``: the ids of the cleanup's calls and of the cut ones, when known already."""
-    status, error = str(c.status), c.error
-    if status != "halted" or c.ended is None:
-        return status, error
-    if id(c) in (cut if cut is not None else {id(k) for k in result.cleanup_cut_calls}):
-        return cleanup_stop_label(result.cleanup_reason)
-    cleanup = cleanup if cleanup is not None else {id(k) for k in result.cleanup_calls}
-    if result.stopped_at is not None and c.ended >= result.stopped_at and id(c) not in cleanup:
-        return stop_label(result.status == Status.INVALID, result.reason)
-    return status, error
-
-
-def summary_lines(result: RunResult, tree_name: str) -> List[str]:
-    """The end-of-run summary: result (``INTERRUPTED`` for a run stopped by Ctrl-C), reason, every call
-    (the failing one with its inputs; those the stop from outside, or the end of a cut cleanup, halted
-    said so)."""
-    lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, status_word(result.status), result.duration,
-                                                   result.ticks)]
-    if result.reason and not result.succeeded:
-        lines.append("reason: %s" % result.reason)
-    lines.append("calls:")
-    cleanup = {id(c) for c in result.cleanup_calls}
-    cut = {id(c) for c in result.cleanup_cut_calls}
-    for c in [c for c in result.calls if id(c) not in cleanup] + [None] + list(result.cleanup_calls):
-        if c is None:
-            lines.extend(cleanup_lines(result))
-            continue
-        status, error = shown_status(result, c, cleanup, cut)
-        lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
-                               c.inputs if c is result.failed_call else None))
-        if c.late_at is not None:
-            lines.append(late_line(late_answer_text(c, result.started)))
-    return lines
-
-
-def cleanup_lines(result: RunResult) -> List[str]:
-    """The cleanup's line of an end-of-run summary (its calls follow it): how it ended, after which ending
-    of root; nothing for a tree without ``cleanup:``."""
-    if result.cleanup_status is None and not result.ended:
-        return []
-    if result.cleanup_status is None:
-        return ["cleanup (root %s): did not run" % result.ended]
-    said = {"SUCCESS": "succeeded", "FAILURE": "FAILED", "INVALID": "cut short"}[result.cleanup_status.value]
-    took = " in %.2f s" % result.cleanup_duration if result.cleanup_duration is not None else ""
-    why = ": %s" % result.cleanup_reason if result.cleanup_reason and result.cleanup_failed else ""
-    return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)]
-
-
 class TreeRunner:
     """Ticks ``root`` on a py_trees ``BehaviourTree`` until it ends.
 
@@ -268,7 +185,7 @@ class TreeRunner:
             notify(self.ctx.observers, "on_tick", self.root, changes, self.ctx.clock.now())
 
     def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None,
-            guard: Optional[Callable[[], str]] = None) -> RunResult:
+            guard: Optional[Callable[[], str]] = None, kill_at: Optional[float] = None) -> RunResult:
         """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()`` or
         ``guard()`` gives a reason (asked after each tick); stopped is FAILURE.
 
@@ -276,7 +193,10 @@ class TreeRunner:
         root ended, also when it was stopped (root halted first), bounded by its own time limit; a
         stop signal (KeyboardInterrupt) during it ends it at once. The result is root's. ``guard``
         (the test kit's tick limits) is asked during the cleanup too, and cuts it short: on a
-        simulated clock a livelock never reaches the cleanup's time limit."""
+        simulated clock a livelock never reaches the cleanup's time limit. ``kill_at`` (seconds from the
+        start; a scenario of a run whose process was killed) ends the run there as the kill did: nothing
+        is ticked after what came at that time, a running root or cleanup is halted, and a cleanup not
+        begun never runs."""
         ctx = self.ctx
         ctx.transport.connect(ctx.inbox.put)
         self.tree.setup()
@@ -290,6 +210,9 @@ class TreeRunner:
         failed_call: Optional[CallRecord] = None
         try:
             while True:
+                if kill_at is not None and ctx.clock.now() - start > kill_at:  # what came at kill_at was ticked
+                    reason, stopped_at = self._killed(task, main, kill_at, reason, stopped_at)
+                    break
                 if self.gate is None or self.gate.may_tick():
                     self.tick()
                 if task is None and self.root.status in (Status.SUCCESS, Status.FAILURE):
@@ -323,7 +246,7 @@ class TreeRunner:
                         continue
                 elif self._cleanup_over_time(task) or self._cleanup_guarded(task, guard):
                     break
-                self._wait(self._until(start, max_duration, task))
+                self._wait(self._until(start, max_duration, task, kill_at))
         except BaseException as exc:
             cut = task is not None and isinstance(exc, KeyboardInterrupt) and not task.done
             if cut and task is not None and task.phase == "cleanup":  # root had ended: the cleanup ends at once
@@ -377,15 +300,31 @@ class TreeRunner:
                     - task.cleanup_started
         return result
 
-    def _until(self, start: float, max_duration: Optional[float], task: Optional[WithCleanup]) -> float:
+    def _until(self, start: float, max_duration: Optional[float], task: Optional[WithCleanup],
+               kill_at: Optional[float] = None) -> float:
         """How long to wait for something to happen: the period, or less to wake at a limit."""
         wait = self.period
         now = self.ctx.clock.now()
+        if kill_at is not None:  # wake just after it: everything at kill_at is ticked first
+            wait = min(wait, max(0.0, start + kill_at + KILL_AFTER - now))
         if task is not None and task.phase == "cleanup" and task.cleanup_started is not None:
             return min(wait, max(0.0, task.cleanup_started + task.limit - now))
         if max_duration is not None:  # wake at the limit, not at the next period after it
             wait = min(wait, max(0.0, start + max_duration - now))
         return wait
+
+    def _killed(self, task: Optional[WithCleanup], main: Any, kill_at: float, reason: str,
+                stopped_at: Optional[float]) -> Tuple[str, Optional[float]]:
+        """The run ended by ``kill_at`` (its root or its cleanup runs): halted, without a cleanup after
+        root; the run's reason and stop time."""
+        killed = "killed after %g s" % kill_at
+        if task is not None and task.phase == "cleanup":
+            self._end_cleanup(task, Status.INVALID, killed + while_running(task.cleanup))
+            return reason, stopped_at
+        reason, stopped_at = killed + while_running(main), self.ctx.clock.now()
+        self.root.stop(Status.INVALID)
+        self._tell([])
+        return reason, stopped_at
 
     def _wait(self, wait: float) -> None:
         """Wait up to ``wait`` seconds for messages, then hand over all that came."""

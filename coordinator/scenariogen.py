@@ -179,9 +179,10 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     seen = log  # what the tree acted on
     stop_at: Optional[float] = None
     stopped = _cleanup_stop(log)
+    killed = _killed_in_cleanup(log)
     if stopped is not None:  # the cleanup ran after the stop: root stops then, the cleanup runs as it did
         stop_at = stopped
-    elif cut_short(log):
+    elif cut_short(log) and killed is None:
         seen, stop_at = seen_until(log)
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
@@ -222,9 +223,12 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
         scenario["max_duration"] = stop_at
     elif tree.get("max_duration") is not None:
         scenario["max_duration"] = tree["max_duration"]
-    status = "failure" if stop_at is not None else str((end or {}).get("status", "")).lower()
+    if killed is not None:
+        scenario["killed_at"] = killed
+    status = "failure" if stop_at is not None else str((end or {}).get("status", "") or _root_status(log)).lower()
     if stopped is not None:  # what the cleanup was told (ended_reason) is the replayed stop's reason
-        calls = _restated(calls, str(end.get("reason") or ""), replayed_reason(end, stopped))
+        said = _stop_reason(log)
+        calls = _restated(calls, said, replayed_reason({"reason": said}, stopped))
     scenario["expect"] = {"status": status, "calls": calls}
     cleanup = (end or {}).get("cleanup")
     if isinstance(cleanup, dict) and cleanup.get("status") is not None:
@@ -238,11 +242,46 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     return data
 
 
+def _killed_in_cleanup(log: RunLog) -> Optional[float]:
+    """For a run of a tree with ``cleanup:`` killed (no end record) while its cleanup ran: when its log
+    ends (its last record, rounded up to the microsecond), the scenario's ``killed_at``; else None."""
+    nodes = log.tree.get("nodes") or []
+    if log.end is not None or not (nodes and isinstance(nodes[0], dict) and nodes[0].get("kind") == "with_cleanup"):
+        return None
+    from coordinator.replaystate import Replay
+
+    cleanup = Replay(log).cleanup_ids
+    if not any(c[0] in cleanup for r in log.of_type("tick") for c in r.get("changes") or []):
+        return None
+    return math.ceil(max(float(r.get("t") or 0.0) for r in log.records) * 1e6) / 1e6
+
+
+def _root_status(log: RunLog) -> str:
+    """How root ended in a run killed while its cleanup ran: SUCCESS or FAILURE (or INVALID: stopped)."""
+    from coordinator.replaystate import Replay
+
+    main = Replay(log).main
+    ends = [c[1] for r in log.of_type("tick") for c in r.get("changes") or [] if c[0] == main
+            and c[1] in ("SUCCESS", "FAILURE", "INVALID")]
+    return ends[0] if ends else ""
+
+
+def _stop_reason(log: RunLog) -> str:
+    """Why root was stopped, as the run said it (its end's reason; a killed run's, as the cleanup was told)."""
+    if log.end is not None:
+        return str(log.end.get("reason") or "")
+    told = [r.get("value") for r in log.of_type("write") if r.get("key") == "ended_reason"]
+    return str(told[0]) if told else ""
+
+
 def _cleanup_stop(log: RunLog) -> Optional[float]:
-    """For an interrupted run (Ctrl-C, SIGTERM) of a tree with ``cleanup:``: when root was stopped (its
-    stop's tick, which the cleanup's ticks follow), the scenario's ``max_duration``; else None."""
+    """For an interrupted run (Ctrl-C, SIGTERM) of a tree with ``cleanup:``, or one killed while the cleanup
+    that followed a stop ran: when root was stopped (its stop's tick, which the cleanup's ticks follow),
+    the scenario's ``max_duration``; else None."""
     end = log.end
-    if end is None or end.get("status") != "INVALID" or not isinstance(end.get("cleanup"), dict):
+    if end is None and _killed_in_cleanup(log) is None:
+        return None
+    if end is not None and (end.get("status") != "INVALID" or not isinstance(end.get("cleanup"), dict)):
         return None
     from coordinator.replaystate import Replay
 
@@ -309,11 +348,18 @@ def write_scenario(log: RunLog, out_path: str) -> None:
                               "bmtree does not overwrite it (choose a new name)" % out_path)
     data = scenario_from_log(log, out_path)
     end = log.end
+    scenario = data["scenarios"][0]
+    killed = ("# It was killed at %gs while the cleanup ran (its log ends there): killed_at ends\n"
+              "# the scenario then; the calls still running then hang.\n" % scenario["killed_at"]
+              if "killed_at" in scenario else "")
     if _cleanup_stop(log) is not None:
-        how = ("# The run was interrupted (%s) at %gs, then its cleanup ran: this stops root\n"
+        how = ("# The run was %s (%s) at %gs, then its cleanup ran: this stops root\n"
                "# then (max_duration: a stop, so its status is failure, and the cleanup reads\n"
                "# 'stopped after %g s' as ended_reason), then the cleanup runs as it did.\n" % (
-                   end.get("reason"), data["scenarios"][0]["max_duration"], data["scenarios"][0]["max_duration"]))
+                   "interrupted" if end is not None else "stopped", _stop_reason(log), scenario["max_duration"],
+                   scenario["max_duration"])) + killed
+    elif killed:
+        how = "# Root ended by itself (%s), then its cleanup ran.\n" % scenario["expect"]["status"] + killed
     elif cut_short(log):
         how = ("# The run %s: this stops at its last recorded tick, %gs, after the\n"
                "# same calls; the calls still running then hang.\n" % (

@@ -285,12 +285,14 @@ class TreeTest:
 
     def run(self, max_duration: float = DEFAULT_MAX_DURATION, default_timeout: float = 30.0,
             observers: Sequence[Any] = (), stop_when: Optional[Callable[[], str]] = None,
-            max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT) -> TreeRun:
+            max_ticks: int = DEFAULT_MAX_TICKS, max_ticks_per_instant: int = DEFAULT_MAX_TICKS_PER_INSTANT,
+            kill_at: Optional[float] = None) -> TreeRun:
         """Run to SUCCESS/FAILURE (or ``max_duration`` simulated seconds, or until ``stop_when()``
         gives a reason); ``observers`` are :class:`~coordinator.runevents.RunObserver` (e.g. a
         RunStream writing a run log). A run that ticks ``max_ticks`` times, or ``max_ticks_per_instant``
         times without the simulated clock moving (a livelock), is stopped and raises
-        :class:`~coordinator.testing.limits.TickLimitError`, whatever the test expects."""
+        :class:`~coordinator.testing.limits.TickLimitError`, whatever the test expects. ``kill_at``: the
+        run ends then as a killed process's does (nothing more ticked, no cleanup begun after it)."""
         __tracebackhide__ = True
         self._check_inputs()
         clock = SimClock()
@@ -302,7 +304,7 @@ class TreeTest:
         del self.mocks.errors[:]
         with now_from(clock.now):  # a time given as `now` is the simulated time: the same on every run
             result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=[guard, *observers],
-                                tree=self.tree).run(max_duration, stop_when, guard)
+                                tree=self.tree).run(max_duration, stop_when, guard, kill_at)
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
         run = TreeRun(result, transport)

@@ -87,7 +87,7 @@ __all__ = ["DEFAULT_MAX_DURATION", "DEFAULT_MAX_TICKS", "DEFAULT_MAX_TICKS_PER_I
            "calls_diff", "load_scenario_file", "run_scenario_file", "run_scenarios"]
 
 _LIMITS = ("max_duration", "max_ticks", "max_ticks_per_instant")
-_SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS
+_SCENARIO_KEYS = ("name", "inputs", "stored", "mocks", "events", "expect") + _LIMITS + ("killed_at",)
 _EXPECT_COMMON = ("status", "calls", "blackboard", "reason", "duration")   # what "expect is a mapping with" names
 _EXPECT_KEYS = _EXPECT_COMMON + ("cleanup",)   # cleanup: for a tree with cleanup:
 _TOP_KEYS = ("tree", "modules", "scenarios")
@@ -119,7 +119,8 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
         check_cleanup(expect, at, tree, out.add)
     limits = {"max_duration": sm.number(sc, "max_duration", DEFAULT_MAX_DURATION, at, out),
               "max_ticks": sm.count(sc, "max_ticks", DEFAULT_MAX_TICKS, at, out),
-              "max_ticks_per_instant": sm.count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out)}
+              "max_ticks_per_instant": sm.count(sc, "max_ticks_per_instant", DEFAULT_MAX_TICKS_PER_INSTANT, at, out),
+              "killed_at": sm.number(sc, "killed_at", 0.0, at, out) if "killed_at" in sc else None}
     if not isinstance(sc.get("name", ""), str):
         out.add(pos_of(sc, "name", at), "name must be text, got %r" % (sc.get("name"),))
     test = None
@@ -243,7 +244,7 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     limits = s.limits
     try:   # the kit's tick limits, worded for a scenario (set where its TreeTest is made)
         run = s.test.run(max_duration=limits["max_duration"], max_ticks=limits["max_ticks"],
-                         max_ticks_per_instant=limits["max_ticks_per_instant"])
+                         max_ticks_per_instant=limits["max_ticks_per_instant"], kill_at=limits["killed_at"])
     except TickLimitError as exc:   # a FAIL whatever expect says
         return exc.run, [exc.hit]
     stopped = run.reason.startswith("stopped after %g s" % limits["max_duration"])

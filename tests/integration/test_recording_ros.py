@@ -159,3 +159,69 @@ def test_a_run_killed_with_kill_9_leaves_a_readable_log(ros_graph, tmp_path):
     assert "it was killed" in open(scenario).read()
     passed = bmtree("test", scenario, env=env)
     assert passed.returncode == 0 and "1 passed, 0 failed" in passed.stdout, passed.stdout + passed.stderr
+
+
+CLEANUP_TREE = """format: 1
+name: go_back
+root:
+  call: navigation.go_to
+  name: go to the kitchen
+  inputs: {place: kitchen}
+  timeout: 60
+cleanup:
+  sequence:
+    - call: speech.say
+      inputs: {text: "{ended}: {ended_reason}"}
+    - call: navigation.go_to
+      name: back to the charger
+      inputs: {place: living_room}
+      timeout: 60
+"""
+
+
+def _wait_for_starts(proc, log, n, what):
+    """Until the log shows ``n`` call starts."""
+    end = time.monotonic() + 60
+    while not (log.exists() and sum('"call_start"' in line for line in log.read_text().splitlines()) >= n):
+        assert proc.poll() is None, "bmtree run ended early"
+        assert time.monotonic() < end, "the log never showed " + what
+        time.sleep(0.05)
+
+
+def test_a_run_killed_with_kill_9_during_its_cleanup_replays_as_a_scenario_that_ends_there(ros_graph, tmp_path):
+    """Ctrl-C stops root (the drive), the cleanup speaks and drives back, kill -9 during that drive: the
+    scenario stops root when the run did, runs the cleanup until the log ends, and passes."""
+    slow = world(tmp_path, "crawl.yaml", speed=0.25)
+    start_sim_module(ros_graph, "navigation", slow)
+    start_sim_module(ros_graph, "speech")
+    tree = tmp_path / "go_back.yaml"
+    tree.write_text(CLEANUP_TREE)
+    log = tmp_path / "run.jsonl"
+    proc = subprocess.Popen(bmtree_cmd("run", str(tree), "-q", "--record", str(log)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        _wait_for_starts(proc, log, 1, "the drive")
+        proc.send_signal(signal.SIGINT)       # root stops, its drive cancelled; the cleanup runs
+        _wait_for_starts(proc, log, 3, "the drive back")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    run = read_log(str(log))
+    assert run.end is None
+    assert [r["target"] for r in run.of_type("call_start")] == ["navigation.go_to", "speech.say", "navigation.go_to"]
+    scenario = str(tmp_path / "killed.yaml")
+    env = dict(os.environ)
+    made = bmtree("replay", str(log), "--scenario", scenario, env=env)
+    assert made.returncode == 0, made.stdout + made.stderr
+    text = open(scenario).read()
+    data = yaml.safe_load(text)["scenarios"][0]
+    assert data["max_duration"] < data["killed_at"], text     # root stopped first, the cleanup cut later
+    assert data["expect"]["status"] == "failure" and "cleanup" not in data["expect"], text
+    said = data["expect"]["calls"][1]["speech.say"]["text"]
+    assert said.startswith("stopped: stopped after %g s while 'go to the kitchen' was running" % data["max_duration"])
+    assert "# It was killed at" in text and "while the cleanup ran" in text
+    passed = bmtree("test", scenario, env=env)
+    assert passed.returncode == 0 and "1 passed, 0 failed" in passed.stdout, passed.stdout + passed.stderr

@@ -346,7 +346,7 @@ def test_the_readme_gives_the_real_signatures_of_fail_reject_and_run():
     params = inspect.signature(TreeTest.run).parameters
     shown = ", ".join("%s=%r" % (k, p.default) for k, p in params.items() if k != "self")
     assert shown == ("max_duration=3600.0, default_timeout=30.0, observers=(), stop_when=None, max_ticks=100000, "
-                     "max_ticks_per_instant=10000")
+                     "max_ticks_per_instant=10000, kill_at=None")
     assert "`t.run(%s)`" % shown in section
 
 

@@ -1,0 +1,111 @@
+"""A run's lines for people: its calls, its stop and its summary, as ``bmtree run`` prints them at the
+end and ``replay``/``watch`` label them."""
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
+
+from py_trees.common import Status
+
+from coordinator.context import CallRecord, late_answer_text
+from coordinator.runevents import status_word
+
+if TYPE_CHECKING:
+    from coordinator.runner import RunResult
+
+__all__ = ["call_line", "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "shown_status", "stop_label",
+           "summary_lines"]
+
+
+def short_json(value: Any, width: int = 60) -> str:
+    """``value`` as compact JSON, cut to ``width`` characters: inputs on a summary line stay one line."""
+    text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), default=str)
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
+def call_line(started: float, target: Any, status: Any, duration: Optional[float], error: Any,
+              inputs: Any = None) -> str:
+    """One call of an end-of-run summary (the live one and ``bmtree replay``'s print the same lines);
+    ``inputs`` are given for the failing call: what it was asked is half of why it failed."""
+    dur = "%.3fs" % duration if duration is not None else "-"
+    line = "  +%7.3fs  %-26s %-11s %8s  %s" % (started, target, status, dur, error or "")
+    if inputs is not None:
+        line += "%sinputs %s" % ("  " if error else "", short_json(inputs))
+    return line.rstrip()
+
+
+def late_line(text: str) -> str:
+    """Under its call in an end-of-run summary (live and ``bmtree replay``): the answer that came after
+    the call had ended (``text``: its notice, which says when). Not a call's line: no ``+`` time."""
+    return " " * 14 + "late answer: " + text
+
+
+def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
+    """(status, error) shown for a call halted because the run was stopped from outside, instead of
+    the call's own "halted by the tree": ``interrupted`` for Ctrl-C, the limit for ``max_duration``."""
+    if interrupted:
+        return "interrupted", ""
+    return "halted", reason.split(" while ", 1)[0] or "the run was stopped"
+
+
+def cleanup_stop_label(reason: str) -> Tuple[str, str]:
+    """(status, error) shown for a call of a tree's cleanup halted when the cleanup was cut short,
+    instead of the call's own "halted by the tree": ``interrupted`` for a Ctrl-C, else its time limit
+    (``halted  did not end within 30 s (cleanup_timeout)``)."""
+    if reason.startswith("interrupted"):
+        return "interrupted", ""
+    return "halted", reason.split(" while ", 1)[0] or "the cleanup was cut short"
+
+
+def shown_status(result: RunResult, c: CallRecord, cleanup: Optional[Set[int]] = None,
+                 cut: Optional[Set[int]] = None) -> Tuple[str, str]:
+    """(status, error) of call ``c`` as an end-of-run summary shows it (and the kit's ``run.label``): a
+    call the stop from outside halted says so (:func:`stop_label`), and so does one halted when the
+    cleanup was cut short (:func:`cleanup_stop_label`: the calls :meth:`WithCleanup.end_cleanup` halted,
+    as ``bmtree replay`` finds them: halted after the tick before the one that halted the cleanup).
+    ``cleanup``, ``cut``: the ids of the cleanup's calls and of the cut ones, when known already."""
+    status, error = str(c.status), c.error
+    if status != "halted" or c.ended is None:
+        return status, error
+    if id(c) in (cut if cut is not None else {id(k) for k in result.cleanup_cut_calls}):
+        return cleanup_stop_label(result.cleanup_reason)
+    cleanup = cleanup if cleanup is not None else {id(k) for k in result.cleanup_calls}
+    if result.stopped_at is not None and c.ended >= result.stopped_at and id(c) not in cleanup:
+        return stop_label(result.status == Status.INVALID, result.reason)
+    return status, error
+
+
+def summary_lines(result: RunResult, tree_name: str) -> List[str]:
+    """The end-of-run summary: result (``INTERRUPTED`` for a run stopped by Ctrl-C), reason, every call
+    (the failing one with its inputs; those the stop from outside, or the end of a cut cleanup, halted
+    said so)."""
+    lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, status_word(result.status), result.duration,
+                                                   result.ticks)]
+    if result.reason and not result.succeeded:
+        lines.append("reason: %s" % result.reason)
+    lines.append("calls:")
+    cleanup = {id(c) for c in result.cleanup_calls}
+    cut = {id(c) for c in result.cleanup_cut_calls}
+    for c in [c for c in result.calls if id(c) not in cleanup] + [None] + list(result.cleanup_calls):
+        if c is None:
+            lines.extend(cleanup_lines(result))
+            continue
+        status, error = shown_status(result, c, cleanup, cut)
+        lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
+                               c.inputs if c is result.failed_call else None))
+        if c.late_at is not None:
+            lines.append(late_line(late_answer_text(c, result.started)))
+    return lines
+
+
+def cleanup_lines(result: RunResult) -> List[str]:
+    """The cleanup's line of an end-of-run summary (its calls follow it): how it ended, after which ending
+    of root; nothing for a tree without ``cleanup:``."""
+    if result.cleanup_status is None and not result.ended:
+        return []
+    if result.cleanup_status is None:
+        return ["cleanup (root %s): did not run" % result.ended]
+    said = {"SUCCESS": "succeeded", "FAILURE": "FAILED", "INVALID": "cut short"}[result.cleanup_status.value]
+    took = " in %.2f s" % result.cleanup_duration if result.cleanup_duration is not None else ""
+    why = ": %s" % result.cleanup_reason if result.cleanup_reason and result.cleanup_failed else ""
+    return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)]
