@@ -114,6 +114,26 @@ def test_run_stream_on_ros_topics_and_max_duration(ros_graph, ros_probe, tmp_pat
             ros_probe.close_collector(c)
 
 
+def _run_then_kill(tree, log, *signals):
+    """``bmtree run TREE --record LOG``; for each ``(n, signal)``, once the log shows ``n`` call starts,
+    the signal (the last one SIGKILL)."""
+    proc = subprocess.Popen(bmtree_cmd("run", tree, "-q", "--record", str(log)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        for n, sig in signals:
+            end = time.monotonic() + 60
+            while not (log.exists() and sum('"call_start"' in line for line in log.read_text().splitlines()) >= n):
+                assert proc.poll() is None, "bmtree run ended early"
+                assert time.monotonic() < end, "the log never showed %d call starts" % n
+                time.sleep(0.05)
+            proc.send_signal(sig)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+
+
 def test_a_run_killed_with_kill_9_leaves_a_readable_log(ros_graph, tmp_path):
     slow = world(tmp_path, "crawl.yaml", speed=0.25)
     start_sim_module(ros_graph, "navigation", slow)
@@ -121,21 +141,7 @@ def test_a_run_killed_with_kill_9_leaves_a_readable_log(ros_graph, tmp_path):
     runs = tmp_path / "runs"
     runs.mkdir()
     log = runs / "20260101-000000-abcdef-go_kitchen.jsonl"
-    proc = subprocess.Popen(bmtree_cmd("run", GO, "-q", "--record", str(log)), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env=dict(os.environ), stdin=subprocess.DEVNULL)
-    try:
-        end = time.monotonic() + 60
-        while not (log.exists() and any('"call_start"' in line and '"navigation.go_to"' in line
-                                        for line in log.read_text().splitlines())):
-            assert proc.poll() is None, "bmtree run ended early"
-            assert time.monotonic() < end, "the log never showed the navigation call"
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
+    _run_then_kill(GO, log, (2, signal.SIGKILL))   # once the drive started
     run = read_log(str(log))
     assert run.end is None
     assert [r["target"] for r in run.of_type("call_start")] == ["speech.say", "navigation.go_to"]
@@ -179,13 +185,6 @@ cleanup:
 """
 
 
-def _wait_for_starts(proc, log, n, what):
-    """Until the log shows ``n`` call starts."""
-    end = time.monotonic() + 60
-    while not (log.exists() and sum('"call_start"' in line for line in log.read_text().splitlines()) >= n):
-        assert proc.poll() is None, "bmtree run ended early"
-        assert time.monotonic() < end, "the log never showed " + what
-        time.sleep(0.05)
 
 
 def test_a_run_killed_with_kill_9_during_its_cleanup_replays_as_a_scenario_that_ends_there(ros_graph, tmp_path):
@@ -197,18 +196,8 @@ def test_a_run_killed_with_kill_9_during_its_cleanup_replays_as_a_scenario_that_
     tree = tmp_path / "go_back.yaml"
     tree.write_text(CLEANUP_TREE)
     log = tmp_path / "run.jsonl"
-    proc = subprocess.Popen(bmtree_cmd("run", str(tree), "-q", "--record", str(log)), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env=dict(os.environ), stdin=subprocess.DEVNULL)
-    try:
-        _wait_for_starts(proc, log, 1, "the drive")
-        proc.send_signal(signal.SIGINT)       # root stops, its drive cancelled; the cleanup runs
-        _wait_for_starts(proc, log, 3, "the drive back")
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
+    # Ctrl-C once the drive started (root stops, the cleanup runs), kill -9 once the drive back started
+    _run_then_kill(str(tree), log, (1, signal.SIGINT), (3, signal.SIGKILL))
     run = read_log(str(log))
     assert run.end is None
     assert [r["target"] for r in run.of_type("call_start")] == ["navigation.go_to", "speech.say", "navigation.go_to"]
