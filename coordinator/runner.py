@@ -48,6 +48,7 @@ __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner",
 KILL_AFTER = 1e-6
 """How long after ``kill_at`` a killed run ends (so that what came at ``kill_at`` itself is ticked)."""
 
+
 @dataclass
 class RunResult:
     status: Status

@@ -228,7 +228,7 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     status = "failure" if stop_at is not None else str((end or {}).get("status", "") or _root_status(log)).lower()
     if stopped is not None:  # what the cleanup was told (ended_reason) is the replayed stop's reason
         said = _stop_reason(log)
-        calls = _restated(calls, said, replayed_reason({"reason": said}, stopped))
+        calls = _restated(calls, said, replayed_reason(said, stopped))
     scenario["expect"] = {"status": status, "calls": calls}
     cleanup = (end or {}).get("cleanup")
     if isinstance(cleanup, dict) and cleanup.get("status") is not None:
@@ -289,10 +289,9 @@ def _cleanup_stop(log: RunLog) -> Optional[float]:
     return None if stop is None else math.ceil(float(log.records[stop].get("t") or 0.0) * 1e6) / 1e6
 
 
-def replayed_reason(end: Dict[str, Any], stop_at: float) -> str:
-    """The reason a scenario that stops at ``stop_at`` (``max_duration``) gives for the stop the run's
-    ``end`` says (``interrupted while 'go' was running`` -> ``stopped after 4.3 s while 'go' was running``)."""
-    reason = str(end.get("reason") or "")
+def replayed_reason(reason: str, stop_at: float) -> str:
+    """The reason a scenario that stops at ``stop_at`` (``max_duration``) gives for the stop the run
+    gave as ``reason`` (``interrupted while 'go' was running`` -> ``stopped after 4.3 s while 'go' was running``)."""
     return "stopped after %g s%s" % (stop_at, reason[len("interrupted"):] if reason.startswith("interrupted") else "")
 
 
