@@ -1,4 +1,4 @@
-"""The README's example of a retry's failure reason is what a run gives."""
+"""The README against what runs: a retry's failure reason, the topic-and-service module example."""
 from __future__ import annotations
 
 import os
@@ -28,3 +28,20 @@ def test_the_readmes_retry_reason_is_the_runs(tmp_path, sim_defs):
         readme = fh.read()
     assert "A `retry` above it that gave up adds the attempts:\n`%s`" % run.reason in readme
     assert '"reason":"%s"' % run.reason in readme
+
+
+def test_the_readmes_topic_and_service_module_is_the_example_files():
+    """The README shows modules/example/keywords.py's class as it is (the file runs in the integration tests)."""
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        section = fh.read().split("### A ROS topic or service as a module", 1)[1].split("\n### ", 1)[0]
+    shown = section.split("```python\n", 1)[1].split("```", 1)[0]
+    with open(os.path.join(ROOT, "modules", "example", "keywords.py"), encoding="utf-8") as fh:
+        code = fh.read()
+
+    def tokens(text):   # the code's words, wrapped anywhere, without comments and type annotations
+        kept = " ".join(line.split("#")[0] for line in text.split("class Keywords", 1)[1].splitlines())
+        for annotation in (": Any", " -> None", " -> Dict[str, Any]", ": String"):
+            kept = kept.replace(annotation, "")
+        return kept.split()
+
+    assert tokens(shown) == tokens(code)
