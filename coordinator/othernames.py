@@ -117,6 +117,12 @@ for _name, _tools, _kinds, _text in _IDIOMS:
 OTHER_OPTIONS: Dict[str, Tuple[Tuple[str, ...], str]] = {
     "remapping": (("inputs", "outputs"), "SMACH's remapping is inputs: (input name: $key) and outputs: "
                                          "(output name: key)"),
+    "transitions": (("status",), "SMACH's transitions are a sequence's order (the next state when one succeeds) "
+                                 "and, to route on how a call ended, its status: KEY with a switch: $KEY over the "
+                                 "outcomes after it"),
+    "outcome_map": (("policy", "succeed_on"), "SMACH's outcome_map is parallel's succeed_on: [child names] (those "
+                                              "children succeed: it succeeds, halting the others) or policy: all, "
+                                              "one or first_success"),
     "num_attempts": (("child",), "BehaviorTree.CPP's num_attempts is retry's value: retry: N"),
     "num_cycles": (("child",), "BehaviorTree.CPP's num_cycles is repeat's value: repeat: N"),
     "msec": (("child",), "BehaviorTree.CPP's msec is timeout's value, in seconds: timeout: SECONDS"),
@@ -128,6 +134,7 @@ OTHER_OPTIONS: Dict[str, Tuple[Tuple[str, ...], str]] = {
                              "switch: $key, with cases: {value: node} and default: node"),
 }
 OTHER_OPTIONS["failure_count"] = OTHER_OPTIONS["success_count"]
+OTHER_OPTIONS["child_termination_cb"] = OTHER_OPTIONS["outcome_map"]
 OTHER_OPTIONS.update(("case_%d" % n, OTHER_OPTIONS["variable"]) for n in range(1, 10))
 
 # BehaviorTree.CPP's pre- and post-conditions, which any node takes there (by name, in lower case): what bmtree

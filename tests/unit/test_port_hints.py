@@ -253,3 +253,18 @@ root:
         "'outputs:' or a 'set', or declare it under 'inputs:')",
         "t.yaml:6:14: retry takes its count as its value and its options beside it, not in a mapping: "
         "{retry: 2, child: …} (in block form, child: on a line of its own below retry:, at its indentation)"]
+
+
+def test_smachs_transitions_and_outcome_map_are_named_with_what_bmtree_writes(tmp_path, capsys):
+    status, lines = check(tmp_path, capsys, "format: 1\nroot:\n  sequence:\n    - call: speech.say\n"
+                                            "      inputs: {text: hi}\n      transitions: {succeeded: next}\n"
+                                            "    - parallel:\n        - wait: 1\n      outcome_map: {done: {a: x}}\n")
+    assert status == 2
+    assert lines[0].startswith("t.yaml:6:7: unknown option 'transitions' for call (call takes check_success, ")
+    assert lines[0].endswith("): SMACH's transitions are a sequence's order (the next state when one succeeds) and, "
+                             "to route on how a call ended, its status: KEY with a switch: $KEY over the outcomes "
+                             "after it")
+    assert lines[1] == ("t.yaml:9:7: unknown option 'outcome_map' for parallel (parallel takes name, policy, succeed_on, "
+                        "synchronise): SMACH's outcome_map is parallel's succeed_on: [child names] (those children "
+                        "succeed: it succeeds, halting the others) or policy: all, one or first_success")
+    assert OTHER_OPTIONS["child_termination_cb"] == OTHER_OPTIONS["outcome_map"]
