@@ -7,6 +7,7 @@ where the run's failures started (by the live reason's rule) and the calls that 
 """
 from __future__ import annotations
 
+import bisect
 import json
 import types
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Set, TextIO, Tuple
@@ -77,8 +78,9 @@ def _skeleton(nodes: List[Dict[str, Any]]) -> Tuple[Any, Dict[int, Any]]:
 
 class Failure(NamedTuple):
     """Where a failure started: its place among the status changes, its tick record, node and message;
-    for one the run got past, the node that did (``by``: recovered, or went on), and the include it
-    was in with the arguments it had then (``within``)."""
+    for one the run got past, the nearest ancestor that did not pass it up (``by``: it took another
+    child or ran it again, ``recovered`` if it then succeeded), and the include it was in with the
+    arguments it had then (``within``)."""
 
     seq: int
     index: int
@@ -236,22 +238,24 @@ class Replay:
     def failures(self) -> Tuple[Optional[Failure], List[Failure]]:
         """Where failures started, over the whole log, by the rule of the live reason
         (:class:`coordinator.reasons.FailureTrail`): the one that ended the run (None if none did:
-        it succeeded, or was stopped from outside), and the others before it, in order: those an
-        ancestor recovered from (it succeeded later) and those the tree went on past (a ``for_each``
-        took its next element, a selector its next child, a retry made its next attempt)."""
+        it succeeded, or was stopped from outside), and the others before it, in order, each with the
+        nearest ancestor that went on past it (a ``for_each`` took its next element, a selector its
+        next child, a retry made its next attempt), ``recovered`` if that ancestor then succeeded."""
         trail = FailureTrail(self.parent.get)
         status: Dict[int, str] = {}
         args = IncludeArgs.of_nodes(self.nodes.values())
         found: Dict[int, Failure] = {}
+        at: Dict[int, Tuple[int, int]] = {}   # an origin's seq -> its tick record and place in it
+        timeline: Dict[Any, List[Tuple[int, int, str]]] = {}   # node -> its changes (record, place, status)
         for index, rec in enumerate(self.log.records):
             kind = rec.get("type")
             if kind == "write":
                 args.write(str(rec.get("key")), rec.get("value"))
             if kind != "tick":
                 continue
-            failed_now = set()
+            changes = rec.get("changes") or []
             here = []
-            for change in rec.get("changes") or []:
+            for pos, change in enumerate(changes):
                 nid, new = change[0], change[1]
                 message = change[2] if len(change) > 2 else ""
                 kids = self.kids.get(nid, [])
@@ -259,18 +263,18 @@ class Replay:
                     self.nodes.get(nid, {}).get("kind"), not kids, message,
                     any(status.get(k) == "FAILURE" for k in kids))
                 status[nid] = new
-                if new == "FAILURE":
-                    failed_now.add(nid)
+                timeline.setdefault(nid, []).append((index, pos, new))
                 o = trail.change(nid, Status(new), origin, message, float(rec.get("t") or 0.0))
                 if o is not None:
-                    here.append(o)
-            for o in here:  # the nearest include above it, with its arguments then; who went on
+                    here.append((o, pos))
+            for o, pos in here:  # the nearest include above it, with its arguments then; who went on
                 up = trail.ancestors(o.behaviour)
                 inc = next((a for a in up if self.nodes.get(a, {}).get("kind") == "include"), None)
+                at[o.seq] = (index, pos)
                 found[o.seq] = Failure(o.seq, index, o.behaviour, o.message, o.time,
-                                       by=next((a for a in up if a not in failed_now), None),
+                                       by=self._went_on(changes, pos, o.behaviour),
                                        within=self._named(args, inc) if inc is not None else "")
-            args.tick(rec.get("changes") or [])
+            args.tick(changes)
         ended = None
         end = self.log.end
         if end is not None and end.get("status") == "FAILURE" and self.stop_tick() is None:
@@ -281,10 +285,41 @@ class Replay:
         for o in trail.origins:
             if (ended is not None and o.seq >= ended.seq) or o.behaviour in self.cleanup_ids:
                 continue
-            by = trail.recovered_by(o)
             f = found[o.seq]
-            others.append(f._replace(by=by, recovered=True) if by is not None else f)
+            if f.by is not None:
+                f = f._replace(recovered=_ended_in_success(timeline.get(f.by, []), *at[o.seq]))
+            others.append(f)
         return ended, others
+
+    def _went_on(self, changes: List[Any], pos: int, node: Any) -> Optional[int]:
+        """The nearest ancestor of ``node`` (whose failure is change ``pos`` of a tick's ``changes``)
+        that did not pass that failure up: it took another child, ran the child again, succeeded, or
+        kept running. Ancestors that failed later in the same tick for another reason (a selector whose
+        next child failed at once) went on all the same, so "failed in this tick" is not enough: the
+        failure is passed up only by a parent whose next change is FAILURE with nothing under it run
+        in between (a parallel's other children are ticked anyway). None when it reached root (above
+        it, a ``with_cleanup`` running the cleanup did not get past it)."""
+        at = pos
+        for a in self._ancestors(node):
+            if self.nodes.get(a, {}).get("kind") == "with_cleanup":
+                return None
+            nxt = next((i for i in range(at + 1, len(changes)) if changes[i][0] == a), None)
+            if nxt is None or changes[nxt][1] != "FAILURE":
+                return a
+            if self.nodes.get(a, {}).get("kind") != "parallel" and any(
+                    changes[i][1] != "INVALID" and a in self._ancestors(changes[i][0])
+                    for i in range(at + 1, nxt)):
+                return a
+            at = nxt
+        return None
+
+    def _ancestors(self, node: Any) -> List[Any]:
+        out: List[Any] = []
+        node = self.parent.get(node)
+        while node is not None and len(out) < 1000:
+            out.append(node)
+            node = self.parent.get(node)
+        return out
 
     def failing_call(self, f: Failure) -> Tuple[Optional[Dict[str, Any]], Optional[Dict[str, Any]]]:
         """The call of failure ``f`` (made at or under its node before it: the failed call, or the
@@ -344,6 +379,15 @@ class Replay:
         if n is None:
             return "?"
         return "'%s' %s:%s" % (n.get("name"), n.get("file", "?"), n.get("line", "?"))
+
+
+def _ended_in_success(changes: List[Tuple[int, int, str]], index: int, pos: int) -> bool:
+    """Whether a node's first end after change ``pos`` of record ``index`` (its ``changes``, in order) is
+    SUCCESS: the node that went on past a failure recovered from it (halted or failed: it did not)."""
+    for _i, _p, new in changes[bisect.bisect_right(changes, (index, pos, "\uffff")):]:
+        if new != "RUNNING":
+            return new == "SUCCESS"
+    return False
 
 
 def _root_and_cleanup(nodes: Dict[int, Dict[str, Any]], kids: Dict[Any, List[int]]) -> Tuple[Any, Set[int]]:

@@ -38,7 +38,7 @@ from modules.discovery import PARAM_ROOT, announcement, node_alive
 from modules.runtime import BasicModule, BindingError, ModuleServer
 
 __all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_parser", "main", "renamed_by_argument",
-           "run_module"]
+           "run_module", "serving_line"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -239,7 +239,7 @@ class ModuleNode:
                            rospy.get_node_uri(), getattr(self.impl, "call_limit", None))
         patiently(lambda: rospy.set_param(self._param, ann))
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
-        rospy.loginfo("basic module %r serving %s", self.definition.name, ", ".join(self.definition.functions))
+        rospy.loginfo("basic module %r %s", self.definition.name, serving_line(self.definition))
         injected = _injected(self.definition.name, self.impl, faults)
         if injected:
             log.info("%s", injected)
@@ -386,6 +386,18 @@ def _where(exc: BaseException, spec: str) -> str:
     frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith(here)
               and "importlib" not in f.filename]
     return "%s:%s" % (frames[-1].filename, frames[-1].lineno) if frames else spec
+
+
+def serving_line(definition: ModuleDefinition) -> str:
+    """What a started node serves, for its start-up line: ``serving go_to, approach; events: arrived``.
+    An events-only module (``"Functions": []``, a topic turned into events: SMACH's MonitorState) says
+    ``serving no functions; events: heard``, not a bare ``serving`` that reads as if its functions
+    were lost."""
+    functions = ", ".join(definition.functions) or "no functions"
+    events = ", ".join(definition.events)
+    if events:
+        return "serving %s; events: %s" % (functions, events)
+    return "serving %s%s" % (functions, " and no events" if not definition.functions else "")
 
 
 def renamed_by_argument(definition: ModuleDefinition, argv: Optional[List[str]] = None) -> ModuleDefinition:
