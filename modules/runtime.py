@@ -286,7 +286,7 @@ class ModuleServer:
                     out = work(**call.inputs)
                 if isinstance(out, Outcome):
                     outcome = out
-                else:
+                elif not ctx.cancelled.is_set():  # a cancelled call's code may return early, without outputs
                     result = self._outputs(call, out)
             except Failure as exc:
                 result = self._result(call, CallStatus.FAILED, str(exc) or "failed")

@@ -260,3 +260,31 @@ def test_a_stopping_node_can_wait_for_the_answers_of_its_calls_in_flight(sim_def
     s.server.handle_cancel(CancelRequest(hung, "speech", "listen").encode())
     assert s.server.answers_sent(calls, 5.0)
     assert s.result(hung).status == "cancelled"
+
+
+def test_a_function_that_returns_early_on_cancel_is_answered_cancelled_without_an_outputs_warning(sim_defs):
+    """The README's pattern (``if not self.context.sleep(…): return``) returns no outputs: the call was
+    cancelled, so they are not the author's bug (the sim's go_to logged "invalid outputs" on every halt)."""
+    import logging
+
+    class Kept(logging.Handler):
+        def __init__(self):
+            super().__init__(logging.WARNING)
+            self.messages = []
+
+        def emit(self, record):
+            self.messages.append(record.getMessage())
+
+    kept = Kept()
+    logging.getLogger("bmtree.module").addHandler(kept)
+    try:
+        world = World.load()
+        world.speed = 2.0
+        s = Served(sim_defs["navigation"], Navigation(world))
+        first = s.call("go_to", place="kitchen")
+        time.sleep(0.1)
+        s.server.handle_cancel(CancelRequest(first, "navigation", "go_to").encode())
+        assert s.result(first).status == "cancelled"
+    finally:
+        logging.getLogger("bmtree.module").removeHandler(kept)
+    assert not [m for m in kept.messages if "invalid outputs" in m], kept.messages
