@@ -32,7 +32,7 @@ import time
 from typing import Any, Callable, Dict, Iterator, List, Optional
 
 __all__ = ["Interrupts", "StopSignals", "registering", "stop_requested", "leave_graph", "bound_master_questions",
-           "LEAVE_BOUND"]
+           "shut_rospy_down", "LEAVE_BOUND"]
 
 log = logging.getLogger("bmtree.nodelife")
 
@@ -185,13 +185,9 @@ class StopSignals:
             return
 
         def steps() -> None:
-            if not rospy.is_shutdown():
-                rospy.signal_shutdown("signal-%d" % self.signal if self.signal else "stopped")
-                # a shutdown another thread began (the master kicked this node out) woke us with rospy's
-                # first hooks and runs the others still (the node notes why there): wait for them
-                deadline = time.monotonic() + 2.0
-                while not rospy.is_shutdown() and time.monotonic() < deadline:
-                    time.sleep(0.01)
+            # a shutdown another thread began (the master kicked this node out) woke us with rospy's
+            # first hooks and runs the others still (the node notes why there): shut_rospy_down waits
+            shut_rospy_down("signal-%d" % self.signal if self.signal else "stopped")
             if cleanup is not None:
                 cleanup()
 
@@ -222,6 +218,38 @@ def _wake_registration_thread() -> Callable[[str], None]:
     return wake
 
 
+def shut_rospy_down(reason: str, wait: float = 2.0) -> None:
+    """``rospy.signal_shutdown(reason)``, then wait (at most ``wait`` s) for ``rospy.is_shutdown()``.
+
+    A shutdown another thread began (a shutdown request of the node, run in rospy's XML-RPC thread)
+    makes ``signal_shutdown`` return at once, that thread still unregistering the node's topics:
+    a process that left then would leave its registrations with the master."""
+    import rospy
+
+    if rospy.is_shutdown():
+        return
+    rospy.signal_shutdown(reason)
+    deadline = time.monotonic() + wait
+    while not rospy.is_shutdown() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def _first_preshutdown_hook(hook: Callable[[str], None]) -> None:
+    """``hook`` among rospy's pre-shutdown hooks, before the others: the first of those (its
+    RegManager's, added by ``init_node``) unregisters and closes every topic of the node."""
+    import rospy.core
+
+    rospy.core.add_preshutdown_hook(hook)
+    hooks = getattr(rospy.core, "_preshutdown_hooks", None)
+    lock = getattr(rospy.core, "_shutdown_lock", None)
+    if not isinstance(hooks, list) or lock is None:  # another rospy: where add_preshutdown_hook put it
+        return
+    with lock:
+        if hook in hooks:
+            hooks.remove(hook)
+            hooks.insert(0, hook)
+
+
 def stop_requested() -> bool:
     """True once the process's :class:`StopSignals` saw a stop: long start-up waits end early."""
     return _installed is not None and _installed.requested
@@ -238,6 +266,9 @@ class Interrupts:
     machine unreachable) for as long as it does not: a second signal there (not one re-sent in
     the same burst) ends the process at once with ``exit_code``. :meth:`restore` puts the previous
     handlers back.
+
+    With :meth:`stop_on_shutdown_request`, a shutdown of rospy begun outside the main thread
+    (``rosnode kill``, a node of the same name) stops the main thread as SIGINT does.
     """
 
     def __init__(self, exit_code: int = 3) -> None:
@@ -250,6 +281,13 @@ class Interrupts:
         self._previous: Dict[int, Any] = {}
         #: called (in the signal handler: take no lock) when a signal is held inside ``registering()``
         self.on_held: List[Callable[[], None]] = []
+        #: rospy's reason, once a shutdown of rospy begun in another thread stopped the process
+        self.shutdown_request = ""
+        self._bound: Callable[[], float] = lambda: 0.0
+        self._told: Optional[Callable[[str], None]] = None
+        self._done = False  # the work is over: a shutdown request no longer stops it
+        self._leaving = threading.Event()  # the process leaves the graph: a held shutdown goes on
+        self._request_thread: Optional[threading.Thread] = None  # rospy's thread that runs the request
         for sig in (signal.SIGINT, signal.SIGTERM):
             self._previous[sig] = signal.getsignal(sig)
             signal.signal(sig, self._on_signal)
@@ -289,8 +327,69 @@ class Interrupts:
                 self._pending = False
                 raise KeyboardInterrupt
 
+    def stop_on_shutdown_request(self, bound: Callable[[], float],
+                                 told: Optional[Callable[[str], None]] = None) -> None:
+        """Stop the main thread as SIGINT does when rospy's shutdown begins in another thread.
+
+        ``rosnode kill`` (the node's XML-RPC ``shutdown``), or the master when a node of the same
+        name registers, makes rospy's XML-RPC thread shut rospy down: its first pre-shutdown hook
+        unregisters and closes every topic, and the main thread went on with nothing to send its
+        cancels and cleanup on. Here a hook that goes before it tells ``told(reason)`` (in that
+        thread; not for a process already stopping), raises KeyboardInterrupt in the main thread
+        (held inside :func:`registering` as a signal is), and holds rospy's shutdown, topics open,
+        until :meth:`leaving` or for ``bound()`` seconds (asked then: the cleanup's limit, and a
+        margin). Call once rospy is initialized. A shutdown this process begins itself (its
+        leave, from any thread, after :meth:`leaving`; or in the main thread) is not held."""
+        self._bound, self._told = bound, told
+        _first_preshutdown_hook(self._on_shutdown_request)
+
+    def _on_shutdown_request(self, reason: str) -> None:
+        if self._leaving.is_set() or threading.current_thread() is threading.main_thread():
+            return  # this process's own leave: nothing to hold (the main thread would wait for itself)
+        self.shutdown_request = reason or "no reason given"
+        self._request_thread = threading.current_thread()
+        if not self._done and self.last_signal is None:  # not stopping already (Ctrl-C, the run's end)
+            if self._told is not None:
+                try:
+                    self._told(self.shutdown_request)
+                except Exception:  # saying so must not keep the stop from happening
+                    log.exception("telling of the shutdown request")
+            main = threading.main_thread().ident
+            if main is not None:
+                signal.pthread_kill(main, signal.SIGINT)  # also wakes it from a blocking wait
+        try:
+            bound = max(0.0, float(self._bound()))
+        except Exception:
+            log.exception("the bound of a shutdown request")
+            bound = 0.0
+        if not self._leaving.wait(bound):
+            sys.stderr.write("the process did not leave within %g s of the shutdown request (%s): rospy shuts "
+                             "down now, its topics closed\n" % (bound, self.shutdown_request))
+            sys.stderr.flush()
+
+    def done(self) -> None:
+        """The work a shutdown request stops is over: a later one only waits for :meth:`leaving`."""
+        self._done = True
+
+    def leaving(self) -> None:
+        """The process leaves the ROS graph: a shutdown request held since goes on (rospy shuts
+        down), and one that comes later is this process's own."""
+        self._done = True
+        self._leaving.set()
+
+    def request_answered(self, timeout: float) -> bool:
+        """Wait (at most ``timeout`` s) for the thread of a held shutdown request to end: rospy's
+        shutdown goes on there after :meth:`leaving`, and only then answers the request (a process
+        that exits first drops the answer: ``rosnode kill`` says it failed). True unless it still runs."""
+        thread = self._request_thread
+        if thread is None or thread is threading.current_thread():
+            return True
+        thread.join(timeout)
+        return not thread.is_alive()
+
     def restore(self) -> None:
         global _interrupts
+        self.leaving()
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         if _interrupts is self:

@@ -9,7 +9,7 @@ import time
 from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
-from comm.nodelife import Interrupts, leave_graph
+from comm.nodelife import Interrupts, leave_graph, shut_rospy_down
 from coordinator.cliutil import (
     EXIT_ENV,
     EXIT_FAILED,
@@ -24,7 +24,7 @@ from coordinator.cliutil import (
 )
 from coordinator.errors import TreeError, TreeErrors, UsageError
 
-__all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line"]
+__all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line", "shutdown_notice"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -32,6 +32,11 @@ PROJECT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMO_TREE = os.path.join(PROJECT, "trees", "find_apple.yaml")
 ANNOUNCED_EVERY = 0.2  # s between looks for the announcement of a module not given with --modules
 PREFLIGHT_AT_LEAST = 2.0  # s the preflight has even when the --wait before it is used up
+#: s a shutdown request of the run's node holds rospy's shutdown beyond the cleanup's own limit:
+#: root halted, the summary, the run's topics unregistered (each master question bounded, 2 s)
+SHUTDOWN_MARGIN = 5.0
+NOTICE_FIRST = 1.0  # s a shutdown request waits for its notice to be in the run before it stops it
+REQUEST_ANSWERED = 3.0  # s the leave waits for rospy to end the shutdown it held and answer the request
 
 
 def _report(result: Any, tree_name: str) -> None:
@@ -41,14 +46,17 @@ def _report(result: Any, tree_name: str) -> None:
         print(line)
 
 
-def interrupted_line(result: Any, started: bool) -> str:
+def interrupted_line(result: Any, started: bool, request: str = "") -> str:
     """What ``bmtree run`` says when a stop signal ended it (``started``: the tree was ticking; ``result``:
-    the run's, None if it had none): what happened to the calls, then how the cleanup, if any, went."""
+    the run's, None if it had none; ``request``: rospy's reason when a shutdown request of the run's node
+    stopped it, not Ctrl-C): what happened to the calls, then how the cleanup, if any, went."""
+    by = " by a shutdown request of its node (%s)" % request if request else ""
     if not started:
-        return "interrupted during start-up: nothing was called"
+        return "interrupted during start-up%s: nothing was called" % by
     mine = {id(c) for c in getattr(result, "cleanup_calls", None) or []}
     sent = result is not None and any(id(c) not in mine for c in result.calls)
-    line = "interrupted: running calls were cancelled" if sent else "interrupted before any call was sent"
+    line = ("interrupted%s: running calls were cancelled" % by if sent
+            else "interrupted%s before any call was sent" % by)
     status = getattr(result, "cleanup_status", None)
     if status is None:
         return line + (", and the cleanup did not run" if getattr(result, "ended", "") else "")
@@ -57,10 +65,49 @@ def interrupted_line(result: Any, started: bool) -> str:
         return line + ", then the cleanup ran"
     if status.value == "INVALID" or why.startswith("interrupted"):
         where = why.partition(" while ")[2]
-        return line + ", then the cleanup was cut short by a second Ctrl-C" + (" while %s" % where if where else "")
+        return line + ", then the cleanup was cut short by %s" % ("Ctrl-C" if request else "a second Ctrl-C") + (
+            " while %s" % where if where else "")
     if why.startswith("did not end within"):
         return line + ", then the cleanup was cut short: %s" % why
     return line + ", then the cleanup failed: %s" % why
+
+
+def shutdown_notice(node: str, reason: str) -> str:
+    """What a run says when its node is asked to shut down (rospy's ``reason``): that it stops as on
+    Ctrl-C, and who asked, since nobody at its terminal did."""
+    if "new node registered with same name" in reason:
+        who = "another node registered with this run's node name %s, so the ROS master shut it down" % node
+    elif reason.startswith("external shutdown request"):
+        who = "this run's node %s was asked to shut down (rosnode kill?)" % node
+    else:
+        who = "rospy shuts this run's node %s down" % node
+    return "%s: %s; stopping the run as Ctrl-C does" % (who, reason)
+
+
+class _RequestNotice:
+    """Tells a shutdown request (called in rospy's XML-RPC thread, before the run is stopped): a
+    notice in the run once it ticks (display, run log and stream), handed to the ticking thread
+    and waited for (bounded) so that it comes before the stop's own; on stderr otherwise."""
+
+    def __init__(self) -> None:
+        self.ctx: Any = None  # the run's context, once it ticks
+
+    def __call__(self, reason: str) -> None:
+        import rospy
+
+        from coordinator.runevents import Notice
+
+        text = shutdown_notice(rospy.get_name(), reason)
+        ctx = self.ctx
+        if ctx is not None:
+            notice = Notice("shutdown_request", text)
+            ctx.inbox.put(notice)
+            end = time.monotonic() + NOTICE_FIRST
+            while time.monotonic() < end:
+                if any(n is notice for n in ctx.notices):
+                    return
+                time.sleep(0.005)
+        err(text)
 
 
 def _warn_without_blackboard() -> None:
@@ -329,6 +376,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 err("warning: %s" % hint)
             transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
             stream_sink = transport.stream_sink()
+            # rospy initialized: a shutdown request of its node (rosnode kill) stops the run as Ctrl-C does, ROS up
+            request_notice = _RequestNotice()
+            interrupts.stop_on_shutdown_request(lambda: SHUTDOWN_MARGIN + (
+                tree.cleanup_timeout if tree is not None and tree.cleanup is not None else 0.0), request_notice)
             from coordinator.watch import STREAM_NS
 
             for other in [] if args.sim else _other_runs():  # a private graph has no other run
@@ -376,8 +427,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 observers=[recorder, steer] + quiet_notices, tree=tree, gate=steer)
             guard.wait_back()  # no first tick while the master is away (bounded)
         guard.stop()  # from the first tick on, the run's master watch tells (notices)
+        request_notice.ctx = ctx
         try:
             result = runner.run(args.max_duration)
+            interrupts.done()  # a shutdown request from now on only waits for the leave
         finally:
             if view is not None:
                 view.stop()
@@ -386,7 +439,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
         stopped_at = interrupts.last_signal
-        err(interrupted_line(runner.result if runner is not None else None, runner is not None))
+        err(interrupted_line(runner.result if runner is not None else None, runner is not None,
+                             interrupts.shutdown_request))
         if runner is not None and runner.result is not None and tree is not None:
             with interrupts.held(again_exits=False):  # what it did and where its log is, before a second Ctrl-C
                 _report(runner.result, tree.name)
@@ -398,7 +452,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             with interrupts.held(again_exits=False):  # until the leave takes the signals (bounded)
                 _leave_graph(transport, master_gone=guard is not None and (guard.expired or guard.down),
-                             stopped_at=stopped_at)
+                             stopped_at=stopped_at, interrupts=interrupts)
         except KeyboardInterrupt:
             pass
         interrupts.restore()
@@ -419,12 +473,15 @@ def _start_guard(limit: float, interrupts: Interrupts) -> Any:
     return StartupGuard(limit, err, interrupts).start()
 
 
-def _leave_graph(transport: Any, master_gone: bool = False, stopped_at: Optional[float] = None) -> None:
+def _leave_graph(transport: Any, master_gone: bool = False, stopped_at: Optional[float] = None,
+                 interrupts: Optional[Interrupts] = None) -> None:
     """Unregister everything this process registered with the master (also when a stop signal
     came before the transport was made: ``init_node`` may have registered already), bounded
     (:func:`comm.nodelife.leave_graph`): a master that does not answer within a few seconds, or
     ``master_gone`` (it stopped answering during start-up), is left without unregistering, said in
-    one line; a second stop signal (after the one at ``stopped_at``, if any) leaves at once."""
+    one line; a second stop signal (after the one at ``stopped_at``, if any) leaves at once. A
+    shutdown request that ``interrupts`` hold goes on once the run's topics are unregistered, and is
+    waited for (bounded): its thread unregisters the rest."""
     import rospy
 
     from coordinator.watch import quiet_unregistering
@@ -435,8 +492,12 @@ def _leave_graph(transport: Any, master_gone: bool = False, stopped_at: Optional
     def steps() -> None:
         if transport is not None:
             transport.close()
+        if interrupts is not None:
+            interrupts.leaving()
         if rospy.core.is_initialized():
-            rospy.signal_shutdown("bmtree run finished")
+            shut_rospy_down("bmtree run finished")
+        if interrupts is not None:
+            interrupts.request_answered(REQUEST_ANSWERED)
 
     with quiet_unregistering():  # a master that is gone: one warning per topic, for nothing left to undo
         leave_graph(steps, err, master_down=master_gone, stopped_at=stopped_at)
