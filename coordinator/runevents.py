@@ -37,7 +37,8 @@ class Notice:
     call the run had given up on, and a ``retry`` may have sent it again)."""
 
     # master_down, master_back, other_run, blackboard_down, blackboard_back, late_answer; cleanup (a run
-    # stopped from outside runs its tree's cleanup), cleanup_failed (the cleanup failed or was cut short)
+    # stopped from outside runs its tree's cleanup), cleanup_failed (the cleanup failed or was cut short),
+    # shutdown_request (the run's node was asked to shut down: rosnode kill, a node of the same name)
     what: str
     text: str
     call_id: str = ""   # the call a late answer answers
