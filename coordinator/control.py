@@ -1,4 +1,4 @@
-"""Steering a running tree (``bmtree run --control``): pause, resume, step, breakpoints,
+"""Steering a running tree (``bmtree run --control``): pause, resume, step, stop, breakpoints,
 forced outcomes and tree-blackboard writes, over a request/reply topic pair.
 
 Requests are JSON on ``/bmtree/run/control_request`` (``{"id", "command", ...}``); every
@@ -13,6 +13,12 @@ taken in (pending calls finish; their timeouts keep counting and are seen at the
 An answer taken in while paused is told at once (``on_call_answer``: the run stream's
 ``call_answer``), so viewers do not show an answered call as running until the next tick.
 
+``stop`` is another node's way to preempt the task (SMACH's ``request_preempt``): the runner takes
+it (:meth:`Controller.take_stop`) and stops root as ``--max-duration`` does, so also while paused.
+
+A node is named by its ``name`` or, when several share it, by ``NAME@ID`` (its id in the run
+stream's ``nodes`` table): a command never applies to several nodes at once.
+
 A request may name the run it is for (``to``: the run's ROS node, as ``bmtree watch`` sends
 it): another run on the same master leaves it alone.
 """
@@ -20,6 +26,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import queue
 import threading
 import time
@@ -38,7 +45,7 @@ __all__ = ["Controller", "ControlClient", "ros_controller", "parse_command", "RE
 
 REQUEST = "/bmtree/run/control_request"
 REPLY = "/bmtree/run/control_reply"
-COMMANDS = {"pause": [], "resume": [], "step": [], "break": ["node"], "clear": ["node"],
+COMMANDS = {"pause": [], "resume": [], "step": [], "stop": [], "break": ["node"], "clear": ["node"],
             "force": ["node", "outcome"], "set": ["key", "value"]}
 MAX_REQUEST = 64 * 1024
 
@@ -96,6 +103,8 @@ class Controller(RunObserver):
         self._wrapped: Dict[Any, bool] = {}
         self._flying: Dict[str, Any] = {}  # call_id -> CallRecord of the calls in flight
         self._told: Set[str] = set()  # answers told while paused
+        self._stop = ""  # the reason of a stop accepted and not yet taken by the runner
+        self._stopped = False  # a stop was accepted: a second one is refused
 
     # from any thread ----------------------------------------------------------------------
     def submit(self, command: Dict[str, Any]) -> None:
@@ -114,6 +123,19 @@ class Controller(RunObserver):
     def on_call_end(self, record: Any) -> None:
         self._flying.pop(record.call_id, None)
         self._told.discard(record.call_id)
+
+    def take_stop(self) -> str:
+        """The reason of a ``stop`` accepted since the last call (``stopped by control (/node)``), or '':
+        the runner stops root with it (as ``--max-duration`` does), once."""
+        why, self._stop = self._stop, ""
+        return why
+
+    def unpause(self, why: str) -> None:
+        """A run stopped from outside (Ctrl-C) while paused: the pause ends (said to the viewers), or its
+        cleanup would wait out its time limit without a tick."""
+        if self.paused:
+            self.paused = False
+            self._answer({"command": "resume", "by": "bmtree"}, True, why)
 
     def may_tick(self) -> bool:
         """Apply the commands that came; True if the runner may tick now."""
@@ -153,10 +175,77 @@ class Controller(RunObserver):
         except Exception:  # a reply that cannot be sent must not stop the run
             pass
 
-    def _nodes(self, name: Any) -> List[Any]:
+    def _nodes(self, name: Any) -> Tuple[List[Any], str]:
+        """The nodes ``name`` designates (all so named; ``NAME@ID``/``@ID``: the one of that id in the run
+        stream's ``nodes`` table), or why none."""
         from coordinator.runstream import preorder
 
-        return [b for b in preorder(self.root) if b.name == name] if self.root is not None else []
+        every = preorder(self.root)
+        named = [b for b in every if b.name == name]
+        if named or not isinstance(name, str):
+            return named, ""
+        head, at, num = name.rpartition("@")
+        if at and num.isdigit():
+            if int(num) >= len(every):
+                return [], "no node of id %s in this tree (its ids are 0 to %d)" % (num, len(every) - 1)
+            b = every[int(num)]
+            if head and b.name != head:
+                ids = ["%s@%d" % (head, i) for i, o in enumerate(every) if o.name == head]
+                return [], "node %s is %r, not %r%s" % (num, b.name, head, " (%s: %s)" % (
+                    "the nodes so named are" if len(ids) > 1 else "the node so named is", ", ".join(ids)) if ids else "")
+            return [b], ""
+        return [], "no node named %r in this tree%s" % (name, did_you_mean(name, {b.name for b in every}))
+
+    def _label(self, b: Any) -> str:
+        """How answers name ``b``: its name, with ``@ID`` when another node has the same name."""
+        from coordinator.runstream import preorder
+
+        every = preorder(self.root)
+        if sum(1 for o in every if o.name == b.name) == 1:
+            return b.name
+        return "%s@%d" % (b.name, next(i for i, o in enumerate(every) if o is b))
+
+    def _ambiguous(self, nodes: List[Any], cmd: Dict[str, Any]) -> str:
+        """Why a command on a name several steerable nodes share is refused: each with where it is (file:line,
+        its parents) and how to pick one; a command applied to all of them would steer ones nobody meant."""
+        from coordinator.runstream import preorder
+
+        ids = {b: i for i, b in enumerate(preorder(self.root))}
+        said = []
+        for b in nodes:
+            node = getattr(b, "bmtree_node", None) or getattr(b, "node", None)
+            pos = getattr(node, "pos", None)
+            where = "%s:%s, " % (os.path.basename(str(pos.file)), pos.line) if pos is not None else ""
+            up, p = [], b.parent
+            while p is not None:
+                up.insert(0, p.name)
+                p = p.parent
+            path = " > ".join(up if len(up) <= 3 else ["…"] + up[-3:])
+            said.append("%s@%d (%s%s)" % (b.name, ids[b], where, "in %s" % path if path else "the top"))
+        pick = "%s %s@%d%s" % (cmd.get("command"), nodes[0].name, ids[nodes[0]],
+                               " %s" % cmd.get("outcome") if cmd.get("command") == "force" else "")
+        return ("%d nodes are named %r: %s; say which one by its id (%s), or give them names of their own "
+                "(name: in the tree)" % (len(nodes), cmd.get("node"), ", ".join(said), pick))
+
+    def _stop_run(self, by: str) -> Tuple[bool, str]:
+        """Accept a stop (the runner takes it at once) or say why not: a second stop, or one while a cleanup
+        runs, is refused rather than cutting the cleanup short (it is what leaves the robot safe, it is bounded
+        by its cleanup_timeout, and a preempt sent twice must not escalate; Ctrl-C in the run's terminal does)."""
+        task = self._task()
+        if task is not None and task.phase not in ("root", "between"):
+            left = max(0.0, (task.cleanup_started or 0.0) + task.limit - self.ctx.clock.now())
+            how = ("root was stopped already (%s)" % task.ended_reason.split(" while ", 1)[0] if task.ended == "stopped"
+                   else "root has ended (%s)" % task.ended)
+            return False, ("%s and its cleanup is running: a stop does not cut the cleanup short (it ends within %.3g s, "
+                           "its cleanup_timeout; Ctrl-C in the run's terminal ends it at once)" % (how, left))
+        if self._stopped:
+            return False, "the run is stopping already"
+        self._stopped = True
+        self._stop = "stopped by control%s" % (" (%s)" % by if by and by != "?" else "")
+        was, self.paused = self.paused, False  # paused, its cleanup would never be ticked
+        said = ("stopping: root is halted and its calls cancelled, then the cleanup runs (at most %g s)" % task.limit
+                if task is not None else "stopping: the running nodes are halted and their calls cancelled")
+        return True, said + ("; the pause ends" if was else "")
 
     def _apply(self, cmd: Dict[str, Any]) -> Tuple[bool, str]:
         what = cmd.get("command")
@@ -177,34 +266,33 @@ class Controller(RunObserver):
                 return False, "step works while paused (pause first)"
             self._step = True
             return True, "one tick"
+        if what == "stop":
+            return self._stop_run(str(cmd.get("by") or ""))
         if what == "set":
             return self._set(cmd.get("key"), cmd.get("value"))
-        nodes = self._nodes(cmd.get("node"))
+        nodes, missing = self._nodes(cmd.get("node"))
         if not nodes:
-            from coordinator.runstream import preorder
-
-            names = {b.name for b in preorder(self.root)}
-            return False, "no node named %r in this tree%s" % (cmd.get("node"), did_you_mean(cmd.get("node"), names))
-        if what != "clear":
-            nodes, refused = self._still_ticked(nodes, cmd.get("node"))
-            if refused:
-                return False, refused
-        if what == "break":
-            for b in nodes:
-                self._wrap(b)
-                self.breaks[b] = True
-            return True, "will pause before %r starts" % cmd.get("node")
-        if what == "clear":
+            return False, missing
+        if what == "clear":  # harmless on each node so named
             for b in nodes:
                 self.breaks.pop(b, None)
             return True, "no breakpoint on %r" % cmd.get("node")
+        nodes, refused = self._still_ticked(nodes, cmd.get("node"))
+        if refused:
+            return False, refused
+        if len(nodes) > 1:
+            return False, self._ambiguous(nodes, cmd)
+        b = nodes[0]
+        if what == "break":
+            self._wrap(b)
+            self.breaks[b] = True
+            return True, "will pause before %r starts" % self._label(b)
         outcome = str(cmd.get("outcome", "")).upper()
         if outcome not in ("SUCCESS", "FAILURE"):
             return False, "an outcome is SUCCESS or FAILURE, not %r" % cmd.get("outcome")
-        for b in nodes:
-            self._wrap(b)
-            self.force[b] = Status(outcome)
-        return True, "%r will end in %s the next time it is ticked" % (cmd.get("node"), outcome)
+        self._wrap(b)
+        self.force[b] = Status(outcome)
+        return True, "%r will end in %s the next time it is ticked" % (self._label(b), outcome)
 
     def _task(self) -> Any:
         """The tree's top when it has a ``cleanup:`` (a WithCleanup: root, then the cleanup), else None."""
@@ -299,8 +387,9 @@ class Controller(RunObserver):
             elif self.breaks.get(b) and b.status != Status.RUNNING:
                 self._held[b] = True
                 self.paused = True
-                self._answer({"command": "breakpoint", "node": b.name, "by": "bmtree"}, True,
-                             "paused before %r starts" % b.name)
+                label = self._label(b)
+                self._answer({"command": "breakpoint", "node": label, "by": "bmtree"}, True,
+                             "paused before %r starts" % label)
                 b.status = Status.RUNNING  # held: the parent waits for it
                 yield b
                 return

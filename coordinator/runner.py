@@ -188,7 +188,8 @@ class TreeRunner:
     def run(self, max_duration: Optional[float] = None, stop_when: Optional[Callable[[], str]] = None,
             guard: Optional[Callable[[], str]] = None, kill_at: Optional[float] = None) -> RunResult:
         """Tick until the root ends, ``max_duration`` seconds of its clock pass, or ``stop_when()`` or
-        ``guard()`` gives a reason (asked after each tick); stopped is FAILURE.
+        ``guard()`` gives a reason (asked after each tick), or the gate takes a stop (``bmtree control
+        stop``: asked before each tick); stopped is FAILURE.
 
         With ``cleanup:`` (the root behaviour is a :class:`WithCleanup`) the cleanup runs once after
         root ended, also when it was stopped (root halted first), bounded by its own time limit; a
@@ -214,7 +215,9 @@ class TreeRunner:
                 if kill_at is not None and ctx.clock.now() - start > kill_at:  # what came at kill_at was ticked
                     reason, stopped_at = self._killed(task, main, kill_at, reason, stopped_at)
                     break
-                if self.gate is None or self.gate.may_tick():
+                ticking = self.gate is None or self.gate.may_tick()
+                asked = self._asked_stop()  # a control stop: no tick after it, also while paused
+                if ticking and not asked:
                     self.tick()
                 if task is None and self.root.status in (Status.SUCCESS, Status.FAILURE):
                     break
@@ -228,7 +231,9 @@ class TreeRunner:
                                         reason)
                     continue
                 if task is None or task.phase == "root":
-                    if max_duration is not None and ctx.clock.now() - start >= max_duration:
+                    if asked:
+                        reason = asked
+                    elif max_duration is not None and ctx.clock.now() - start >= max_duration:
                         reason = "stopped after %g s" % max_duration
                     elif stop_when is not None:
                         reason = stop_when()
@@ -265,6 +270,12 @@ class TreeRunner:
                 notify(ctx.observers, "on_end", self.result)
             raise
         return self._finish(start, task, reason, failed_call, stopped_at)
+
+    def _asked_stop(self) -> str:
+        """The reason of a stop the gate accepted (``bmtree control stop``), or '': root is stopped with it
+        as with ``max_duration`` (FAILURE, the cleanup runs with ``ended`` = stopped)."""
+        take = getattr(self.gate, "take_stop", None)
+        return take() if take is not None else ""
 
     def _finish(self, start: float, task: Optional[WithCleanup], reason: str, failed_call: Optional[CallRecord],
                 stopped_at: Optional[float]) -> RunResult:
@@ -390,6 +401,9 @@ class TreeRunner:
         ends or runs its time limit; a second stop (not one of the same burst, within ``BURST`` s) ends
         it at once."""
         stopped = time.monotonic()
+        unpause = getattr(self.gate, "unpause", None)
+        if unpause is not None:  # paused, the cleanup would not be ticked until its time limit
+            unpause("interrupted: the pause ends, so that the cleanup runs")
         while not task.done:
             try:
                 if task.phase in ("root", "between"):  # (again, if a signal of the burst cut this short)

@@ -58,7 +58,8 @@ class LiveView:
 
     def _frame(self, anchor: List[float]) -> Any:
         size = self.console.size
-        return render(self.state, size.width, size.height, self.foot(), now_since(self.state, anchor), self.title)
+        return render(self.state, size.width, size.height, self.foot(), now_since(self.state, anchor), self.title,
+                      footer_wrap=bool(self.message))
 
     def _loop(self) -> None:
         from rich.live import Live
@@ -99,7 +100,8 @@ class LiveView:
         return Group(frame, *lines)
 
 
-KEYS_HELP = "q quit  p pause/resume  s step  : command (break NODE, clear NODE, force NODE SUCCESS, set KEY VALUE)"
+KEYS_HELP = ("q quit  p pause/resume  s step  : command (stop, break NODE, clear NODE, force NODE SUCCESS, "
+             "set KEY VALUE)")
 NO_CONTROL_HELP = "q quit  (this run takes no commands: it was started without --control)"
 
 

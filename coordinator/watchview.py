@@ -117,12 +117,14 @@ def _panel(title: str, shown: List[Text], total: int, empty: str) -> List[Text]:
 
 
 def render(state: WatchState, width: int, height: int, footer: str = "", now: Optional[float] = None,
-           title: str = "bmtree watch", result: str = "wrap") -> Group:
+           title: str = "bmtree watch", result: str = "wrap", footer_wrap: bool = False) -> Group:
     """The whole view, exactly ``height`` lines or fewer, none longer than ``width``. ``now``: the
     run's time advanced by the wall clock since its last record (:func:`now_since`) for the header's
     clock and the pending calls' elapsed times; ``title``: what shows it (``bmtree run``);
     ``result``: the result line wrapped to at most a sixth of the height (``wrap``), whole
-    (``full``) or left out (``none``: the watch prints it after the view)."""
+    (``full``) or left out (``none``: the watch prints it after the view); ``footer_wrap``: the footer
+    (an answer to a command: a refusal lists the nodes a shared name may mean) wrapped over at most a
+    sixth of the height."""
     with state.lock:
         name = state.tree.get("name") or "(waiting for a run on the run stream)"
         # between records the run's clock moves on: a long call makes no record until it ends
@@ -169,7 +171,8 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
 
         # budget: header, footer, result; the panels get a share, the tree the rest, and the lines
         # the tree leaves unused go back to the panels that were cut
-        fixed = 1 + (1 if footer else 0) + len(end)
+        foot = [] if not footer else [footer] if not footer_wrap else wrap(footer, width, max(1, height // 6))
+        fixed = 1 + len(foot) + len(end)
         room = max(4, height - fixed)
         sizes = [len(plines), len(written), len(ev), len(calls)]
         share = max(1, room // 3 // len(sizes)) if height < 30 else max(2, room // 2 // len(sizes))
@@ -185,7 +188,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                 + _panel("tree blackboard", board(takes[1]), len(written), "empty")
                 + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
                 + _panel("call log", calls[len(calls) - takes[3]:], max(len(calls), state.calls_total), "none"))
-        out = [head] + tree + body + end + ([Text(footer, style="dim")] if footer else [])
+        out = [head] + tree + body + end + [Text(line, style="dim") for line in foot]
     out = out[:height]
     for line in out:
         line.no_wrap = True

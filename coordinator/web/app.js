@@ -289,7 +289,15 @@ function draw(s) {
     shownNodes = names;
     const sel = $("node");
     sel.textContent = "";
-    for (const n of s.nodes) { const o = document.createElement("option"); o.textContent = n.name; sel.appendChild(o); }
+    // a name several nodes share says which one: NAME@ID (the run refuses a shared name)
+    const seen = {};
+    for (const n of s.nodes) seen[n.name] = (seen[n.name] || 0) + 1;
+    for (const n of s.nodes) {
+      const o = document.createElement("option");
+      o.value = seen[n.name] > 1 ? n.name + "@" + n.id : n.name;
+      o.textContent = seen[n.name] > 1 ? o.value + (n.line ? " (line " + n.line + ")" : "") : n.name;
+      sel.appendChild(o);
+    }
   }
   $("controls").hidden = !s.steer || gone;
   follow(s, false);
@@ -381,6 +389,7 @@ async function control(cmd) {
 $("pause").onclick = () => control({ command: "pause" });
 $("resume").onclick = () => control({ command: "resume" });
 $("step").onclick = () => control({ command: "step" });
+$("stop").onclick = () => { if (confirm("Stop the run? Root is halted, then its cleanup runs.")) control({ command: "stop" }); };
 $("break").onclick = () => control({ command: "break", node: $("node").value });
 $("clear").onclick = () => control({ command: "clear", node: $("node").value });
 $("force-success").onclick = () => control({ command: "force", node: $("node").value, outcome: "SUCCESS" });

@@ -50,8 +50,8 @@ def test_a_livelock_fails_the_test_with_the_limit_by_default(tmp_path):
                         "t.run(max_ticks_per_instant=...) if this tree needs more" % DEFAULT_MAX_TICKS_PER_INSTANT)
     assert lines[1].startswith("CALLS ") and lines[1].endswith(" True") and int(lines[1].split()[1]) > 1000
     assert lines[2].startswith("MESSAGE %s: stopped after %d ticks" % (path, DEFAULT_MAX_TICKS_PER_INSTANT))
-    assert lines[2].endswith("(it was stopped while 'repeat x1000000000' (run 5000 of 1000000000 succeeded) "
-                             "was running)")
+    assert lines[2].endswith("(it was stopped while 'repeat x1000000000' was running (between runs: run 5000 of "
+                             "1000000000 succeeded))")
 
 
 def test_the_limits_are_arguments_of_run_and_fail_whatever_the_test_expects(tmp_path):

@@ -160,8 +160,8 @@ def test_a_run_stopped_while_a_retry_waits_its_delay_says_what_it_waits_after(si
     t = TreeTest(str(tree), definitions=sim_defs)
     t.mocks["navigation.go_to"].fail("blocked")
     run = t.run(max_duration=5.0)
-    assert run.reason == "stopped after 5 s while 'retry x5' (run 1 of 5 ended in FAILURE (navigation.go_to failed: " \
-                         "blocked); the next in 10s) was running", run.reason
+    assert run.reason == "stopped after 5 s while 'retry x5' was running (waiting 10 s between attempts: attempt 1 " \
+                         "of 5 failed: navigation.go_to failed: blocked)", run.reason
 
 
 def test_a_timeout_that_fires_while_a_retry_waits_its_delay_says_what_it_waits_after(sim_defs, tmp_path):
