@@ -178,7 +178,7 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     end = log.end
     seen = log  # what the tree acted on
     stop_at: Optional[float] = None
-    stopped = _cleanup_stop(log)
+    stopped = _cleanup_stop(log) or _control_stop(log)
     killed = _killed_in_cleanup(log)
     if stopped is not None:  # the cleanup ran after the stop: root stops then, the cleanup runs as it did
         stop_at = stopped
@@ -274,6 +274,17 @@ def _stop_reason(log: RunLog) -> str:
     return str(told[0]) if told else ""
 
 
+def _control_stop(log: RunLog) -> Optional[float]:
+    """For a run stopped by ``bmtree control stop`` (root halted, then its cleanup, if any): when root
+    was stopped (its stop's tick), the scenario's ``max_duration``; else None."""
+    if log.end is None or not any(r.get("ok") and r.get("command") == "stop" for r in log.of_type("control")):
+        return None
+    from coordinator.replaystate import Replay
+
+    stop = Replay(log).stop_tick()
+    return None if stop is None else math.ceil(float(log.records[stop].get("t") or 0.0) * 1e6) / 1e6
+
+
 def _cleanup_stop(log: RunLog) -> Optional[float]:
     """For an interrupted run (Ctrl-C, SIGTERM) of a tree with ``cleanup:``, or one killed while the cleanup
     that followed a stop ran: when root was stopped (its stop's tick, which the cleanup's ticks follow),
@@ -291,8 +302,10 @@ def _cleanup_stop(log: RunLog) -> Optional[float]:
 
 def replayed_reason(reason: str, stop_at: float) -> str:
     """The reason a scenario that stops at ``stop_at`` (``max_duration``) gives for the stop the run
-    gave as ``reason`` (``interrupted while 'go' was running`` -> ``stopped after 4.3 s while 'go' was running``)."""
-    return "stopped after %g s%s" % (stop_at, reason[len("interrupted"):] if reason.startswith("interrupted") else "")
+    gave as ``reason`` (``interrupted while 'go' was running``, ``stopped by control (/n) while 'go' was
+    running`` -> ``stopped after 4.3 s while 'go' was running``)."""
+    _, sep, rest = reason.partition(" while ")
+    return "stopped after %g s%s%s" % (stop_at, sep, rest)
 
 
 def _restated(value: Any, said: str, replayed: str) -> Any:
@@ -351,7 +364,13 @@ def write_scenario(log: RunLog, out_path: str) -> None:
     killed = ("# It was killed at %gs while the cleanup ran (its log ends there): killed_at ends\n"
               "# the scenario then; the calls still running then hang.\n" % scenario["killed_at"]
               if "killed_at" in scenario else "")
-    if _cleanup_stop(log) is not None:
+    if _control_stop(log) is not None:
+        how = ("# The run was stopped by control (%s) at %gs: this stops root then\n"
+               "# (max_duration: a stop, so its status is failure%s).\n" % (
+                   _stop_reason(log), scenario["max_duration"], ", then the cleanup runs as it did, and\n"
+                   "# reads 'stopped after %g s' as ended_reason" % scenario["max_duration"]
+                   if log.end.get("cleanup") else ""))
+    elif _cleanup_stop(log) is not None:
         how = ("# The run was %s (%s) at %gs, then its cleanup ran: this stops root\n"
                "# then (max_duration: a stop, so its status is failure, and the cleanup reads\n"
                "# 'stopped after %g s' as ended_reason), then the cleanup runs as it did.\n" % (

@@ -436,7 +436,8 @@ def cmd_control(args: argparse.Namespace) -> int:
 def add_control_parser(sub: Any) -> None:
     c = sub.add_parser("control", help="steer the run on $ROS_MASTER_URI (started with 'bmtree run --control')")
     c.add_argument("words", nargs="+", metavar="COMMAND",
-                   help="pause | resume | step | break NODE | clear NODE | force NODE SUCCESS|FAILURE | set KEY VALUE")
+                   help="pause | resume | step | stop | break NODE | clear NODE | force NODE SUCCESS|FAILURE | "
+                        "set KEY VALUE (NODE: a name, or NAME@ID when several nodes share it)")
     c.add_argument("--wait", type=seconds(), default=10.0, help="how long to wait for the run's answer (s)")
     c.add_argument("--node", default="", metavar="NODE",
                    help="only the run of this ROS node (e.g. /bmtree_14239_1795636146106, as 'bmtree run' names "
