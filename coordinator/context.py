@@ -27,8 +27,8 @@ from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["CallRecord", "LATE_ANSWER", "RecordStatus", "RunContext", "WAKE", "late_answer_text",
-           "plain"]
+__all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "WAKE", "gone_text",
+           "late_answer_text", "plain"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -116,6 +116,19 @@ _MEANING: Dict[str, str] = {RecordStatus.SUCCEEDED: "the module did run it", Rec
                             RecordStatus.REJECTED: "the module did not run it"}
 
 
+MODULE_GONE = "module_lost"
+"""The ``what`` of the notice that a module a ``wait_event`` waits on is gone (:func:`gone_text`)."""
+
+
+def gone_text(module: str, reason: str, events: List[str]) -> str:
+    """Why no event of ``events`` (``module.event``) can come now that ``module``'s node is gone
+    (``reason``: the watchdog's, which names the node): the reason of a ``wait_event`` that fails."""
+    said = " or ".join(sorted(set(events)))
+    if "restarted" in reason:  # a new process may send them, but one sent meanwhile is lost
+        return "%s's node was restarted (%s): a %s event may have been lost meanwhile" % (module, reason, said)
+    return "%s's node is gone (%s): no %s event can come" % (module, reason, said)
+
+
 def late_answer_text(rec: CallRecord, start: float) -> str:
     """The notice of ``rec``'s late answer, times from the run's ``start``: ``navigation.go_to (call
     1b26…, timed out at 6.00s) answered succeeded at 7.40s: the module did run it``."""
@@ -160,6 +173,8 @@ class RunContext:
         self.unstored: typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]] = OrderedDict()
         self._asked: Dict[str, typing.OrderedDict[str, Tuple[str, Tuple[str, ...]]]] = {}
         self.lost: Dict[str, Tuple[str, str]] = {}  # Blackboard name -> (module.function, call_id) it lost
+        self._watches: Dict[str, str] = {}  # watch key -> the module.event a wait_event waits for
+        self._gone: Dict[str, str] = {}  # watch key -> why its module can send no event now
         self.started = clock.now()  # the run's start (the runner sets it at its first tick): for notice texts
 
     # values ------------------------------------------------------------------------
@@ -186,6 +201,31 @@ class RunContext:
     def wake_after(self, delay: float) -> None:
         """Make the runner tick again after ``delay`` (timeouts, waits, retries)."""
         self.clock.call_later(delay, lambda: self.inbox.put(WAKE))
+
+    # modules whose events are awaited --------------------------------------------------
+    def watch_module(self, module: str, event: str) -> Optional[str]:
+        """Have the transport watch ``module``'s node while a ``wait_event`` waits for its ``event``
+        (as it watches the node of a call in flight): a key for :meth:`module_gone` and
+        :meth:`unwatch`, or None when the transport cannot watch (in process: mocks do not die)."""
+        watch = getattr(self.transport, "watch_module", None)
+        if watch is None:
+            return None
+        key = watch(module)
+        self._watches[key] = "%s.%s" % (module, event)
+        return key
+
+    def unwatch(self, key: Optional[str]) -> None:
+        """The wait that watched with ``key`` ended (or was halted)."""
+        if key is None or self._watches.pop(key, None) is None:
+            return
+        self._gone.pop(key, None)
+        unwatch = getattr(self.transport, "unwatch_module", None)
+        if unwatch is not None:
+            unwatch(key)
+
+    def module_gone(self, key: Optional[str]) -> str:
+        """Why the module watched with ``key`` can send no event now ('' while it can)."""
+        return self._gone.get(key, "") if key is not None else ""
 
     # calls -------------------------------------------------------------------------
     def start_call(self, fn: FunctionDefinition, call: FunctionCall, owner: Any = None) -> CallRecord:
@@ -295,10 +335,17 @@ class RunContext:
             if self.observers:
                 notify(self.observers, "on_notice", item, self.clock.now())
         elif isinstance(item, ModuleLost):
+            waits = []
             for call_id in item.call_ids:
                 rec = self.pending.get(call_id)
                 if rec is not None:
                     self.finish(rec, RecordStatus.MODULE_LOST, "module %s lost: %s" % (item.module, item.reason))
+                elif call_id in self._watches:
+                    waits.append(self._watches[call_id])
+                    self._gone[call_id] = gone_text(item.module, item.reason, [self._watches[call_id]])
+            if waits:
+                self._notice(Notice(MODULE_GONE, "%s; %s" % (gone_text(item.module, item.reason, waits), (
+                    "the wait_event for it fails" if len(waits) == 1 else "the %d wait_events fail" % len(waits)))))
         elif isinstance(item, BlackboardLost):
             for request_id in item.request_ids:
                 lost = BlackboardAnswer(request_id=request_id, error="Blackboard node lost: %s" % item.reason)
@@ -324,9 +371,13 @@ class RunContext:
         rec.late_result = result
         notice = Notice(LATE_ANSWER, late_answer_text(rec, self.started), rec.call_id)
         log.info("%s", notice.text)
+        self._notice(notice, rec.late_at)
+
+    def _notice(self, notice: Notice, at: Optional[float] = None) -> None:
+        """A notice of the run itself, told as the transport's are (the display, the run log and stream)."""
         self.notices.append(notice)
         if self.observers:
-            notify(self.observers, "on_notice", notice, rec.late_at)
+            notify(self.observers, "on_notice", notice, self.clock.now() if at is None else at)
 
     def correlate(self, result: FunctionResult) -> Optional[CallRecord]:
         """The pending call a result answers (DESIGN §2, README "Correlation").

@@ -12,6 +12,13 @@ subscriber that stops reading (a stopped process) fills only its own queue (then
 oldest messages). The preflight is :mod:`coordinator.preflight`; the start-up guard
 :mod:`coordinator.startguard`; the run stream's topics :mod:`coordinator.rosstream`; the
 liveness watchdogs' questions to the master :mod:`coordinator.rosliveness`.
+
+A call is never delivered after it ended, nor held for ever: one kept for a module's node to
+connect (restarting) is given up as ``module_lost`` after :data:`HOLD_LIMIT` seconds, or sooner
+when the watchdog finds the module's node gone; one to a module reached on ``/master/output``
+whose node is not connected there (ROS would drop it) ends ``module_lost`` at once. The
+watchdog also watches the modules whose events a ``wait_event`` waits for
+(:meth:`RosTransport.watch_module`).
 """
 from __future__ import annotations
 
@@ -44,24 +51,27 @@ from comm.messages import (
     Event,
     FunctionCall,
     FunctionResult,
+    new_id,
 )
 from comm.nodelife import registering
 from coordinator.preflight import diff_definitions, wait_ready
-from coordinator.rosliveness import node_of, uri_of
+from coordinator.rosliveness import Whereabouts, node_of, uri_of
 from coordinator.rosstream import RosStreamSink
 from coordinator.runevents import Notice
-from coordinator.sender import TopicSender, topic_senders, widen_accept_queue
+from coordinator.sender import TopicSender, peer_gone, topic_senders, widen_accept_queue
 from coordinator.startguard import MasterGone, StartupGuard
 from coordinator.transport import Transport
 from modules.definition import ModuleDefinition
 from modules.discovery import LiveModule, live_modules
 
 __all__ = ["RosTransport", "RosStreamSink", "StartupGuard", "MasterGone", "diff_definitions", "address_problem",
-           "SEND_QUEUE"]
+           "SEND_QUEUE", "HOLD_LIMIT", "WATCH_PREFIX"]
 
 log = logging.getLogger("bmtree.coordinator")
 
 SEND_QUEUE = 10000  # messages queued per subscriber connection before the oldest is dropped
+HOLD_LIMIT = 10.0  # s a call may wait for its module's node to connect (restarting) before it is given up
+WATCH_PREFIX = "watch/"  # the watchdog's key of a module watched for a wait_event (never a call id)
 
 
 def address_problem() -> str:
@@ -75,15 +85,19 @@ class RosTransport(Transport):
     """Publishes calls/cancels/requests; decodes results/events/answers in rospy's threads."""
 
     def __init__(self, node_name: str = "bmtree", max_bytes: int = DEFAULT_MAX_BYTES,
-                 liveness: float = DEFAULT_PERIOD):
+                 liveness: float = DEFAULT_PERIOD, hold_limit: float = HOLD_LIMIT):
         self.node_name = node_name
         self.max_bytes = max_bytes
+        self.hold_limit = hold_limit
         self._early: List[Any] = []  # events and notices that came during the preflight, for the run
         self._other_runs: Set[str] = set()  # nodes of other runs on this master, each noticed once
         self._deliver: Callable[[Any], None] = self._hold
         self._watch: Any = None  # the process's comm.masterwatch.MasterWatch, once open
         self._bb_watch: Optional[NodeWatch] = None  # the Blackboard node's process, while the run goes on
-        self.watchdog = Watchdog(self._from_watchdog, node_of, uri_of, period=liveness)
+        #: where each module's node is, or was last seen: a node that stopped cleanly leaves no trace on the master
+        self.whereabouts = Whereabouts(self._run_node)
+        self.watchdog = Watchdog(self._from_watchdog, self.whereabouts.node_of, self.whereabouts.uri_of,
+                                 period=liveness)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._String: Any = None
@@ -249,13 +263,49 @@ class RosTransport(Transport):
             self._held[route.resolved_name] = route
 
     def send_call(self, call: FunctionCall) -> None:
+        route = self._routes.get(call.basic_mod)
+        if route is None:
+            shared = self._shared("call")
+            node = self._unconnected_node(call.basic_mod, shared)
+            if node is not None:  # ROS would drop it, and the call would wait for nothing
+                self._lost_now(call, node, "node %s is not connected to %s (gone, or restarting): the call was "
+                                           "not sent" % (node, shared.resolved_name))
+                return
         if call.call_id:
             self.watchdog.call_sent(call.call_id, call.basic_mod)
-        route = self._routes.get(call.basic_mod)
         if route is not None:  # kept while the module's node is not connected (restarting), sent when it is
             self._to_route(route, call.encode(), key=call.call_id)
         else:
-            self._shared("call").publish(self._String(call.encode()))
+            shared.publish(self._String(call.encode()))
+
+    def _unconnected_node(self, module: str, shared: Any) -> Optional[str]:
+        """The node the run knows for ``module`` (reached on the shared call topic) when none of its
+        nodes is connected there, alive; None when one is, or when the run knows no node of it."""
+        nodes = [node for node, m in list(self.node_modules.items()) if m == module]
+        if not nodes:
+            return None
+        for conn in list(shared.impl.connections):  # a dead node's connection stays until a write fails
+            sock = getattr(conn, "socket", None)
+            if getattr(conn, "endpoint_id", None) in nodes and sock is not None and not conn.done \
+                    and not peer_gone(sock):
+                return None
+        return nodes[0]
+
+    def _lost_now(self, call: FunctionCall, node: str, reason: str) -> None:
+        """End ``call`` as ``module_lost`` without sending it (delivered to the run like the watchdog's)."""
+        log.warning("module %s (node %s): %s", call.basic_mod, node, reason)
+        if call.call_id:
+            self._deliver(ModuleLost(module=call.basic_mod, node=node, reason=reason, call_ids=[call.call_id]))
+
+    def watch_module(self, module: str) -> str:
+        """Watch ``module``'s node as if it owed an answer (a ``wait_event`` waits for its event) until
+        :meth:`unwatch_module`: when that node is gone, a ``ModuleLost`` names the key returned here."""
+        key = WATCH_PREFIX + new_id()
+        self.watchdog.call_sent(key, module)
+        return key
+
+    def unwatch_module(self, key: str) -> None:
+        self.watchdog.call_done(key)
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         route = self._routes.get(cancel.basic_mod)
@@ -313,19 +363,42 @@ class RosTransport(Transport):
                 route = None
             if route is None and live.call_topic is not None:
                 fresh.append(live)
+        for live in lives:
+            self.whereabouts.seen(live.name, live.node, live.uri)
         with registering():
             senders = topic_senders([live.call_topic or "" for live in fresh], self._String, SEND_QUEUE,
                                     on_connect=self._connected)
         for live, sender in zip(fresh, senders):
+            sender.give_up_after(self.hold_limit, lambda keys, module=live.name: self._gave_up(module, keys))
             self._routes[live.name] = sender
+
+    def _run_node(self, module: str) -> Optional[str]:
+        """The node the run found for ``module`` before it started (None if none)."""
+        return next((node for node, m in list(self.node_modules.items()) if m == module), None)
+
+    def _gave_up(self, module: str, keys: List[str]) -> None:
+        """Calls that waited :data:`HOLD_LIMIT` seconds for ``module``'s node to connect end as
+        ``module_lost``, never sent (its node runs but did not connect, or none was found)."""
+        ids = [key for key in keys if self.watchdog.owes(key)]
+        for key in ids:
+            self.watchdog.call_done(key)
+        if ids:
+            node = self.whereabouts.known(module) or "?"
+            reason = "no node of it connected to %s within %gs (node %s: restarting, or unable to reach this " \
+                     "process?): the call was never sent" % (self.topics_of(module)[0], self.hold_limit, node)
+            log.warning("module %s: %s", module, reason)
+            self._deliver(ModuleLost(module=module, node=node, reason=reason, call_ids=ids))
 
     def _from_watchdog(self, item: Any) -> None:
         """A lost module's dead connection is closed before the run hears of it: a retry then waits
         for the restarted node instead of going into the old socket."""
         if isinstance(item, ModuleLost):
             route = self._routes.get(item.module)
-            if route is not None and route.drop_closed():
-                log.info("closed the call connection of module %s's dead node %s", item.module, item.node)
+            if route is not None:
+                for call_id in item.call_ids:  # kept for a connection that will not come: never sent
+                    route.discard(call_id)
+                if route.drop_closed():
+                    log.info("closed the call connection of module %s's dead node %s", item.module, item.node)
         self._deliver(item)
 
     def _connected(self, topic: str) -> None:

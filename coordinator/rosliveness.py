@@ -1,10 +1,18 @@
 """Who serves a module now, asked of the ROS master for the run's liveness watchdogs
 (:class:`comm.liveness.Watchdog`, :class:`comm.liveness.NodeWatch`): the node of a module
 or of the Blackboard, and a node's URI; each question bounded, as a master may not answer.
+
+A module whose node stopped cleanly (Ctrl-C, ``rosnode kill``, a launch file stopped) leaves
+no trace on the master: its announcement is removed and its node unregistered. Asked only
+the master, the watchdog found no node for it and left its calls to their timeout, and a call
+with ``timeout: none`` waited for ever, then ran on the node started next.
+:class:`Whereabouts` remembers where each module was seen, so such a module is asked at its
+last address (refused: gone) instead of being taken for one not started yet.
 """
 from __future__ import annotations
 
-from typing import Optional
+import threading
+from typing import Callable, Dict, Optional
 
 from blackboard.node import TOPIC_STORED
 from comm import TOPIC_BB_ANSWER
@@ -13,7 +21,7 @@ from comm.rpc import master_api
 from coordinator.preflight import legacy_nodes
 from modules.discovery import PARAM_ROOT, node_alive
 
-__all__ = ["LIVENESS_QUESTION", "node_of", "uri_of"]
+__all__ = ["LIVENESS_QUESTION", "Whereabouts", "node_of", "uri_of"]
 
 LIVENESS_QUESTION = 2.0  # s a liveness lookup may wait for the master (then: not known now)
 
@@ -53,3 +61,54 @@ def uri_of(node: str) -> Optional[str]:
         return master_api("/bmtree_liveness", LIVENESS_QUESTION).lookupNode(node)
     except rosgraph.masterapi.MasterError:
         return None
+
+
+class Whereabouts:
+    """:func:`node_of` and :func:`uri_of` for a run's watchdog, falling back on where a module's node
+    was last seen when the master no longer knows it.
+
+    ``run_node(module)`` gives the node the run found for a module before it started (its
+    preflight), for a module whose node this has never seen itself. A node the master no longer
+    knows is asked at its last address: a dead process refuses (the watchdog says it stopped), a
+    live one answers (a restarted master it has not registered with again yet: not lost).
+    """
+
+    def __init__(self, run_node: Callable[[str], Optional[str]] = lambda module: None):
+        self.run_node = run_node
+        self._nodes: Dict[str, str] = {}  # module -> its node, when last seen
+        self._uris: Dict[str, str] = {}  # node -> its XML-RPC URI, when last seen
+        self._lock = threading.Lock()
+
+    def seen(self, module: str, node: str, uri: Optional[str] = None) -> None:
+        """Remember that ``node`` (at ``uri``) served ``module`` (an announcement the run read)."""
+        with self._lock:
+            self._nodes[module] = node
+            if uri:
+                self._uris[node] = uri
+
+    def known(self, module: str) -> Optional[str]:
+        """The node last seen serving ``module``, without asking the master (None if never known)."""
+        with self._lock:
+            node = self._nodes.get(module)
+        return node if node is not None else self.run_node(module)
+
+    def node_of(self, module: str) -> Optional[str]:
+        """The node serving ``module`` now, else the one that served it last (None if never known)."""
+        node = node_of(module)
+        if module == BLACKBOARD:
+            return node
+        with self._lock:
+            if node is not None:
+                self._nodes[module] = node
+                return node
+            node = self._nodes.get(module)
+        return node if node is not None else self.run_node(module)
+
+    def uri_of(self, node: str) -> Optional[str]:
+        """``node``'s URI from the master, else its last known one (None if never known)."""
+        uri = uri_of(node)
+        with self._lock:
+            if uri:
+                self._uris[node] = uri
+                return uri
+            return self._uris.get(node)

@@ -20,7 +20,11 @@ A message published while the topic has no subscriber at all (the module's node 
 restarting: its old connection is gone, the new one not made yet) would be lost, and a call
 in it would wait out its whole timeout. Such messages are kept, with a key (the call id),
 until a subscriber connects (:meth:`TopicSender.connected`), and a kept message can be taken
-back (:meth:`TopicSender.discard`: a cancel of a call its module never got).
+back (:meth:`TopicSender.discard`: a cancel of a call its module never got). The wait is
+bounded (:meth:`TopicSender.give_up_after`): a call to a module that does not come back is
+dropped and its caller told, never delivered to a node started much later. A connection whose
+subscriber's process is gone is closed before each send, so a message does not go into a
+dead node's socket (a node killed while it owed nothing, its replacement not connected yet).
 
 :func:`topic_senders` makes many at once: rospy registers publishers with the master one
 after another (a lock around each XML-RPC), which with 50 modules was most of ``bmtree
@@ -34,6 +38,7 @@ import logging
 import select
 import socket
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, Deque, List, Optional, Tuple
 
@@ -45,6 +50,8 @@ __all__ = ["TopicSender", "peer_gone", "topic_senders", "widen_accept_queue"]
 ACCEPT_QUEUE = 128  # pending TCP connections to this node's TCPROS port (rospy listens with 5)
 
 log = logging.getLogger("bmtree.coordinator")
+
+_Keyed = Tuple[Optional[str], bytes, float]  # a message's key (a call id, or None), frame, when published
 
 
 def _close(conn: Any) -> None:
@@ -88,8 +95,11 @@ class TopicSender:
         self.limit = limit
         self.dropped = 0
         self._queue: Deque[bytes] = collections.deque()  # whole frames for the thread
-        self._held: List[Tuple[Optional[str], bytes]] = []  # (key, frame) kept for flush()
-        self._unconnected: List[Tuple[Optional[str], bytes]] = []  # (key, frame) sent while nobody listened
+        self._held: List[_Keyed] = []  # (key, frame, when published) kept for flush()
+        self._unconnected: List[_Keyed] = []  # (key, frame, when published) sent while nobody listened
+        self.hold_limit: Optional[float] = None  # s a message may wait for a subscriber (give_up_after)
+        self._on_expired: Callable[[List[str]], None] = lambda keys: None
+        self._timer: Optional[threading.Timer] = None  # gives up what waited hold_limit
         self._rest: List[Tuple[Any, memoryview]] = []  # (connection, the unsent end of a frame): first
         self._writing = False  # the thread holds frames it has not written yet
         self._cond = threading.Condition()
@@ -100,12 +110,12 @@ class TopicSender:
     def publish(self, msg: Any, hold: bool = False, key: Optional[str] = None) -> bool:
         """Send ``msg``; with ``hold``, keep it for :meth:`flush` instead (True if it was kept).
         ``key`` names it for :meth:`discard` while it waits for a subscriber."""
-        frame = _frame(msg)
+        keyed = (key, _frame(msg), time.monotonic())
         with self._cond:
             if hold:
-                self._held.append((key, frame))
+                self._held.append(keyed)
                 return True
-        self._send([(key, frame)])
+        self._send([keyed])
         return False
 
     def flush(self) -> None:
@@ -120,7 +130,7 @@ class TopicSender:
         how many were sent."""
         with self._cond:  # re-entrant: nothing newer is sent before these
             waiting, self._unconnected = self._unconnected, []
-            frames = [(k, f) for k, f in waiting if k is None or wanted(k)]
+            frames = [w for w in waiting if w[0] is None or wanted(w[0])]
             if frames:
                 self._send(frames)
         return len(frames)
@@ -136,52 +146,96 @@ class TopicSender:
         return len(gone)
 
     def discard(self, key: str) -> bool:
-        """Take back a message that still waits for a subscriber (True if it did)."""
+        """Take back a message that still waits for a subscriber, or for :meth:`flush` (True if it did)."""
         with self._cond:
-            for i, (k, _frame) in enumerate(self._unconnected):
-                if k == key:
-                    del self._unconnected[i]
-                    return True
+            for kept in (self._unconnected, self._held):
+                for i, waiting in enumerate(kept):
+                    if waiting[0] == key:
+                        del kept[i]
+                        return True
         return False
 
-    def _send(self, keyed: List[Tuple[Optional[str], bytes]]) -> None:
+    def give_up_after(self, limit: float, on_expired: Callable[[List[str]], None]) -> None:
+        """Bound the wait for a subscriber: a message kept ``limit`` seconds is dropped, never sent, and
+        ``on_expired`` gets the keys of those dropped (from a timer's thread)."""
+        self.hold_limit, self._on_expired = limit, on_expired
+
+    def waiting_since(self) -> Optional[float]:
+        """When the oldest message still waiting for a subscriber was published (None: none waits)."""
+        with self._cond:
+            return min((w[2] for w in self._unconnected), default=None)
+
+    def expire(self, before: float) -> List[str]:
+        """Give up the messages waiting for a subscriber since before ``before`` (``time.monotonic()``):
+        they are never sent; the keys of those that had one."""
+        with self._cond:
+            old = [w for w in self._unconnected if w[2] < before]
+            self._unconnected = [w for w in self._unconnected if w[2] >= before]
+        return [w[0] for w in old if w[0] is not None]
+
+    def _arm(self) -> None:
+        """Wake when the oldest waiting message has waited ``hold_limit`` (called with the lock held)."""
+        if self._timer is not None or self.hold_limit is None or self._closed or not self._unconnected:
+            return
+        delay = max(0.0, min(w[2] for w in self._unconnected) + self.hold_limit - time.monotonic())
+        self._timer = threading.Timer(delay, self._give_up)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _give_up(self) -> None:
+        with self._cond:
+            self._timer = None
+            keys = self.expire(time.monotonic() - (self.hold_limit or 0.0))
+            self._arm()  # for those that came later
+        if keys:
+            self._on_expired(keys)
+
+    def _send(self, keyed: List[_Keyed]) -> None:
+        self.drop_closed()  # a dead subscriber's socket would take the message, and nobody would read it
         broken = []
         with self._cond:
             if self._unconnected or not any(c.socket is not None and not c.done for c in list(self.impl.connections)):
                 if not self._unconnected:
-                    log.info("%s has no subscriber (its module's node restarting?): messages wait for one",
-                             self.resolved_name)
+                    log.info("%s has no subscriber (its module's node restarting?): messages wait for one%s",
+                             self.resolved_name, " (at most %gs)" % self.hold_limit if self.hold_limit else "")
                 self._unconnected.extend(keyed)
                 del self._unconnected[:-self.limit]
-                return
-            frames = [f for _k, f in keyed]
-            if self._queue or self._rest or self._writing:  # behind what waits: keep the order
-                for frame in frames:
-                    self._enqueue(frame)
-                return
-            data = frames[0] if len(frames) == 1 else b"".join(frames)
-            for conn in list(self.impl.connections):
-                sock = conn.socket
-                if sock is None or conn.done:
-                    continue
-                if sock.gettimeout() is not None:  # Python would wait for room first: the thread writes
-                    self._rest.append((conn, memoryview(data)))
-                else:
-                    try:
-                        sent = sock.send(data, socket.MSG_DONTWAIT)
-                    except BlockingIOError:
-                        sent = 0
-                    except OSError:
-                        broken.append(conn)
-                        continue
-                    if sent < len(data):
-                        self._rest.append((conn, memoryview(data)[sent:]))
-                conn.stat_bytes += len(data)  # counted when handed over, as rospy's queue does
-                conn.stat_num_msg += len(frames)
-            if self._rest:
-                self._wake()
+                self._arm()
+            else:
+                broken = self._write_now([f for _k, f, _t in keyed])
         for conn in broken:
             _close(conn)
+
+    def _write_now(self, frames: List[bytes]) -> List[Any]:
+        """Write ``frames`` from the caller's thread where the sockets take them (the rest to the
+        thread); the connections found broken. Called with the lock held."""
+        broken: List[Any] = []
+        if self._queue or self._rest or self._writing:  # behind what waits: keep the order
+            for frame in frames:
+                self._enqueue(frame)
+            return broken
+        data = frames[0] if len(frames) == 1 else b"".join(frames)
+        for conn in list(self.impl.connections):
+            sock = conn.socket
+            if sock is None or conn.done:
+                continue
+            if sock.gettimeout() is not None:  # Python would wait for room first: the thread writes
+                self._rest.append((conn, memoryview(data)))
+            else:
+                try:
+                    sent = sock.send(data, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    sent = 0
+                except OSError:
+                    broken.append(conn)
+                    continue
+                if sent < len(data):
+                    self._rest.append((conn, memoryview(data)[sent:]))
+            conn.stat_bytes += len(data)  # counted when handed over, as rospy's queue does
+            conn.stat_num_msg += len(frames)
+        if self._rest:
+            self._wake()
+        return broken
 
     def _enqueue(self, frame: bytes) -> None:
         if len(self._queue) >= self.limit:
@@ -243,6 +297,8 @@ class TopicSender:
             self._closed = True
             self._cond.notify()
             thread = self._thread
+            if self._timer is not None:
+                self._timer.cancel()
         if thread is not None:
             thread.join(flush)
         self._stopped = True

@@ -237,11 +237,16 @@ class WaitEvent(Leaf):
 
     Events that arrive together (between two ticks) are one moment for the tree: started again
     (by a loop) after taking one of them, the leaf first takes the others of that moment, in their
-    order, so that ``repeat … until`` over it sees each one (two people seen at once)."""
+    order, so that ``repeat … until`` over it sees each one (two people seen at once). While it waits,
+    the run watches the module's node as a call's: once that node is gone, it fails (no event can come)."""
 
     took: Optional[int] = None   # the index of the event the last run took
+    watch: Optional[str] = None  # the run's watch on the module's node while it waits
 
     def initialise(self) -> None:
+        self.ctx.unwatch(self.watch)   # (a watch left by a run that was not terminated)
+        ev_def = self.node.spec.event
+        self.watch = self.ctx.watch_module(ev_def.module, ev_def.name) if ev_def is not None else None
         events, ticks = self.ctx.events, self.ctx.event_ticks
         self.seen = len(events)
         took, self.took = self.took, None
@@ -280,11 +285,19 @@ class WaitEvent(Leaf):
                         self.ctx.write(key, values[param])
                 self.took = index
                 return Status.SUCCESS
+        gone = self.ctx.module_gone(self.watch)
+        if gone:   # after the events that came before: one sent before it died is still taken
+            return self._fail(gone)
         if self.deadline is not None and self.ctx.clock.now() >= self.deadline:
             return self._fail("no %s.%s%s within %gs%s" % (
                 ev_def.module, ev_def.name, " where %s" % where.text if where is not None else "", self.timeout,
                 " (%d skipped)" % self.skipped if self.skipped else ""))
         return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        """Ended or halted: its module's node is no longer watched for it."""
+        self.ctx.unwatch(self.watch)
+        self.watch = None
 
 
 class WaitEventKind(NodeKind):
