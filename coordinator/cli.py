@@ -279,8 +279,9 @@ def make_parser() -> argparse.ArgumentParser:
                         help="how long to wait for the master and modules (s)")
         sp.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"), default=1 << 20, help="largest payload accepted (bytes)")
         sp.add_argument("--liveness", type=seconds("off"), default=0.25, metavar="SECONDS",
-                        help="how often the nodes owing answers are checked; a dead module's calls fail as "
-                             "module_lost about this long after it died (0: off, calls wait their timeout)")
+                        help="how often the nodes owing answers, or events a wait_event waits for, are checked; "
+                             "a dead module's calls and waits fail (module_lost) about this long after it died "
+                             "(0: off, calls wait their timeout)")
         sp.add_argument("-q", "--quiet", action="store_true", help="no live tree display")
         sp.add_argument("--record", metavar="PATH", help="write the run log to PATH (default: a new file under "
                                                          "$ROS_HOME/bmtree/runs/)")

@@ -207,11 +207,9 @@ class RunContext:
         """Have the transport watch ``module``'s node while a ``wait_event`` waits for its ``event``
         (as it watches the node of a call in flight): a key for :meth:`module_gone` and
         :meth:`unwatch`, or None when the transport cannot watch (in process: mocks do not die)."""
-        watch = getattr(self.transport, "watch_module", None)
-        if watch is None:
-            return None
-        key = watch(module)
-        self._watches[key] = "%s.%s" % (module, event)
+        key = self.transport.watch_module(module)
+        if key is not None:
+            self._watches[key] = "%s.%s" % (module, event)
         return key
 
     def unwatch(self, key: Optional[str]) -> None:
@@ -219,9 +217,7 @@ class RunContext:
         if key is None or self._watches.pop(key, None) is None:
             return
         self._gone.pop(key, None)
-        unwatch = getattr(self.transport, "unwatch_module", None)
-        if unwatch is not None:
-            unwatch(key)
+        self.transport.unwatch_module(key)
 
     def module_gone(self, key: Optional[str]) -> str:
         """Why the module watched with ``key`` can send no event now ('' while it can)."""

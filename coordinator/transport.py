@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
-from typing import Any, Callable, ContextManager, Iterable
+from typing import Any, Callable, ContextManager, Iterable, Optional
 
 from comm.messages import BlackboardRequest, CancelRequest, FunctionCall
 
@@ -39,6 +39,15 @@ class Transport(abc.ABC):
 
     def wait_ready(self, modules: Iterable[str], timeout: float) -> None:  # noqa: B027 - optional, no-op default
         """Block until the named modules can be called (raise EnvironmentProblem if not)."""
+
+    def watch_module(self, module: str) -> Optional[str]:
+        """Watch ``module``'s node as a call in flight's is watched (a ``wait_event`` waits for one of its
+        events): a key, which a ``ModuleLost`` delivered for the module carries as a call id once the node
+        is gone; None when this transport has no nodes to lose (in process: mocks do not die)."""
+        return None
+
+    def unwatch_module(self, key: str) -> None:  # noqa: B027 - optional, no-op default
+        """The wait that :meth:`watch_module` gave ``key`` for has ended."""
 
     def close(self) -> None:  # noqa: B027 - optional, no-op default
         """Stop receiving and release resources."""

@@ -306,7 +306,8 @@ class WaitEventKind(NodeKind):
     value = ("event", "`module.event`")
     summary = "SUCCESS at the first matching event that arrives after the leaf starts"
     options = (Option("outputs", "outputs", "event param → tree key"),
-               Option("timeout", "seconds", "seconds, or `none`: no limit, as when left out", shown="none"),
+               Option("timeout", "seconds", "seconds, or `none`: no limit, as when left out (it still fails when "
+                                            "its module is lost)", shown="none"),
                Option("where", "expr", "an expression over the event's params, by their names (`person == "
                                        "\"Ana\"`): the first event for which it is true is taken, the others "
                                        "skipped"))
