@@ -18,6 +18,7 @@ from py_trees.common import Status
 
 from coordinator.nodes.decorators import Retry
 from coordinator.runevents import Change, RunObserver
+from coordinator.running import running_phrase
 
 __all__ = ["FailureExplainer", "FailureTrail", "Origin", "originates"]
 
@@ -137,8 +138,7 @@ class FailureExplainer(RunObserver):
                     not b.children or getattr(b, "resume_at", None) is not None):
                 for o in fired:  # a timeout halted this leaf (or a retry waiting out its delay): say what ran
                     if o.behaviour in _ancestors(b):
-                        said = " (%s)" % b.feedback_message if b.children and b.feedback_message else ""
-                        o.message += " while '%s'%s was running" % (b.name, said)
+                        o.message += running_phrase([b])
 
     def root_cause(self) -> Optional[Origin]:
         """The latest failure no ancestor recovered from."""

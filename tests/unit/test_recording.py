@@ -171,8 +171,8 @@ def test_a_timeout_that_fires_while_a_retry_waits_its_delay_says_what_it_waits_a
     t = TreeTest(str(tree), definitions=sim_defs)
     t.mocks["navigation.go_to"].fail("blocked")
     run = t.run()
-    assert run.reason == "in time: timed out after 3s while 'retry x5' (run 2 of 5 ended in FAILURE (navigation.go_to " \
-                         "failed: blocked); the next in 2s) was running", run.reason
+    assert run.reason == "in time: timed out after 3s while 'retry x5' was running (waiting 2 s between attempts: " \
+                         "attempt 2 of 5 failed: navigation.go_to failed: blocked)", run.reason
 
 
 def test_max_duration_stops_at_the_limit_not_at_the_next_period(sim_defs):
