@@ -221,6 +221,19 @@ class ModuleDefinition:
                 self.name, name, did_you_mean(name, self.functions)))
         return fn
 
+    def no_function(self, name: Any) -> str:
+        """``module 'arm' has no function 'pik' (did you mean 'pick'?)``, or what it has instead: its
+        functions, or for a module of events only (a topic turned into events) those events, which a
+        ``wait_event`` waits for."""
+        hint = did_you_mean(name, self.functions) if isinstance(name, str) else ""
+        if not hint and self.functions:
+            hint = " (functions: %s)" % ", ".join(self.functions)
+        elif not hint:
+            hint = " (it has no functions%s)" % (
+                "; its events: %s: wait for one with wait_event: %s.%s" % (
+                    ", ".join(self.events), self.name, next(iter(self.events))) if self.events else "")
+        return "module %r has no function %r%s" % (self.name, name, hint)
+
     def renamed(self, name: str) -> ModuleDefinition:
         """The same definition under another module name (a ROS parameter may rename a module)."""
         return parse_definition(dict(self.to_dict(), **{"Basic Module": name}), self.source)

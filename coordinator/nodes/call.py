@@ -226,8 +226,7 @@ class CallKind(NodeKind):
             mod, fname = found
             fn = mod.functions.get(fname)
             if fn is None:
-                p.err(at, "module %r has no function %r%s" % (mod.name, fname, did_you_mean(fname, mod.functions)
-                                                               or " (functions: %s)" % ", ".join(mod.functions)))
+                p.err(at, mod.no_function(fname))
         if fn is None:  # its outputs still write their keys: no knock-on errors where they are read
             spec.outputs = p.key_map(node, raw, "outputs", None, "output")
             repeated_outputs(p, raw, spec.outputs)
@@ -237,7 +236,8 @@ class CallKind(NodeKind):
         params = {q.name: q for q in fn.inputs}
         for k in inputs_raw:
             if k not in params:
-                p.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, did_you_mean(k, params)))
+                p.err(inputs_raw.key_pos[k], "%s has no input %r%s" % (value, k, _read_as_bool(k, params)
+                                                                       or did_you_mean(k, params)))
         for q in fn.inputs:
             if q.name not in inputs_raw:
                 if q.name in raw:   # written beside the call: its error says to move it under inputs
@@ -432,3 +432,17 @@ def _sample(types: Dict[str, set], key: str) -> Any:
 
 
 KINDS = (CallKind(),)
+
+
+_BOOL_WORDS = {True: ("on", "yes", "y", "true"), False: ("off", "no", "n", "false")}
+
+
+def _read_as_bool(key: Any, params: Dict[str, Any]) -> str:
+    """For an input name YAML read as true or false (an unquoted ``on``, ``yes``, ``off``, ``no``): how to
+    write it (``'on': …``, quoted), naming the input it meant when the function has one such."""
+    if not isinstance(key, bool):
+        return ""
+    meant = [n for n in params if n.lower() in _BOOL_WORDS[key]]
+    return ": YAML reads an unquoted on, off, yes or no as true or false; quote the name%s" % (
+        " ('%s': …)" % meant[0] if len(meant) == 1 else "")
+

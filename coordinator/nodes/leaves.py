@@ -143,9 +143,7 @@ def _recalled_type(p: Any, parts: List[str], at: Pos) -> Optional[str]:
             return None
         fn = mod.functions.get(fname)
         if fn is None:
-            p.err(at, "blackboard name %r: module %r has no function %r%s" % (
-                name, mod_name, fname, did_you_mean(fname, mod.functions) or " (functions: %s)"
-                % ", ".join(mod.functions)))
+            p.err(at, "blackboard name %r: %s" % (name, mod.no_function(fname)))
             return None
         outputs = {q.name: q for q in fn.outputs}
         if out not in outputs:

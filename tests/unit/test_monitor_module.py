@@ -80,3 +80,15 @@ def test_an_events_only_module_binds_announces_and_emits(tmp_path):
     assert sent.msgs[0].data == "open"
     said = announcement("/bm_door_monitor", definition)
     assert parse_definition(json.loads(said["definition"])).events["heard"].params[0].rostype == "std_msgs/String"
+
+
+def test_a_call_to_an_events_only_module_says_it_has_events_to_wait_for(tmp_path, capsys):
+    path = str(tmp_path / "door_monitor.json")
+    with open(path, "w") as fh:
+        json.dump(MONITOR, fh)
+    tree = tmp_path / "t.yaml"
+    tree.write_text("format: 1\nroot:\n  call: door_monitor.heard\n")
+    assert bmtree(["check", "--modules", path, str(tree)]) == 2
+    err = capsys.readouterr().err
+    assert "t.yaml:3:9: module 'door_monitor' has no function 'heard' (it has no functions; its events: heard: wait " \
+           "for one with wait_event: door_monitor.heard)" in err, err

@@ -268,3 +268,20 @@ def test_smachs_transitions_and_outcome_map_are_named_with_what_bmtree_writes(tm
                         "synchronise): SMACH's outcome_map is parallel's succeed_on: [child names] (those children "
                         "succeed: it succeeds, halting the others) or policy: all, one or first_success")
     assert OTHER_OPTIONS["child_termination_cb"] == OTHER_OPTIONS["outcome_map"]
+
+
+def test_an_input_name_yaml_read_as_true_says_to_quote_it(tmp_path, capsys):
+    defs = tmp_path / "lamp.json"
+    defs.write_text(json.dumps({"Basic Module": "lamp", "Brief Description": "A lamp.", "Hardware Required": [],
+                                "Functions": [{"Name": "switch", "Exec-condition": "", "Description": "Turns it.",
+                                               "Input-params": [{"Name": "on", "Data-type": "std_msgs/Bool",
+                                                                 "Description": "on or off"}],
+                                               "Output-params": [], "Concurrent": False}]}))
+    path = tmp_path / "t.yaml"
+    path.write_text("format: 1\nroot:\n  call: lamp.switch\n  inputs: {on: true}\n")
+    assert bmtree(["check", "--modules", str(defs), str(path)]) == 2
+    err = capsys.readouterr().err.replace(str(path), "t.yaml")
+    assert "t.yaml:4:12: lamp.switch has no input True: YAML reads an unquoted on, off, yes or no as true or false; " \
+           "quote the name ('on': …)\n" in err, err
+    path.write_text("format: 1\nroot:\n  call: lamp.switch\n  inputs: {'on': true}\n")
+    assert bmtree(["check", "--modules", str(defs), str(path)]) == 0
