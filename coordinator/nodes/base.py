@@ -485,9 +485,10 @@ def repeated_outputs(p: Parser, raw: LMap, outputs: Dict[str, str], key: str = "
                   "key" % (key, first[tree_key], name, tree_key, name))
 
 
-def check_choice(p: Parser, raw: LMap, key: str, choices: Tuple[str, ...], default: str) -> str:
+def check_choice(p: Parser, raw: LMap, key: str, choices: Tuple[str, ...], default: str, hint: str = "") -> str:
+    """``raw[key]``, one of ``choices`` (else an error with the closest one, or ``hint``)."""
     v = raw.get(key, default)
     if v not in choices:
         p.err(raw.val_pos[key], "%s must be %s%s" % (key, " or ".join("%r" % c for c in choices),
-                                                      did_you_mean(v, choices)))
+                                                      did_you_mean(v, choices) or hint))
     return v

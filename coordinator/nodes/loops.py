@@ -178,6 +178,10 @@ class RepeatKind(Counted):
 
 
 # for_each -------------------------------------------------------------------------------------
+_GO_ON = (" (to go on to the next element when one fails, as SMACH's Iterator with a 'continue' outcome: put "
+          "the child in force_success, and keep what failed with its call's status: KEY)")
+
+
 @dataclass(frozen=True)
 class ForEachSpec:
     items: Any                      # a list literal (may hold references), a Ref or an ExprValue
@@ -284,7 +288,7 @@ class ForEachKind(NodeKind):
         if "index" in raw and (not isinstance(index, str) or not index.isidentifier() or index == key):
             p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier) other than 'as', got %r" % (index,))
             index = None
-        spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all"), limit,
+        spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all", _GO_ON), limit,
                            raw.val_pos["max"] if "max" in raw else None, index or "")
         if "child" in raw:
             p.child(node, raw["child"], raw.val_pos["child"])

@@ -285,3 +285,12 @@ def test_an_input_name_yaml_read_as_true_says_to_quote_it(tmp_path, capsys):
            "quote the name ('on': …)\n" in err, err
     path.write_text("format: 1\nroot:\n  call: lamp.switch\n  inputs: {'on': true}\n")
     assert bmtree(["check", "--modules", str(defs), str(path)]) == 0
+
+
+def test_a_for_each_policy_to_go_on_past_failures_is_told_the_idiom(tmp_path, capsys):
+    status, lines = check(tmp_path, capsys, "format: 1\nroot:\n  for_each: [a, b]\n  as: x\n  policy: continue\n"
+                                            "  child: {wait: 0}\n")
+    assert status == 2 and lines == [
+        "t.yaml:5:11: policy must be 'all' or 'one' (to go on to the next element when one fails, as SMACH's "
+        "Iterator with a 'continue' outcome: put the child in force_success, and keep what failed with its call's "
+        "status: KEY)"]
