@@ -4,6 +4,7 @@ from __future__ import annotations
 import errno
 import operator
 import os
+import re
 import stat
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -101,7 +102,17 @@ class LList(list, OnDemandPos):
 
 
 # libyaml's parser when PyYAML was built with it (Debian's is): the same events, ~10x faster.
-_Builder = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _Builder(_SafeLoader):  # type: ignore[misc,valid-type]
+    """The safe loader, reading ``5e-1`` and ``1e3`` as numbers as YAML 1.2 (and JSON) do: YAML 1.1,
+    PyYAML's, wants a dot (``5.0e-1``) and read them as text, which a float input then refused only
+    when its call was built, mid-run (``--set x=5e-1``)."""
+
+
+_Builder.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+|[0-9]*\.[0-9]+)[eE][-+]?[0-9]+$"),
+                               list("-+0123456789."))
 
 MAX_NODES = 200000          # every scalar, container and alias expansion counts
 MAX_DEPTH = 400

@@ -28,9 +28,21 @@ multi: |
 
 def test_values_match_the_safe_loader_and_aliases_share():
     data = load_yaml(TEXT, "t.yaml")
-    assert data == yaml.safe_load(TEXT)
+    expected = yaml.safe_load(TEXT)
+    assert expected["list"][4] == "1e3"
+    expected["list"][4] = 1000.0   # a number, as YAML 1.2 and JSON read it (PyYAML's YAML 1.1 wants 1.0e3)
+    assert data == expected
     assert data["copy"] is data["base"] and data["more"] is data["list"]
     assert data["tagged"] == "5" and data["empty"] is None
+
+
+@pytest.mark.parametrize("text,value", [
+    ("5e-1", 0.5), ("-2E3", -2000.0), ("+1e+2", 100.0), (".5e1", 5.0), ("1.5e-3", 0.0015), ("1e", "1e"),
+    ("'5e-1'", "5e-1"), ("e5", "e5"), ("1_0e1", "1_0e1"),
+])
+def test_exponents_without_a_dot_are_numbers(text, value):
+    """``--set x=5e-1`` gave text, which a float input refused only when its call was built, mid-run."""
+    assert load_value(text, "--set x") == value and type(load_value(text, "--set x")) is type(value)
 
 
 def test_a_merge_then_a_list_in_the_same_mapping():

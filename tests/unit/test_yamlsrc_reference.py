@@ -18,6 +18,7 @@ import yaml
 
 from coordinator.errors import Pos, TreeErrors
 from coordinator.yamlsrc import LList, LMap, load_yaml
+from coordinator.yamlsrc import _Builder as yamlsrc_loader
 from tests.conftest import ROOT
 
 _MERGE = object()
@@ -32,7 +33,7 @@ class _Refused(Exception):
 
 def _reference(text: str, file: str) -> Any:
     """One document as ``load_yaml`` must read it (without its size and depth limits)."""
-    loader = yaml.CSafeLoader(text)
+    loader = yamlsrc_loader(text)   # PyYAML's safe loader, with YAML 1.2's 5e-1 as a number
     anchors: Dict[str, Any] = {}
     open_anchors: List[Any] = []  # of the collections being read, innermost last
 
