@@ -34,6 +34,7 @@ clock moving (a livelock); a limit reached is a FAIL naming it. The format: docs
 """
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import time
@@ -289,14 +290,44 @@ def run_scenario_file(path: str, definitions: Definitions = None,
     results = []
     for s in load_scenario_file(path, definitions, coverage):
         t0 = time.perf_counter()
-        run, problems = _run(s)
+        with _ModuleLog() as logged:
+            run, problems = _run(s)
         ms = (time.perf_counter() - t0) * 1000
         ok = not problems
         out.write("%s %s: %s (%d calls, %.1f ms)\n" % ("PASS" if ok else "FAIL", path, s.name, len(run.calls()), ms))
         for p in problems:
             out.write("    %s\n" % p)
+        if not ok:
+            out.writelines("    module log: %s\n" % line for line in logged.lines)
         results.append(ok)
     return results
+
+
+class _ModuleLog(logging.Handler):
+    """The warnings the mocked modules' runtime logs during a scenario (``busy with call …``, a cancelled
+    call whose code has not returned), kept, not printed between the PASS/FAIL lines: a FAIL shows them
+    under its problems (at most ``MAX``), a PASS drops them."""
+
+    MAX = 20
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.lines: List[str] = []
+        self._logger = logging.getLogger("bmtree.module")
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if len(self.lines) < self.MAX:
+            self.lines.append(record.getMessage())
+
+    def __enter__(self) -> _ModuleLog:
+        self._propagate = self._logger.propagate
+        self._logger.addHandler(self)
+        self._logger.propagate = False   # else Python's last-resort handler prints it on stderr
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._logger.removeHandler(self)
+        self._logger.propagate = self._propagate
 
 
 def run_scenarios(paths: List[str], modules: Optional[List[str]] = None, out: Optional[TextIO] = None,

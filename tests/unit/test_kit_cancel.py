@@ -69,3 +69,25 @@ scenarios:
 """)
     out = io.StringIO()
     assert run_scenario_file(str(scen), None, out) == [True], out.getvalue()
+
+
+def test_the_mocks_warnings_show_under_a_failed_scenario_not_between_the_lines(tmp_path, capfd):
+    """``bmtree test`` printed the mocked runtime's warnings (busy, a cancelled call's code still running)
+    on stderr among the PASS/FAIL lines; a failed scenario now shows them under its problems."""
+    (tmp_path / "t.yaml").write_text(TREE)
+    scen = tmp_path / "t.scenarios.yaml"
+    scenario = """  - name: %s
+    mocks:
+      navigation.go_to: [{succeed: {room: kitchen}, delay: 8, ignores_cancel: true}]
+    expect:
+      status: %s
+"""
+    scen.write_text("tree: t.yaml\nscenarios:\n" + scenario % ("expected", "failure") + scenario % ("wrong", "success"))
+    out = io.StringIO()
+    assert run_scenario_file(str(scen), None, out) == [True, False], out.getvalue()
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("PASS ") and lines[1].startswith("FAIL ") and lines[2].startswith("    status FAILURE")
+    logged = [line for line in lines if line.startswith("    module log: ")]
+    assert logged and any("busy" in line for line in logged), lines
+    assert all(line.startswith("    ") for line in lines[2:])
+    assert capfd.readouterr().err == ""
