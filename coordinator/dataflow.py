@@ -11,11 +11,12 @@ that cannot be one (``coordinator.nodes.base.param_type_errors``). A key is type
 writers give one type: a node's definition gives it, or the reference whose value it copies (a ``set``
 or an include argument of ``$pose``, ``for_each``'s element: the list's element type); a tree input, a
 literal or an expression gives none. A tree input that nothing else writes is checked, as a count,
-duration or list, with the literals it is given (its default, the includes' arguments).
+duration or list, with the literals it is given (its default, the includes' arguments), and in the call
+inputs it is passed to with those literals (:mod:`coordinator.inputvalues`).
 """
 from __future__ import annotations
 
-from typing import Any, Dict, FrozenSet, List, Optional, Sequence, Set, Tuple
+from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import Flow
@@ -42,6 +43,13 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     """For each tree key, the ROS types written to it (None: not known statically), and the literals the
     tree inputs that nothing else writes are given (``bound``; ``given``: inputs the caller sets, whose
     defaults are not used)."""
+    return _key_types(tree, nodes, given)[0]
+
+
+def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]],
+               given: FrozenSet[str]) -> Tuple[KeyTypes, List[TreeNode], Dict[str, List[TreeNode]]]:
+    """:func:`key_types`, with the nodes that bind a file's inputs (includes) and the writers of the keys
+    that are inputs of a file."""
     types = KeyTypes((k, {None}) for k in tree.inputs)
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
     kinds = kinds_in(nodes)
@@ -72,7 +80,7 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     if inputs:
         types.bound = _bindings(tree, binders, writers, given)
     types.why_not = _Choices(nodes, inputs)
-    return types
+    return types, binders, writers
 
 
 class _Choices:
@@ -146,15 +154,7 @@ def _bindings(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[T
     for k, default in tree.inputs.items():
         if k not in given and k not in writers and _literal(default):
             out.setdefault(k, {}).setdefault(here, []).append((default, "", None))
-    files: Dict[int, Tuple[TreeFile, Dict[str, Any], TreeNode]] = {}   # each include node once
-    for b in binders:
-        bound = b.nodekind.binds(b)
-        if bound is not None:
-            files.setdefault(id(b), (bound[0], bound[1], b))
-    sole: Dict[str, Optional[TreeFile]] = {}   # the one file whose includes are all the key's writers
-    for k, ws in writers.items():
-        subs = {id(files[id(w)][0]) if id(w) in files else 0 for w in ws}
-        sole[k] = files[id(ws[0])][0] if len(subs) == 1 and 0 not in subs else None
+    files, sole = _included(binders, writers)
     seen: Set[Tuple[str, str, str, str]] = set()
     for sub, args, b in files.values():
         for k, default in sub.inputs.items():
@@ -169,13 +169,37 @@ def _bindings(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[T
     return out
 
 
-def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
-                given: FrozenSet[str] = frozenset()) -> List[TreeError]:
+_Includes = Dict[int, Tuple[TreeFile, Dict[str, Any], TreeNode]]
+
+
+def _included(binders: List[TreeNode], writers: Dict[str, List[TreeNode]]
+              ) -> Tuple[_Includes, Dict[str, Optional[TreeFile]]]:
+    """Each include node once, as (its subtree, its arguments, itself); and for each key that is an input
+    of a file, the one file whose includes are all its writers (None: another node writes it too)."""
+    files: _Includes = {}
+    for b in binders:
+        bound = b.nodekind.binds(b)
+        if bound is not None:
+            files.setdefault(id(b), (bound[0], bound[1], b))
+    sole: Dict[str, Optional[TreeFile]] = {}
+    for k, ws in writers.items():
+        subs = {id(files[id(w)][0]) if id(w) in files else 0 for w in ws}
+        sole[k] = files[id(ws[0])][0] if len(subs) == 1 and 0 not in subs else None
+    return files, sole
+
+
+def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None, given: FrozenSet[str] = frozenset(),
+                defaults: Optional[Mapping[str, Any]] = None) -> List[TreeError]:
     """References that cannot fit the input they are passed to (``given``: inputs the caller sets); a
-    ``warning: `` among them is one (the tree's default of an input that cannot be used as it is)."""
+    ``warning: `` among them is one (the tree's default of an input that cannot be used as it is). And the
+    literals tree inputs are given (their defaults, the includes' arguments) that a call input they are
+    passed to (``$x``, ``$x.field``, anywhere in its value) could never take, at the literal: the call would
+    refuse them when built, after the calls before it ran; only where no node writes the key (a key some node
+    may write could hold another value by then). ``defaults``: each file's ``inputs:`` as written, by file
+    (where a default is)."""
     errors: List[TreeError] = []
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
-    types = key_types(tree, nodes, given)
+    types, binders, writers = _key_types(tree, nodes, given)
     choices = types.why_not if isinstance(types.why_not, _Choices) else None
     for n in nodes:
         nk = n.nodekind
@@ -183,4 +207,8 @@ def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
             if choices is not None:
                 choices.checking = n
             nk.check_types(n, types, errors)
+    if tree.inputs or binders:
+        from coordinator.inputvalues import default_misfits  # it reads the data flow: imported here
+
+        errors.extend(default_misfits(tree, nodes, binders, writers, given, defaults))
     return errors

@@ -64,6 +64,7 @@ class Parser:
         self.repeated = 0
         self._sizes: Dict[TreeNode, Tuple[int, int]] = {}   # see _measure
         self._unquoted: Dict[Pos, str] = {}   # where a value is text YAML read as a mapping or a list: the hint
+        self.inputs_raw: Dict[str, LMap] = {}   # each file's inputs as written, by the file's name in positions
 
     def err(self, pos: Pos, message: str, module: str = "") -> None:
         if self._unquoted and "takes text" in message and pos in self._unquoted:   # see literal_at
@@ -188,6 +189,7 @@ class Parser:
             if raw:
                 self.err(pos_of(data, "inputs"), "'inputs' must be a mapping of name: {default: …}")
             return inputs, required
+        self.inputs_raw[raw.pos.file] = raw   # where each default is, for the checks' errors
         for name, spec in raw.items():
             if not isinstance(name, str) or not name.isidentifier():
                 self.err(raw.key_pos[name], "input name %r is not an identifier" % (name,))
@@ -482,7 +484,7 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
             errors.extend(check_flow(tree, frozenset(given)))
             reserved, reserved_warned = reserved_key_problems(tree, list(parser.files.values()), nodes)
             errors.extend(reserved)
-            typed = check_types(tree, nodes, frozenset(given))
+            typed = check_types(tree, nodes, frozenset(given), parser.inputs_raw)
             warned = {e for e in typed if e.message.startswith("warning: ")}
             errors.extend(e for e in typed if e not in warned)
             found = sorted(set(parser.warnings) | set(warnings(nodes)) | warned | set(reserved_warned),

@@ -162,7 +162,8 @@ def first_uses(tree: Any) -> Dict[str, str]:
 
 def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
     """Print the tree's warnings; ``--set`` keys must be inputs the tree declares (a typo would
-    silently use the default) and every required input must be given."""
+    silently use the default), every required input must be given, and each value must fit the call
+    inputs the tree passes it to (else the call would refuse it mid-run, after the calls before it)."""
     for w in tree.warnings:
         err(str(w))
     for key in sorted(given):
@@ -173,6 +174,11 @@ def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
     if missing:
         raise UsageError("%s needs the input%s %s: give them with --set KEY=VALUE" % (
             path, "s" if len(missing) > 1 else "", ", ".join(missing)))
+    from coordinator.inputvalues import set_value_errors
+
+    misfits = set_value_errors(tree, given)
+    if misfits:
+        raise PlainError("\n".join("error: %s" % m for m in misfits))
 
 
 def _check_local_address(address: str) -> None:

@@ -40,6 +40,7 @@ from coordinator.values import (
     templates_as_text,
     value_type_errors,
 )
+from coordinator.yamlsrc import pos_of
 from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS", "NOT_SENT", "NO_TIMEOUT", "STATUS_TEXTS"]
@@ -65,6 +66,8 @@ class CallSpec:
     check_success: bool = True
     input_pos: Dict[str, Pos] = field(default_factory=dict)
     timeout_pos: Optional[Pos] = None
+    # input name -> the place of each $reference inside its mapping or list (keys, indices) -> where it is written
+    ref_pos: Optional[Dict[str, Dict[Tuple[Any, ...], Pos]]] = None
 
 
 class Call(Leaf):
@@ -252,6 +255,9 @@ class CallKind(NodeKind):
                         spec.static[q.name] = msg
                 except ProtocolError as exc:
                     p.err(inputs_raw.val_pos[q.name], said_of("input %r" % q.name, exc))
+            elif isinstance(spec.inputs[q.name], (dict, list)):   # references inside: where, for the checks
+                spec.ref_pos = spec.ref_pos or {}
+                spec.ref_pos[q.name] = _ref_places(inputs_raw[q.name], spec.inputs[q.name], (), {})
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in fn.outputs}, "output")
         repeated_outputs(p, raw, spec.outputs)
         _clashing_keys(p, raw, spec)
@@ -339,6 +345,20 @@ class CallKind(NodeKind):
             except ProtocolError as exc:
                 errors.append(TreeError(at, _cannot_take(q.name, q.rostype, value, sample, types, exc)))
 
+    def typed_inputs(self, node: TreeNode) -> List[Tuple[str, Any, Any, Pos, Dict[Tuple[Any, ...], Pos]]]:
+        """The inputs that read keys, for the check of the values tree inputs are given
+        (``coordinator.dataflow``): what each is called (``navigation.approach's target``), its definition
+        (``convert``: what the call does with its value), its value, where it is written, and where each
+        reference inside a mapping or a list of it is."""
+        spec = node.spec
+        fn = spec.function
+        if fn is None:
+            return []
+        places = spec.ref_pos or {}
+        return [("%s's %s" % (spec.target, q.name), q, spec.inputs[q.name], spec.input_pos.get(q.name, node.pos),
+                 places.get(q.name, {})) for q in fn.inputs if spec.inputs.get(q.name) is not None
+                and q.name not in spec.static]
+
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         return Call(node, ctx)
 
@@ -365,6 +385,19 @@ def _clashing_keys(p: Any, raw: Any, spec: CallSpec) -> None:
                                        "%s its own key" % (taken[key], option, key, option))
         else:
             taken[key] = option
+
+
+def _ref_places(raw: Any, value: Any, here: Tuple[Any, ...],
+                out: Dict[Tuple[Any, ...], Pos]) -> Dict[Tuple[Any, ...], Pos]:
+    """Where each reference inside a mapping or a list (``value``, parsed from ``raw``) is written, by its place."""
+    for step, v in (value.items() if isinstance(value, dict) else enumerate(value)):
+        if isinstance(v, Ref):
+            at = pos_of(raw, step, None)
+            if at is not None:
+                out[here + (step,)] = at
+        elif isinstance(v, (dict, list)) and isinstance(raw, (dict, list)):
+            _ref_places(raw[step], v, here + (step,), out)
+    return out
 
 
 def _text_misfit(q: Any, value: Any, types: Any, at: Pos) -> Optional[str]:

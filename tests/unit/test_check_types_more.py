@@ -167,11 +167,12 @@ def test_the_run_time_error_of_a_missing_field_says_did_you_mean():
 
 
 def test_a_call_whose_input_misses_a_field_fails_with_did_you_mean_when_running(tmp_path, bmtree_tree, defs):
-    """A tree input's type is not known before running: the run says it, with the closest field."""
+    """A tree input's type is not known before running: the run says it, with the closest field (a value
+    the test kit gives; the tree's own default is checked before running: test_check_input_values.py)."""
     path = tmp_path / "t.yaml"
-    path.write_text("format: 1\ninputs:\n  where: {default: {position: {x: 1.0, y: 2.0, z: 0.0}}}\nroot:\n"
+    path.write_text("format: 1\ninputs:\n  where: {}\nroot:\n"
                     "  call: navigation.approach\n  inputs: {target: $where.positon}\n")
-    run = bmtree_tree(str(path), definitions=defs).run()
+    run = bmtree_tree(str(path), definitions=defs, inputs={"where": {"position": {"x": 1.0, "y": 2.0}}}).run()
     assert run.failed and "cannot build the call: where has no field 'positon' (did you mean 'position'?)" \
         in run.reason, run.reason
 
