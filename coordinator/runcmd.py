@@ -23,6 +23,7 @@ from coordinator.cliutil import (
     wait_master,
 )
 from coordinator.errors import TreeError, TreeErrors, UsageError
+from coordinator.runstop import RequestNotice, interrupted_line, shutdown_notice
 
 __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line", "shutdown_notice"]
 
@@ -35,7 +36,6 @@ PREFLIGHT_AT_LEAST = 2.0  # s the preflight has even when the --wait before it i
 #: s a shutdown request of the run's node holds rospy's shutdown beyond the cleanup's own limit:
 #: root halted, the summary, the run's topics unregistered (each master question bounded, 2 s)
 SHUTDOWN_MARGIN = 5.0
-NOTICE_FIRST = 1.0  # s a shutdown request waits for its notice to be in the run before it stops it
 REQUEST_ANSWERED = 3.0  # s the leave waits for rospy to end the shutdown it held and answer the request
 
 
@@ -44,70 +44,6 @@ def _report(result: Any, tree_name: str) -> None:
 
     for line in summary_lines(result, tree_name):
         print(line)
-
-
-def interrupted_line(result: Any, started: bool, request: str = "") -> str:
-    """What ``bmtree run`` says when a stop signal ended it (``started``: the tree was ticking; ``result``:
-    the run's, None if it had none; ``request``: rospy's reason when a shutdown request of the run's node
-    stopped it, not Ctrl-C): what happened to the calls, then how the cleanup, if any, went."""
-    by = " by a shutdown request of its node (%s)" % request if request else ""
-    if not started:
-        return "interrupted during start-up%s: nothing was called" % by
-    mine = {id(c) for c in getattr(result, "cleanup_calls", None) or []}
-    sent = result is not None and any(id(c) not in mine for c in result.calls)
-    line = ("interrupted%s: running calls were cancelled" % by if sent
-            else "interrupted%s before any call was sent" % by)
-    status = getattr(result, "cleanup_status", None)
-    if status is None:
-        return line + (", and the cleanup did not run" if getattr(result, "ended", "") else "")
-    why = result.cleanup_reason or "no reason given"
-    if status.value == "SUCCESS":
-        return line + ", then the cleanup ran"
-    if status.value == "INVALID" or why.startswith("interrupted"):
-        where = why.partition(" while ")[2]
-        return line + ", then the cleanup was cut short by %s" % ("Ctrl-C" if request else "a second Ctrl-C") + (
-            " while %s" % where if where else "")
-    if why.startswith("did not end within"):
-        return line + ", then the cleanup was cut short: %s" % why
-    return line + ", then the cleanup failed: %s" % why
-
-
-def shutdown_notice(node: str, reason: str) -> str:
-    """What a run says when its node is asked to shut down (rospy's ``reason``): that it stops as on
-    Ctrl-C, and who asked, since nobody at its terminal did."""
-    if "new node registered with same name" in reason:
-        who = "another node registered with this run's node name %s, so the ROS master shut it down" % node
-    elif reason.startswith("external shutdown request"):
-        who = "this run's node %s was asked to shut down (rosnode kill?)" % node
-    else:
-        who = "rospy shuts this run's node %s down" % node
-    return "%s: %s; stopping the run as Ctrl-C does" % (who, reason)
-
-
-class _RequestNotice:
-    """Tells a shutdown request (called in rospy's XML-RPC thread, before the run is stopped): a
-    notice in the run once it ticks (display, run log and stream), handed to the ticking thread
-    and waited for (bounded) so that it comes before the stop's own; on stderr otherwise."""
-
-    def __init__(self) -> None:
-        self.ctx: Any = None  # the run's context, once it ticks
-
-    def __call__(self, reason: str) -> None:
-        import rospy
-
-        from coordinator.runevents import Notice
-
-        text = shutdown_notice(rospy.get_name(), reason)
-        ctx = self.ctx
-        if ctx is not None:
-            notice = Notice("shutdown_request", text)
-            ctx.inbox.put(notice)
-            end = time.monotonic() + NOTICE_FIRST
-            while time.monotonic() < end:
-                if any(n is notice for n in ctx.notices):
-                    return
-                time.sleep(0.005)
-        err(text)
 
 
 def _warn_without_blackboard() -> None:
@@ -383,7 +319,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
             stream_sink = transport.stream_sink()
             # rospy initialized: a shutdown request of its node (rosnode kill) stops the run as Ctrl-C does, ROS up
-            request_notice = _RequestNotice()
+            request_notice = RequestNotice()
             interrupts.stop_on_shutdown_request(lambda: SHUTDOWN_MARGIN + (
                 tree.cleanup_timeout if tree is not None and tree.cleanup is not None else 0.0), request_notice)
             from coordinator.watch import STREAM_NS
