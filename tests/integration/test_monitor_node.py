@@ -12,16 +12,10 @@ from std_msgs.msg import String
 
 from tests.conftest import until
 from tests.integration.conftest import bmtree_cmd, wait_announced
+from tests.unit.test_monitor_module import MONITOR
 
 TOPIC = "/test_monitor/door"
-DEFINITION = {
-    "Basic Module": "door_monitor",
-    "Brief Description": "The door sensor's topic as events.",
-    "Hardware Required": [],
-    "Functions": [],
-    "Events": [{"Name": "heard", "Description": "The sensor said something.",
-                "Event-params": [{"Name": "text", "Data-type": "std_msgs/String", "Description": "what it said"}]}],
-}
+DEFINITION = MONITOR
 CLASS = '''import rospy
 from std_msgs.msg import String
 

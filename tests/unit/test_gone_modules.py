@@ -17,32 +17,20 @@ from coordinator.clock import SimClock
 from coordinator.context import MODULE_GONE, RunContext, gone_text
 from coordinator.language import load_tree
 from coordinator.ros_transport import WATCH_PREFIX, RosTransport
-from coordinator.transport import Transport
 from modules.definition import load_definition
 from tests.conftest import ROOT
+from tests.unit.test_faults import _Sent
 
 PROBE = load_definition(os.path.join(ROOT, "tests", "integration", "nodes", "probe.json"))
 
 
-class _Watching(Transport):
+class _Watching(_Sent):
     """Records what is sent and which modules are watched, as the ROS transport would watch them."""
 
     def __init__(self):
-        self.sent = []
+        super().__init__()
         self.watched = {}  # key -> module, while watched
         self.unwatched = []
-
-    def connect(self, deliver):
-        pass
-
-    def send_call(self, call):
-        self.sent.append(call)
-
-    def send_cancel(self, cancel):
-        self.sent.append(cancel)
-
-    def send_request(self, request):
-        self.sent.append(request)
 
     def watch_module(self, module):
         key = "%s%d" % (WATCH_PREFIX, len(self.watched) + len(self.unwatched))
