@@ -26,7 +26,7 @@ from comm.nodeopts import node_name, seconds
 from modules.bridgegraph import CppNodeGraph
 from modules.bridgeoutput import CppCall as _Call
 from modules.bridgeoutput import CppOutputs
-from modules.cppinfo import data_topic, data_topics, signature_problems
+from modules.cppinfo import data_topic, data_topics, event_topic, signature_problems
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition, load_definition
 from modules.runtime import BasicModule, BindingError, Failure, ModuleServer, Rejected
 
@@ -75,6 +75,7 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self.cpp_uri = ""
         self.library = False
         self.cancellable = False  # the C++ node takes cancels (bmtree's library subscribes /<BM>/BM_cancel)
+        self.emits = False  # the C++ node sends events (bmtree's library, API 3, publishes /<BM>/BM_event)
         self._cond = threading.Condition()
         self._call: Optional[_Call] = None
         self._ready = False
@@ -84,6 +85,8 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._cancel_pub: Any = None
         self._out_sub: Any = None
         self._info_sub: Any = None
+        self._event_sub: Any = None
+        self._event_warnings: Dict[str, Tuple[float, int]] = {}  # a refused event's reason -> (said at, since)
         self._infos: Dict[str, Dict[str, Any]] = {}  # the latest BM_info of each node that sent one
         self._String: Any = None
         self._self_name = ""
@@ -119,20 +122,39 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._out_sub = rospy.Subscriber("/%s/BM_output" % name, String, self._on_output, queue_size=100,
                                          tcp_nodelay=True)
         self._info_sub = rospy.Subscriber("/%s/BM_info" % name, String, self._on_info, queue_size=1)
+        self._event_sub = rospy.Subscriber(event_topic(name), String, self._on_event, queue_size=1000,
+                                           tcp_nodelay=True)
         missing = self._wait_connected(self.connect_timeout, check=True)
         if missing:
             raise BridgeError("the C++ node of module %r is not ready after %gs: %s (the bridge waits --wait seconds "
                               "for it)" % (name, self.connect_timeout, "; ".join(missing)))
         self._check_signatures()
+        self._check_events()
         self._watcher = threading.Thread(target=self._watch, name="bridge-watch", daemon=True)
         self._watcher.start()
         rospy.loginfo("bridge for %r: C++ node %s connected (%s)", name, self.cpp_node,
-                      ("bmtree library, no input gap, %s" % ("takes cancels" if self.cancellable else "no cancels"))
+                      ("bmtree library, no input gap, %s%s" % ("takes cancels" if self.cancellable else "no cancels",
+                                                               ", sends events" if self.emits else ""))
                       if self.library else "input gap %gs, no cancels" % self._gap())
+
+    def _check_events(self) -> None:
+        """At start: a definition with Events whose C++ node cannot send them is said in the log."""
+        events = ", ".join(self.definition.events)
+        if not events or self.emits:
+            return
+        if self.library:
+            log.warning("%s lists events (%s), but the C++ node %s does not publish %s (built with a bmtree C++ "
+                        "library older than BMTREE_CPP_API 3?): rebuild it, or its events never come",
+                        self.definition.source or self.definition.name, events, self.cpp_node,
+                        event_topic(self.definition.name))
+        else:
+            log.warning("%s lists events (%s), but the C++ node %s is not built with bmtree's C++ library, and the "
+                        "original C++ protocol has no events: they never come", self.definition.source or
+                        self.definition.name, events, self.cpp_node)
 
     def shutdown(self) -> None:
         self._watch_stop.set()
-        for s in self._subs + [self._out_sub, self._info_sub]:
+        for s in self._subs + [self._out_sub, self._info_sub, self._event_sub]:
             if s is not None:
                 s.unregister()
 

@@ -43,8 +43,8 @@ def _some(names: List[str], shown: int = 3) -> str:
 
 class CppNodeGraph:
     """The graph side of :class:`modules.bridge.CppBridge` (a base class of it, on its state): which
-    node is the C++ node (``cpp_node``, ``cpp_uri``, ``library``, ``cancellable``), what is not
-    connected yet, and whether its process is gone."""
+    node is the C++ node (``cpp_node``, ``cpp_uri``, ``library``, ``cancellable``, ``emits``), what is
+    not connected yet, and whether its process is gone."""
 
     def _find_node(self) -> Optional[str]:
         """The C++ node: whoever subscribes ``/<BM>/BM_input`` (its name is not fixed)."""
@@ -74,6 +74,7 @@ class CppNodeGraph:
         self.cpp_node = node
         self.library = node in next((n for t, n in pubs if t == "/%s/BM_info" % name), [])
         self.cancellable = node in next((n for t, n in subs if t == "/%s/BM_cancel" % name), [])
+        self.emits = node in next((n for t, n in pubs if t == "/%s/BM_event" % name), [])
         return node
 
     def _missing(self) -> List[str]:
@@ -89,7 +90,10 @@ class CppNodeGraph:
         if self.cancellable:
             sync.append(("/%s/BM_cancel" % name, self._cancel_pub))
         deaf = [topic for topic, pub in sync + sorted(self._pubs.items()) if not pub.impl.has_connection(node)]
-        mute = [sub.resolved_name for sub in [self._out_sub] + self._subs if not sub.impl.has_connection(self.cpp_uri)]
+        subs = [self._out_sub] + self._subs
+        if self.emits and self.definition.events and self._event_sub is not None:
+            subs.append(self._event_sub)  # an event sent before would be lost
+        mute = [sub.resolved_name for sub in subs if not sub.impl.has_connection(self.cpp_uri)]
         out = []
         if deaf:
             out.append("%s does not receive %s" % (node, _some(deaf)))

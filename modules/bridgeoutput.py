@@ -1,8 +1,10 @@
-"""The C++ node's answers to the bridge: ``BM_output`` and the output values, matched to the call.
+"""The C++ node's answers to the bridge: ``BM_output`` and the output values, matched to the call;
+and its events (``BM_event``), checked and passed on as bmtree events.
 
 The C++ node publishes a call's output values on the data topics, then ``BM_output`` naming them by
 topic and occurrence; values of another call (one that timed out, or a previous bridge's) are told
-apart and skipped. Kept apart from sending calls and their timeouts (:mod:`modules.bridge`).
+apart and skipped. An event comes whole on a topic of its own, so it is never taken for an output.
+Kept apart from sending calls and their timeouts (:mod:`modules.bridge`).
 """
 from __future__ import annotations
 
@@ -13,13 +15,17 @@ from typing import Any, Dict, List, Optional
 
 from comm.errors import ProtocolError
 from comm.messages import load_payload
-from modules.cppinfo import data_topic
+from modules.cppinfo import cpp_event, data_topic
 from modules.definition import FunctionDefinition
 from modules.runtime import Failure, Rejected
 
 __all__ = ["CppCall", "CppOutputs"]
 
 log = logging.getLogger("bmtree.bridge")
+
+#: a refused event's warning is repeated at most this often (s): a timer that emits a wrong event
+#: ten times a second must not flood the log
+_EVENT_WARN_EVERY = 10.0
 
 
 class CppCall:
@@ -89,6 +95,47 @@ class CppOutputs:
             call.output = out
             call.output_at = time.monotonic()
             self._cond.notify_all()
+
+    def _on_event(self, msg: Any) -> None:
+        """An event of the C++ node (``BM_event``, rospy's thread): checked against the definition and
+        published as a bmtree event; a bad one, or one from another node, is logged (naming the node
+        that sent it) and dropped. Never raises."""
+        sender = str(msg._connection_header.get("callerid"))
+        try:
+            if not self.cpp_node:
+                log.debug("ignored a BM_event from %s before the C++ node was found", sender)
+                return
+            try:
+                event, params = cpp_event(load_payload(msg.data, self.max_bytes), self.definition)
+                if sender != self.cpp_node:
+                    self._refused_event(sender, "events are taken from the C++ node only")
+                    return
+                self._server.emit(event, params)
+            except ProtocolError as exc:
+                self._refused_event(sender, str(exc))
+        except Exception as exc:  # a bug here must not end rospy's thread of the topic
+            log.error("could not pass on an event of %s (%s: %s)", sender, type(exc).__name__, exc)
+
+    def _refused_event(self, sender: str, why: str) -> None:
+        """Say that an event was dropped; the same reason at most every ``_EVENT_WARN_EVERY`` seconds."""
+        now = time.monotonic()
+        key = "%s %s" % (sender, why)
+        with self._cond:
+            said = self._event_warnings.get(key)
+            if said is not None and now - said[0] < _EVENT_WARN_EVERY:
+                self._event_warnings[key] = (said[0], said[1] + 1)
+                return
+            if len(self._event_warnings) > 100:
+                self._event_warnings.clear()
+            self._event_warnings[key] = (now, 0)
+        more = " (and %d more like it since the last warning)" % said[1] if said and said[1] else ""
+        module = self.definition.name
+        if sender == self.cpp_node:
+            who = "the C++ node %s of module %r" % (sender, module)
+        else:
+            who = "%s on /%s/BM_event, which is not the C++ node of module %r (%s)" % (
+                sender, module, module, self.cpp_node)
+        log.warning("dropped an event from %s: %s%s", who, why, more)
 
     def _lacking(self, call: CppCall) -> List[str]:
         """Output values listed in BM_output that have not arrived yet, in words."""

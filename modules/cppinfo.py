@@ -3,16 +3,25 @@
 A value of type ``pkg/Type`` of module ``BM`` travels on the data topic ``/BM/type`` (the
 original naming, manual §4.3). The library's latched ``/BM/BM_info`` lists its functions and,
 per function, the topics of its inputs and the names and topics of its outputs: the bridge
-compares them with the definition before it serves anything.
+compares them with the definition before it serves anything. Its events come whole, one message
+each, on ``/BM/BM_event`` (:func:`cpp_event` reads and checks one).
 """
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 from typing import Any, Dict, List, Tuple
 
+from comm.errors import ProtocolError, did_you_mean
 from modules.definition import DefinitionError, FunctionDefinition, ModuleDefinition
 
-__all__ = ["data_topic", "data_topics", "signature_problem", "signature_problems"]
+__all__ = ["cpp_event", "data_topic", "data_topics", "event_topic", "signature_problem", "signature_problems"]
+
+
+def event_topic(module: str) -> str:
+    """``/<module>/BM_event``: where a node built with bmtree's C++ library (API 3) sends its events."""
+    return "/%s/BM_event" % module
 
 
 def data_topic(module: str, rostype: str) -> str:
@@ -97,3 +106,73 @@ def _output_differences(got: Dict[str, Any], want: Dict[str, str]) -> str:
     parts.extend("%s on %s there, %s in the definition" % (n, got[n], want[n])
                  for n in sorted(set(got) & set(want)) if got[n] != want[n])
     return " (%s)" % "; ".join(parts) if parts else ""
+
+
+def cpp_event(payload: Dict[str, Any], definition: ModuleDefinition) -> Tuple[str, Dict[str, Any]]:
+    """The event and its params (ROS messages by name) of a ``BM_event`` payload, checked against the
+    definition's Events: ``{"event": name, "params": [{"name", "type", "md5sum", "data"}, ...]}``, where
+    ``data`` is the param's ROS serialization (base64) made by ``ros::serialization`` in the C++ node.
+
+    Raises:
+        ProtocolError: every problem of the payload in one text (an unknown event or param, a param
+            missing, given twice, of another type or of another definition of its type, bytes that
+            are not that type's).
+    """
+    event = payload.get("event")
+    if not isinstance(event, str) or not event:
+        raise ProtocolError("key 'event' must be an event's name, got %.60r" % (event,))
+    ev = definition.events.get(event)
+    if ev is None:
+        hint = did_you_mean(event, definition.events) or (
+            " (its events: %s)" % ", ".join(definition.events) if definition.events else " (it has no events)")
+        raise ProtocolError("module %r has no event %r%s: add it to the definition's Events, or emit one of "
+                            "those" % (definition.name, event, hint))
+    raw = payload.get("params", [])
+    if not isinstance(raw, list):
+        raise ProtocolError("event %r: key 'params' must be a list, got %s" % (event, type(raw).__name__))
+    wanted = {p.name: p for p in ev.params}
+    params: Dict[str, Any] = {}
+    problems: List[str] = []
+    for i, item in enumerate(raw):
+        fields = item if isinstance(item, dict) else {}
+        name, rostype, md5sum, data = (fields.get(k) for k in ("name", "type", "md5sum", "data"))
+        if not all(isinstance(v, str) for v in (name, rostype, md5sum, data)):
+            problems.append("params[%d] is not {\"name\", \"type\", \"md5sum\", \"data\"} (strings)" % i)
+            continue
+        if name not in wanted:
+            problems.append("unknown param %r%s" % (name, did_you_mean(name, wanted)))
+            continue
+        if name in params:
+            problems.append("param %r is given twice" % name)
+            continue
+        p = wanted[name]
+        if rostype != p.rostype:
+            problems.append("param %r is a %s in the C++ node, but the definition's Event-params say %s" % (
+                name, rostype, p.rostype))
+            continue
+        cls = p.msg_class
+        if md5sum != getattr(cls, "_md5sum", md5sum):
+            problems.append("param %r: the C++ node was built with another definition of %s (md5sum %s there, %s "
+                            "here): rebuild it against the same message package" % (
+                                name, rostype, md5sum[:40], getattr(cls, "_md5sum", "?")))
+            continue
+        try:
+            raw_bytes = base64.b64decode(data.encode("ascii"), validate=True)
+        except (ValueError, binascii.Error, UnicodeEncodeError) as exc:
+            problems.append("param %r: 'data' is not base64 (%s)" % (name, exc))
+            continue
+        try:
+            msg = cls()
+            msg.deserialize(raw_bytes)
+        except Exception as exc:  # genpy.DeserializationError, struct.error, UnicodeDecodeError, ...
+            problems.append("param %r: its %d bytes are not a serialized %s (%s)" % (
+                name, len(raw_bytes), rostype, exc))
+            continue
+        params[name] = msg
+    missing = [n for n in wanted if n not in params and not any(
+        isinstance(x, dict) and x.get("name") == n for x in raw)]
+    if missing:
+        problems.append("missing param %s" % ", ".join(repr(m) for m in missing))
+    if problems:
+        raise ProtocolError("event %r: %s" % (event, "; ".join(problems)))
+    return event, params

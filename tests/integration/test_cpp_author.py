@@ -1,7 +1,7 @@
 """A C++ author's audit of the library and the bridge: late inputs, ros::spinOnce() inside a
-function, exceptions, cancels (onCancel, callId, cancelled() from a helper), a definition that does
-not match the node, a C++ node that dies, the --call-timeout message, warnings and the installed
-CMake package.
+function, exceptions, cancels (onCancel, callId, cancelled() from a helper), events (emit() from a
+ros::Timer, and ones the definition does not have), a definition that does not match the node, a C++
+node that dies, the --call-timeout message, warnings and the installed CMake package.
 
 One test module (``author``, its source below) is built once, -O2 -Werror, with the build helper of
 test_cpp_modules. Some tests talk to it directly as a bridge would (this process publishes the
@@ -24,6 +24,7 @@ from tests.integration.test_cpp_modules import CPP, _build, _node_log, call_line
 AUTHOR_CPP = r"""// bmtree's tests only (tests/integration/test_cpp_author.py writes this file)
 #include <bmtree/basic_module.h>
 
+#include <geometry_msgs/Point.h>
 #include <geometry_msgs/Pose.h>
 #include <std_msgs/Bool.h>
 #include <std_msgs/Float64.h>
@@ -53,7 +54,7 @@ static double since(std::chrono::steady_clock::time_point start) {
 
 class Author : public bmtree::BasicModule {
  public:
-  explicit Author(ros::NodeHandle nh) : BasicModule(nh, "author") {
+  explicit Author(ros::NodeHandle nh) : BasicModule(nh, "author"), nh_(nh) {
     provide("move", &Author::move, {"final_pose", "success"});
     provide("spin", &Author::spin, {"spun"});
     provide("ok", &Author::ok, {"success"});
@@ -61,6 +62,8 @@ class Author : public bmtree::BasicModule {
     provide("hooked", &Author::hooked, {"stopped"});
     provide("stubborn", &Author::stubborn, {"slept"});
     provide("nothing", &Author::nothing, {});
+    provide("announce", &Author::announce, {});
+    provide("misemit", &Author::misemit, {});
   }
 
   std::tuple<geometry_msgs::Pose, std_msgs::Bool> move(const geometry_msgs::Pose& target,
@@ -138,6 +141,52 @@ class Author : public bmtree::BasicModule {
   }
 
   std::tuple<> nothing() { return std::tuple<>(); }
+
+  // arms a one-shot ros::Timer (on the node's queue: it fires once this function has returned) that
+  // emits personSeen twice: Bob first, then `name`
+  std::tuple<> announce(const std_msgs::String& name, const std_msgs::Float64& after) {
+    name_ = name.data;
+    timer_ = nh_.createTimer(ros::Duration(after.data), &Author::onTimer, this, true);
+    return std::tuple<>();
+  }
+
+  void onTimer(const ros::TimerEvent&) {
+#if BMTREE_CPP_API >= 3
+    std_msgs::String bob, name;
+    bob.data = "Bob";
+    name.data = name_;
+    geometry_msgs::Point there, here;
+    there.x = -1.0;
+    here.x = static_cast<double>(name_.size());
+    here.y = 1.0;
+    const bool sent = emit("personSeen", {{"name", bob}, {"position", there}}) &&
+                      emit("personSeen", {{"name", name}, {"position", here}});
+    ROS_INFO("author: emitted personSeen for Bob and %s from a timer: %d", name_.c_str(), sent ? 1 : 0);
+#endif
+  }
+
+  // what an author gets wrong: the bridge (or emit() itself) refuses each
+  std::tuple<> misemit() {
+#if BMTREE_CPP_API >= 3
+    std_msgs::String ana;
+    ana.data = "Ana";
+    geometry_msgs::Point point;
+    geometry_msgs::Pose pose;
+    emit("personSen", {{"name", ana}, {"position", point}});   // no such event
+    emit("personSeen", {{"name", ana}, {"position", pose}});   // a Pose, not a Point
+    emit("personSeen", {{"name", ana}});                       // no position
+    const bool twice = emit("personSeen", {{"name", ana}, {"name", ana}});
+    std::vector<bmtree::EventParam> none;
+    const bool nameless = emit("", none);
+    ROS_INFO("author: misemit sent a name twice: %d, no name: %d", twice ? 1 : 0, nameless ? 1 : 0);
+#endif
+    return std::tuple<>();
+  }
+
+ private:
+  ros::NodeHandle nh_;
+  ros::Timer timer_;
+  std::string name_;
 };
 
 int main(int argc, char** argv) { return bmtree::run<Author>(argc, argv, "author"); }
@@ -166,6 +215,12 @@ AUTHOR = {
         _function("hooked", [("seconds", FLOAT)], [("stopped", BOOL)]),
         _function("stubborn", [("seconds", FLOAT)], [("slept", FLOAT)]),
         _function("nothing", [], []),
+        _function("announce", [("name", STRING), ("after", FLOAT)], []),
+        _function("misemit", [], []),
+    ],
+    "Events": [
+        {"Name": "personSeen", "Description": "Someone was seen.",
+         "Event-params": [_param("name", STRING), _param("position", "geometry_msgs/Point")]},
     ],
 }
 
@@ -388,6 +443,58 @@ def test_the_bridge_logs_the_death_of_its_cpp_node(ros_graph, author):
         bridge_log.text()
 
 
+def test_an_event_emitted_from_a_timer_is_taken_by_a_wait_event(author, author_json, tmp_path):
+    """emit() in a ros::Timer's callback: one BM_event message per event, which the bridge reads
+    (genpy), checks against the definition and passes on; the wait_event's where: skips Bob's."""
+    _, log, bridge_log = author
+    lines = _run_tree(tmp_path, author_json,
+                      "    - call: author.announce\n      inputs: {name: Ana, after: 0.5}\n"
+                      "    - wait_event: author.personSeen\n      where: 'name == \"Ana\"'\n"
+                      "      outputs: {position: at, name: who}\n      timeout: 10\n"
+                      "    - check: 'who == \"Ana\" and at.x == 3.0 and at.y == 1.0 and at.z == 0.0'\n")
+    assert len(lines) == 1 and "succeeded" in lines[0], lines
+    log.wait("author: emitted personSeen for Bob and Ana from a timer: 1")
+    assert "dropped an event" not in bridge_log.text(), bridge_log.text()
+
+
+def test_events_that_the_definition_does_not_have_are_dropped_with_a_warning(author, author_json, tmp_path,
+                                                                            ros_probe):
+    """A BM_event published by hand (not JSON, and a well-formed one from another node) and the
+    author's mistakes (an unknown event, a param of another type, a missing param) are each dropped
+    with a warning that names the node that sent it; the bridge serves on. emit() itself refuses a
+    param given twice and an event without a name."""
+    from std_msgs.msg import String
+
+    from comm import settle_new_connection
+    from coordinator.testing.ros import wait_subscribed
+
+    _, log, bridge_log = author
+    by_hand = ros_probe.publisher("/author/BM_event", 0)
+    wait_subscribed(by_hand, ["/author_bridge"])
+    settle_new_connection()
+    by_hand.publish(String("{not json"))
+    by_hand.publish(String(json.dumps({"event": "personSeen", "params": [
+        {"name": "name", "type": STRING, "md5sum": "992ce8a1687cec8c8bd883ec73ca41d1", "data": "AwAAAEFuYQ=="},
+        {"name": "position", "type": "geometry_msgs/Point", "md5sum": "4a842b65f413084dc2b10fb484ea7f17",
+         "data": "A" * 32}]})))
+    bridge_log.wait("on /author/BM_event, which is not the C++ node of module 'author' (/author): payload is not "
+                    "valid JSON")
+    bridge_log.wait("which is not the C++ node of module 'author' (/author): events are taken from the C++ node only")
+
+    lines = _run_tree(tmp_path, author_json, "    - call: author.misemit\n    - call: author.ok\n")
+    assert len(lines) == 2 and all("succeeded" in line for line in lines), lines  # it serves on
+    said = "dropped an event from the C++ node /author of module 'author': "
+    bridge_log.wait(said + "module 'author' has no event 'personSen' (did you mean 'personSeen'?)")
+    bridge_log.wait(said + "event 'personSeen': param 'position' is a geometry_msgs/Pose in the C++ node, but the "
+                    "definition's Event-params say geometry_msgs/Point")
+    bridge_log.wait(said + "event 'personSeen': missing param 'position'")
+    log.wait("author: misemit sent a name twice: 0, no name: 0")
+    text = log.text()
+    assert "bmtree: emit(\"personSeen\"): param 'name' is given twice; nothing sent" in text, text
+    assert "bmtree: emit(): an event needs a name; nothing sent" in text, text
+    assert "Traceback" not in bridge_log.text()
+
+
 def test_a_definition_that_does_not_match_the_node_stops_the_bridge_at_once(ros_graph, author_exe, tmp_path):
     """An output of another type is a data topic the node never publishes: the bridge compares the
     node's BM_info first and exits 2 naming every difference, instead of waiting --wait (30 s) for
@@ -450,5 +557,5 @@ def test_the_readme_tells_a_cpp_author_what_the_audit_missed():
     for said in ("find_package(catkin REQUIRED COMPONENTS roscpp bmtree_cpp", "<depend>bmtree_cpp</depend>",
                  "${catkin_LIBRARIES}", '<bmtree definitions="arm.json"/>', "ros::spinOnce()", "AsyncSpinner",
                  "onCancel(", "callId()", "std::isfinite", "std::tuple<>", '"Hardware Required"', "input_wait",
-                 "MultiThreadedSpinner", "-B"):
+                 "MultiThreadedSpinner", "-B", "emit(\"touched\"", "BM_event", "its caller /gripper_bridge is gone"):
         assert said in section, said

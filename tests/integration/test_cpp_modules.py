@@ -590,3 +590,116 @@ def test_an_installed_library_is_found_by_find_package(gripper_exe, tmp_path):
     assert os.access(build / "my_module", os.X_OK)
     flags = (build / "CMakeFiles" / "my_module.dir" / "flags.make").read_text()
     assert "%s/include" % prefix in flags and CPP not in flags, flags  # the installed header, not the source tree's
+
+
+SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"}
+
+
+def _stop_clean(graph, cpp, log):
+    """SIGINT to the C++ node: it exits 0, and its log has no sanitizer report."""
+    cpp.send_signal(signal.SIGINT)
+    assert cpp.wait(30) == 0, log()[-4000:]
+    graph.nodes.remove(cpp)
+    assert "AddressSanitizer" not in log() and "runtime error" not in log(), log()[-4000:]
+
+
+TOUCHED = """format: 1
+root:
+  sequence:
+    - call: gripper.reach
+      inputs: {target: {x: 0.3, y: -0.1, z: 0.5}}
+    - parallel:
+        - call: gripper.squeeze
+          inputs: {seconds: 30.0, label: hold}
+        - sequence:
+            - wait_event: gripper.touched
+              where: 'force >= 2.0'
+              outputs: {force: felt, position: at}
+              timeout: 15
+            - check: 'felt == 2.5 and at.x == 0.3 and at.y == -0.1 and at.z == 0.5'
+      policy: one
+"""
+
+
+@pytest.mark.parametrize("build", ["gripper_exe", "gripper_asan_exe"])
+def test_the_example_turns_its_force_sensor_into_events_while_a_function_runs(ros_graph, ros_probe, build, request,
+                                                                              tmp_path):
+    """emit() from the example's sensor callback (a thread of its own): the event reaches the bridge
+    on /gripper/BM_event while squeeze holds the node's spinner thread, the bridge passes it on as
+    gripper.touched, and a wait_event takes the one its where: accepts (a lighter touch comes too),
+    with the params it gives as outputs; the parallel then halts the squeeze. Under ASan too."""
+    import rospy
+    from std_msgs.msg import Float64
+
+    from coordinator.testing.ros import wait_subscribed
+
+    cpp = ros_graph.start_node([request.getfixturevalue(build)], "/gripper", env=SANITIZER_ENV)
+    log = functools.partial(_node_log, ros_graph, "gripper")
+    start = len(log())
+    _start_bridge(ros_graph)
+    sensor = rospy.Publisher("/gripper/contact", Float64, queue_size=10)
+    wait_subscribed(sensor, ["/gripper"])
+    tree = tmp_path / "touched.yaml"
+    tree.write_text(TOUCHED)
+    t0 = time.monotonic()
+    proc = subprocess.Popen(bmtree_cmd("run", str(tree), "-q"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        while proc.poll() is None and time.monotonic() - t0 < 30:  # the sensor until the tree has its touch
+            for force in (1.5, 2.5):
+                sensor.publish(Float64(force))
+            time.sleep(0.2)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, out + err + _node_log(ros_graph, "gripper_bridge")[-3000:]
+    assert time.monotonic() - t0 < 25  # the squeeze was halted, not waited out
+    assert "dropped an event" not in _node_log(ros_graph, "gripper_bridge")
+    assert "squeeze cancelled, fingers stopped" in log()[start:], log()[start:]
+    _stop_clean(ros_graph, cpp, log)
+
+
+@pytest.mark.parametrize("build", ["gripper_exe", "gripper_asan_exe"])
+def test_a_cpp_call_whose_bridge_is_killed_is_cancelled(ros_graph, build, request, tmp_path):
+    """kill -9 of bmtree-bridge a second into a 30 s squeeze: the C++ node sees its caller's connection
+    to BM_output drop and its XML-RPC port refuse, and cancels the call as a BM_cancel would (sleepFor
+    returns early), saying why; a bridge started again has its calls answered. Under ASan too."""
+    import re
+
+    cpp = ros_graph.start_node([request.getfixturevalue(build)], "/gripper", env=SANITIZER_ENV)
+    log = functools.partial(_node_log, ros_graph, "gripper")
+    start = len(log())
+    bridge, _ = _start_bridge(ros_graph)
+    tree = tmp_path / "long.yaml"
+    tree.write_text("format: 1\nroot:\n  call: gripper.squeeze\n  inputs: {seconds: 30.0, label: long}\n")
+    proc = subprocess.Popen(bmtree_cmd("run", str(tree)), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        for line in proc.stdout:
+            if "RUNNING" in line and "gripper.squeeze" in line:
+                break
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        ros_graph.kill_node(bridge)
+        until(lambda: "squeeze cancelled, fingers stopped" in log()[start:], 10, lambda: log()[start:])
+        stopped = time.monotonic() - t0
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    said = log()[start:]
+    assert stopped < 3.0, (stopped, said)  # not after the squeeze's 30 s
+    assert re.search(r"WARN.*bmtree: cancelled call \w+ of gripper\.squeeze: its caller /gripper_bridge is gone "
+                     r"\(its process is gone: nothing answers at http://", said), said
+    assert said.index("cancelled call") < said.index("squeeze cancelled, fingers stopped"), said
+    assert "module_lost" in out, out  # the run lost its module (the bridge)
+
+    _start_bridge(ros_graph)  # a new bridge of the same name: the module takes its calls
+    quick = tmp_path / "quick.yaml"
+    quick.write_text("format: 1\nroot:\n  call: gripper.squeeze\n  inputs: {seconds: 0.2, label: again}\n"
+                     "  outputs: {label: got}\n")
+    again = run("run", str(quick), "-q")
+    assert again.returncode == 0 and "succeeded" in call_lines(again.stdout)[0], again.stdout + again.stderr
+    assert log()[start:].count("cancelled call") == 1, log()[start:]
+    _stop_clean(ros_graph, cpp, log)

@@ -45,7 +45,24 @@
 // sleepFor(seconds), or registers onCancel(callback), stops the hardware and returns; its answer then
 // says "cancelled" (the bridge throws its outputs away) and the module takes calls again at once. A
 // call cancelled before it started is answered "cancelled" without running. The original bridge
-// sends no cancels.
+// sends no cancels. A call whose caller is gone (the bridge was killed: its connection to BM_output
+// dropped, and its XML-RPC port refuses or answers with another pid) is cancelled the same way, and
+// the node logs it ("cancelled call ... of arm.move_to: its caller /arm_bridge is gone (...)").
+//
+// Events: emit() publishes an event of the module's definition ("Events"), from any thread (a
+// ros::Timer, a subscriber's callback, a thread of your own, a function while it runs):
+//
+//   std_msgs::String name;  name.data = "Ana";
+//   geometry_msgs::Point where;  where.x = 1.0;
+//   emit("personSeen", {{"name", name}, {"position", where}});   // false if it could not be sent
+//
+// Each param is a ROS message (bmtree::EventParam: a name and any message type; a double or a
+// char* does not compile), serialized at once. The event travels as one message on
+// /<BM>/BM_event (std_msgs/String: JSON with the event's name and, per param, its name, ROS type,
+// md5sum and serialized bytes in base64), never on the data topics, so it cannot be taken for a
+// call's output. bmtree-bridge checks it against the definition (unknown event or param, missing
+// param, another type: it logs a warning naming this node and drops it) and publishes it as a bmtree
+// event, which a tree's wait_event takes. Nothing is sent while no bridge is connected.
 //
 // A restarted ROS master is survived (master_watch.h): the module registers its topics again.
 // stdout is line-buffered, so that prints reach a log file as they happen.
@@ -53,10 +70,14 @@
 #define BMTREE_BASIC_MODULE_H
 
 /// The library's API level, for a module that must also build against older copies (#if
-/// BMTREE_CPP_API >= 2): 2 added onCancel(), callId(), and made cancelled() and sleepFor() public.
-#define BMTREE_CPP_API 2
+/// BMTREE_CPP_API >= 3): 2 added onCancel(), callId(), and made cancelled() and sleepFor() public;
+/// 3 added emit() and bmtree::EventParam (events on /<BM>/BM_event), and cancels a call whose
+/// caller's process is gone.
+#define BMTREE_CPP_API 3
 
+#include <ros/message_traits.h>
 #include <ros/ros.h>
+#include <ros/serialization.h>
 #include <std_msgs/String.h>
 
 #include <ros/callback_queue.h>
@@ -76,14 +97,17 @@
 #include <cstdlib>
 #include <deque>
 #include <functional>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <tuple>
+#include <type_traits>
 #include <typeinfo>
 #include <utility>
 #include <vector>
@@ -172,6 +196,37 @@ inline std::string typeName(const std::type_info* type) {
 #endif
   return type->name();
 }
+
+/// Standard base64 (RFC 4648, with padding) of `n` bytes.
+inline std::string base64(const std::uint8_t* data, std::size_t n) {
+  static const char kDigits[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((n + 2) / 3 * 4);
+  for (std::size_t i = 0; i < n; i += 3) {
+    const std::uint32_t b0 = data[i];
+    const std::uint32_t b1 = i + 1 < n ? data[i + 1] : 0u;
+    const std::uint32_t b2 = i + 2 < n ? data[i + 2] : 0u;
+    const std::uint32_t v = (b0 << 16) | (b1 << 8) | b2;
+    out += kDigits[(v >> 18) & 63u];
+    out += kDigits[(v >> 12) & 63u];
+    out += i + 1 < n ? kDigits[(v >> 6) & 63u] : '=';
+    out += i + 2 < n ? kDigits[v & 63u] : '=';
+  }
+  return out;
+}
+
+/// A function to run on a callback queue (the cancel thread's, for the caller watch).
+class Task : public ros::CallbackInterface {
+ public:
+  explicit Task(std::function<void()> fn) : fn_(std::move(fn)) {}
+  CallResult call() override {
+    fn_();
+    return Success;
+  }
+
+ private:
+  std::function<void()> fn_;
+};
 
 /// "1", "0.3": seconds as a person writes them.
 inline std::string seconds(double s) {
@@ -330,6 +385,37 @@ class Waker {
 
 }  // namespace detail
 
+/// One parameter of an event for BasicModule::emit(): its name (the definition's Event-params Name)
+/// and its value, any ROS message (std_msgs::String, geometry_msgs::Point, a message of yours),
+/// serialized when the EventParam is made:  emit("personSeen", {{"name", name}, {"position", where}});
+class EventParam {
+ public:
+  template <class M>
+  EventParam(std::string name, const M& value) : name_(std::move(name)) {
+    static_assert(ros::message_traits::IsMessage<M>::value,
+                  "bmtree::EventParam: an event param's value must be a ROS message (std_msgs::Float64, not double; "
+                  "std_msgs::String, not const char*)");
+    type_ = ros::message_traits::DataType<M>::value();
+    md5sum_ = ros::message_traits::MD5Sum<M>::value();
+    const std::uint32_t size = ros::serialization::serializationLength(value);
+    std::vector<std::uint8_t> bytes(size);
+    ros::serialization::OStream out(bytes.data(), size);
+    ros::serialization::serialize(out, value);
+    data_ = detail::base64(bytes.data(), bytes.size());
+  }
+
+  const std::string& name() const { return name_; }
+  /// Its ROS type, "geometry_msgs/Point".
+  const std::string& type() const { return type_; }
+
+ private:
+  friend class BasicModule;
+  std::string name_;
+  std::string type_;
+  std::string md5sum_;
+  std::string data_;  // the serialized message, base64
+};
+
 /// Base class of a C++ basic module. Register functions with provide() in the constructor.
 class BasicModule {
  public:
@@ -339,14 +425,19 @@ class BasicModule {
     ros::NodeHandle("~").param<std::string>("basic_mod", module_, module);
     ros::NodeHandle("~").param<double>("input_wait", input_wait_, 1.0);
     if (!(input_wait_ >= 0) || input_wait_ > 3600) input_wait_ = 1.0;  // NaN, negative, absurd
-    out_pub_ = nh_.advertise<std_msgs::String>("/" + module_ + "/BM_output", 10);
+    caller_watch_.start();
+    // cancels (and a caller's lost connection) must get through while a function blocks the node's
+    // spinner thread: the cancel thread's queue
+    ros::NodeHandle cancel_nh(nh_);
+    cancel_nh.setCallbackQueue(&cancel_queue_);
+    out_pub_ = cancel_nh.advertise<std_msgs::String>(
+        "/" + module_ + "/BM_output", 10, [this](const ros::SingleSubscriberPublisher& s) { onOutputConnect(s); },
+        [this](const ros::SingleSubscriberPublisher& s) { onOutputDisconnect(s); });
     info_pub_ = nh_.advertise<std_msgs::String>("/" + module_ + "/BM_info", 1, true);
+    event_pub_ = nh_.advertise<std_msgs::String>("/" + module_ + "/BM_event", 100);
     waker_.reset(new detail::Waker(nh_.getCallbackQueue(), [this]() { runReady(); }));
     in_sub_ = nh_.subscribe("/" + module_ + "/BM_input", 10, &BasicModule::onInput, this,
                             ros::TransportHints().tcpNoDelay());
-    // cancels must get through while a function blocks the node's spinner thread
-    ros::NodeHandle cancel_nh(nh_);
-    cancel_nh.setCallbackQueue(&cancel_queue_);
     cancel_sub_ = cancel_nh.subscribe("/" + module_ + "/BM_cancel", 10, &BasicModule::onCancelMessage, this,
                                       ros::TransportHints().tcpNoDelay());
     cancel_spinner_.reset(new ros::AsyncSpinner(1, &cancel_queue_));
@@ -355,7 +446,9 @@ class BasicModule {
     master_watch_.start();
   }
   virtual ~BasicModule() {
+    caller_watch_.stop();
     cancel_spinner_->stop();
+    out_pub_.shutdown();  // its connection callbacks go to cancel_queue_, which goes before it
     cancel_sub_.shutdown();
     in_sub_.shutdown();
     waker_.reset();
@@ -363,7 +456,47 @@ class BasicModule {
   BasicModule(const BasicModule&) = delete;
   BasicModule& operator=(const BasicModule&) = delete;
 
+  /// The module's name: the one given to the constructor, or the one of a `_basic_mod:=NAME`
+  /// argument (its topics are /<name>/...).
   const std::string& moduleName() const { return module_; }
+
+  /// Publish the event `event` of the module's definition with these params (each a name and a ROS
+  /// message), from any thread, also while a function runs:
+  ///   emit("personSeen", {{"name", name}, {"position", where}});
+  /// The bridge checks it against the definition's Events (the event, each param's name and type)
+  /// and logs a warning for one it cannot take. False (and an error in the log) if it could not be
+  /// sent: no event name, a param without a name or given twice, or over 1 MiB as a whole.
+  bool emit(const std::string& event, std::initializer_list<EventParam> params = {}) const {
+    return emit(event, std::vector<EventParam>(params));
+  }
+  /// The same, with params gathered at run time.
+  bool emit(const std::string& event, const std::vector<EventParam>& params) const {
+    if (event.empty()) {
+      ROS_ERROR("bmtree: emit(): an event needs a name; nothing sent");
+      return false;
+    }
+    nlohmann::json j;
+    j["event"] = event;
+    j["params"] = nlohmann::json::array();
+    std::set<std::string> names;
+    for (const auto& p : params) {
+      if (p.name_.empty() || !names.insert(p.name_).second) {
+        const std::string why = p.name_.empty() ? "a param has no name" : "param '" + p.name_ + "' is given twice";
+        ROS_ERROR("bmtree: emit(\"%s\"): %s; nothing sent", event.c_str(), why.c_str());
+        return false;
+      }
+      j["params"].push_back({{"name", p.name_}, {"type", p.type_}, {"md5sum", p.md5sum_}, {"data", p.data_}});
+    }
+    std_msgs::String msg;
+    msg.data = j.dump();
+    if (msg.data.size() > kMaxPayload) {
+      ROS_ERROR("bmtree: emit(\"%s\"): the event is %zu bytes, over the %zu the bridge takes; nothing sent",
+                event.c_str(), msg.data.size(), kMaxPayload);
+      return false;
+    }
+    event_pub_.publish(msg);
+    return true;
+  }
 
   /// True once the running call was cancelled, or the node is shutting down (Ctrl-C, rosnode
   /// kill: a respawned node must not drive the hardware beside this one): stop and return.
@@ -524,7 +657,8 @@ class BasicModule {
   void publishInfo() {
     nlohmann::json info;
     info["library"] = "bmtree";
-    info["protocol"] = 2;  // 2: takes cancels on /<BM>/BM_cancel
+    info["protocol"] = 3;  // 2: takes cancels on /<BM>/BM_cancel; 3: emits events on /<BM>/BM_event
+    info["api"] = BMTREE_CPP_API;
     std::vector<std::string> names;
     nlohmann::json signatures = nlohmann::json::object();
     for (const auto& f : functions_) {
@@ -651,16 +785,26 @@ class BasicModule {
   /// Mark `call` running (cancels naming it now reach the function); true if it was cancelled
   /// before it started.
   bool startRunning(const Pending& call) {
-    std::lock_guard<std::mutex> lock(cancel_mutex_);
-    cancelled_.store(false);
-    running_ = call.call_id;
-    in_function_ = true;
-    ++call_serial_;
-    if (call.call_id.empty()) return false;
-    auto it = std::find(early_cancels_.begin(), early_cancels_.end(), call.call_id);
-    if (it == early_cancels_.end()) return false;
-    early_cancels_.erase(it);
-    return true;
+    bool unconnected = false;
+    bool early = false;
+    {
+      std::lock_guard<std::mutex> lock(cancel_mutex_);
+      cancelled_.store(false);
+      running_ = call.call_id;
+      running_caller_ = call.bridge;
+      running_function_ = call.function;
+      in_function_ = true;
+      ++call_serial_;
+      auto seen = out_subscribers_.find(call.bridge);
+      unconnected = seen != out_subscribers_.end() && seen->second == 0;  // it left while its call waited
+      if (!call.call_id.empty()) {
+        auto it = std::find(early_cancels_.begin(), early_cancels_.end(), call.call_id);
+        early = it != early_cancels_.end();
+        if (early) early_cancels_.erase(it);
+      }
+    }
+    if (unconnected && !early) caller_watch_.check(call.bridge);
+    return early;
   }
 
   /// The call has returned: true if it was cancelled meanwhile.
@@ -673,7 +817,77 @@ class BasicModule {
     hooks_.clear();
     in_function_ = false;
     running_.clear();
+    running_caller_.clear();
+    running_function_.clear();
     return cancelled_.exchange(false);
+  }
+
+  /// In the cancel thread: a node connected to BM_output (a bridge, a tool): remember it, and let the
+  /// caller watch learn which process it is.
+  void onOutputConnect(const ros::SingleSubscriberPublisher& link) {
+    const std::string node = link.getSubscriberName();
+    {
+      std::lock_guard<std::mutex> lock(cancel_mutex_);
+      if (out_subscribers_.size() >= kMaxSubscribers && out_subscribers_.find(node) == out_subscribers_.end()) {
+        for (auto it = out_subscribers_.begin(); it != out_subscribers_.end();) {  // forget those gone
+          it = it->second == 0 ? out_subscribers_.erase(it) : std::next(it);
+        }
+      }
+      ++out_subscribers_[node];
+    }
+    caller_watch_.learn(node);
+  }
+
+  /// In the cancel thread: a node's connection to BM_output dropped. If the running call is its, the
+  /// caller watch asks whether its process is gone (callerGone() then cancels the call).
+  void onOutputDisconnect(const ros::SingleSubscriberPublisher& link) {
+    if (!ros::ok()) return;  // the node shuts down: it drops every connection itself
+    const std::string node = link.getSubscriberName();
+    bool check = false;
+    {
+      std::lock_guard<std::mutex> lock(cancel_mutex_);
+      auto it = out_subscribers_.find(node);
+      if (it != out_subscribers_.end() && it->second > 0) --it->second;
+      check = (it == out_subscribers_.end() || it->second == 0) && in_function_ && running_caller_ == node &&
+              !cancelled_.load();
+    }
+    if (check) caller_watch_.check(node);
+  }
+
+  /// The caller watch's question (its thread): is a call of `node` running while `node` has no
+  /// connection to BM_output?
+  bool callerWanted(const std::string& node) {
+    std::lock_guard<std::mutex> lock(cancel_mutex_);
+    if (!ros::ok() || !in_function_ || running_caller_ != node || cancelled_.load()) return false;
+    auto it = out_subscribers_.find(node);
+    return it == out_subscribers_.end() || it->second == 0;
+  }
+
+  /// The caller watch found `node`'s process gone (its thread): cancel its call in the cancel thread,
+  /// where onCancel() callbacks run.
+  void callerGone(const std::string& node, const std::string& reason) {
+    cancel_queue_.addCallback(boost::make_shared<detail::Task>([this, node, reason]() { cancelCallOf(node, reason); }));
+  }
+
+  /// In the cancel thread: cancel the running call of `node`, whose process is gone, as a BM_cancel
+  /// would (nobody can take its answer; running on, it would drive the hardware and hold the module).
+  void cancelCallOf(const std::string& node, const std::string& reason) {
+    bool now = false;
+    std::uint64_t serial = 0;
+    std::string id, function;
+    {
+      std::lock_guard<std::mutex> lock(cancel_mutex_);
+      if (!in_function_ || running_caller_ != node || cancelled_.load()) return;  // ended, or cancelled already
+      serial = call_serial_;
+      id = running_.empty() ? std::string("(no call id)") : running_;
+      function = running_function_;
+      // said before the function can see it, so that the log reads in order
+      ROS_WARN("bmtree: cancelled call %s of %s.%s: its caller %s is gone (%s)", id.c_str(), module_.c_str(),
+               function.c_str(), node.c_str(), reason.c_str());
+      now = !cancelled_.exchange(true);
+    }
+    cancel_cv_.notify_all();
+    if (now) runHooks(serial);
   }
 
   /// What runReady() hands to execute(): a call whose inputs are selected.
@@ -833,11 +1047,13 @@ class BasicModule {
 
   static constexpr std::size_t kMaxPayload = 1 << 20;
   static constexpr std::size_t kMaxEarlyCancels = 64;
+  static constexpr std::size_t kMaxSubscribers = 64;
   ros::NodeHandle nh_;
   std::string module_;
   double input_wait_ = 1.0;
-  ros::Publisher out_pub_;
+  ros::Publisher out_pub_;  // its connection callbacks run in the cancel thread
   ros::Publisher info_pub_;
+  ros::Publisher event_pub_;
   ros::Subscriber in_sub_;
   // the spinner side (state_mutex_ guards what BM_input and the data topics change, and executing_)
   std::mutex state_mutex_;
@@ -847,7 +1063,8 @@ class BasicModule {
   std::map<std::string, Function> functions_;
   std::deque<Pending> pending_;
   std::unique_ptr<detail::Waker> waker_;
-  // the cancel thread's side (cancel_mutex_ guards running_, in_function_, hooks_, early_cancels_)
+  // the cancel thread's side (cancel_mutex_ guards running_, running_caller_, running_function_,
+  // out_subscribers_, in_function_, hooks_, early_cancels_)
   ros::CallbackQueue cancel_queue_;
   ros::Subscriber cancel_sub_;
   std::unique_ptr<ros::AsyncSpinner> cancel_spinner_;
@@ -855,11 +1072,16 @@ class BasicModule {
   std::condition_variable cancel_cv_;
   std::atomic<bool> cancelled_{false};
   std::string running_;
+  std::string running_caller_;    // the node that sent the running call (BM_input's callerid)
+  std::string running_function_;
+  std::map<std::string, int> out_subscribers_;  // node -> its connections to BM_output now
   bool in_function_ = false;
   std::uint64_t call_serial_ = 0;  // one more for each call that starts
   std::map<std::uint64_t, Hook> hooks_;
   std::uint64_t hook_counter_ = 0;
   std::deque<std::string> early_cancels_;
+  detail::CallerWatch caller_watch_{[this](const std::string& node, const std::string& reason) { callerGone(node, reason); },
+                                    [this](const std::string& node) { return callerWanted(node); }};
   detail::MasterWatch master_watch_;  // its thread ends before the rest goes
 };
 
