@@ -86,7 +86,7 @@ def test_the_viewers_refuse_a_shared_name_in_full_and_the_page_stops_the_run(tmp
     term = web = None
     try:
         run.out.wait_for("RUNNING   go to the kitchen")
-        term = Tmux(tmp_path, "shared", 80, 24, _cmd("watch", "--wait", "60"), run.env)
+        term = Tmux(tmp_path, "names", 80, 24, _cmd("watch", "--wait", "60"), run.env)
         term.wait_screen("go to the kitchen", "stop, break NODE")
         term.tmux("send-keys", "-t", term.name, ":force speech.say SUCCESS", "Enter")
         shown = " ".join(term.wait_screen("refused: 2 nodes are named 'speech.say'").split())   # wrapped: as words
