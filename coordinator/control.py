@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import itertools
 import json
+import logging
 import os
 import queue
 import threading
 import time
 from typing import Any, Callable, Dict, List, Set, Tuple
 
-import yaml
 from py_trees.common import Status
 
 from comm import settle_new_connection
@@ -40,6 +40,8 @@ from comm.errors import did_you_mean
 from comm.nodelife import registering
 from coordinator.context import WAKE
 from coordinator.runevents import RunObserver, notify
+
+log = logging.getLogger("bmtree.coordinator")
 
 __all__ = ["Controller", "ControlClient", "ros_controller", "parse_command", "REQUEST", "REPLY", "COMMANDS"]
 
@@ -144,7 +146,7 @@ class Controller(RunObserver):
                 cmd = self._queue.get_nowait()
             except queue.Empty:
                 break
-            self._answer(cmd, *self._apply(cmd))
+            self._answer_guarded(cmd)
         if not self.paused:
             return True
         self._stepping = self._step
@@ -152,6 +154,22 @@ class Controller(RunObserver):
         if not self._stepping:
             self._tell_answers()
         return self._stepping
+
+    def _answer_guarded(self, cmd: Any) -> None:
+        """Apply and answer one command; a malformed one (not a mapping, a command that is not text, a value
+        too deep or too large to read) is refused with why, and never stops the ticking thread."""
+        if not isinstance(cmd, dict) or not isinstance(cmd.get("command"), str):
+            what = type(cmd.get("command")).__name__ if isinstance(cmd, dict) else type(cmd).__name__
+            self._answer(_plain(cmd), False, "malformed command: 'command' is text (one of: %s), got %s" % (
+                ", ".join(COMMANDS), what))
+            return
+        try:
+            ok, answer = self._apply(cmd)
+        except (Exception, RecursionError) as exc:  # a bug or an odd value: refused, the run goes on
+            log.warning("control command refused: %s: %s", type(exc).__name__, exc)
+            self._answer(_plain(cmd), False, "malformed command: %s: %s" % (type(exc).__name__, str(exc)[:200]))
+            return
+        self._answer(cmd, ok, answer)
 
     def _tell_answers(self) -> None:
         """While paused: the calls answered since, which their leaves take only at the next tick."""
@@ -185,7 +203,7 @@ class Controller(RunObserver):
         if named or not isinstance(name, str):
             return named, ""
         head, at, num = name.rpartition("@")
-        if at and num.isdigit():
+        if at and num.isdecimal() and num.isascii() and len(num) <= 9:
             if int(num) >= len(every):
                 return [], "no node of id %s in this tree (its ids are 0 to %d)" % (num, len(every) - 1)
             b = every[int(num)]
@@ -333,10 +351,16 @@ class Controller(RunObserver):
         if not isinstance(key, str) or key not in bb:
             return False, "no tree-blackboard key %r%s (the keys are: %s)" % (
                 key, did_you_mean(key, bb), ", ".join(sorted(bb)) or "none")
-        try:
-            value = yaml.safe_load(text) if isinstance(text, str) else text
-        except yaml.YAMLError as exc:
-            return False, "the value is not YAML: %s" % str(exc).splitlines()[0]
+        if not isinstance(text, str):
+            return False, "the value is YAML text (as 'bmtree control set KEY VALUE' sends it), got %s" % (
+                type(text).__name__)
+        from coordinator.errors import TreeErrors
+        from coordinator.yamlsrc import load_value
+
+        try:   # the tree files' reader and limits (size, depth, aliases): a value from the network
+            value = load_value(text, "the value")
+        except TreeErrors as exc:
+            return False, "the value is not YAML bmtree reads: %s" % str(exc).splitlines()[0]
         old = bb[key]
         import genpy
 
@@ -478,3 +502,11 @@ def ros_controller(enabled: bool, max_bytes: int = MAX_REQUEST) -> Controller:
     with registering():
         ctl.subscription = rospy.Subscriber(REQUEST, String, got, queue_size=100)
     return ctl
+
+
+def _plain(cmd: Any) -> Dict[str, Any]:
+    """What a refused malformed command's record keeps: its id, command and sender as short text."""
+    if not isinstance(cmd, dict):
+        return {"command": "?"}
+    return {k: str(cmd[k])[:80] for k in ("id", "command", "by", "to") if k in cmd}
+
