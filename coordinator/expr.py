@@ -75,11 +75,16 @@ class Expr:
     # evaluation
     def evaluate(self, lookup: Callable[[str], Any]) -> bool:
         """Truth of the expression; ``lookup(key)`` raises KeyError for unset keys."""
-        return bool(unwrap(self._eval(self.tree, lookup)))
+        return bool(self.value(lookup))
 
     def value(self, lookup: Callable[[str], Any]) -> Any:
-        """The expression's value (a one-field message stands for its value)."""
-        return unwrap(self._eval(self.tree, lookup))
+        """The expression's value (a one-field message stands for its value). What Python refuses on the
+        values the run holds (``round(nan)``, a number too large for a float) is an ExprError, which fails
+        the node that worked it out, never the run."""
+        try:
+            return unwrap(self._eval(self.tree, lookup))
+        except (ValueError, OverflowError, ArithmeticError) as exc:
+            raise ExprError(str(exc))
 
     def values_read(self, lookup: Callable[[str], Any]) -> str:
         """`` (a = 'kitchen', b = 'hall')``: what each reference holds now, for a reason that says why an

@@ -79,6 +79,8 @@ def described(v: Any) -> str:
 
 
 MAX_TEXT = 1 << 20  # characters a computed text may have (a call's whole payload is 1 MiB)
+MAX_INT_BITS = 1024   # a computed whole number (about 308 digits, a float64's range): beyond, it only grows
+MAX_INT_DIGITS = 308
 
 
 def check_text_size(text: str) -> str:
@@ -98,15 +100,16 @@ def arithmetic(op: str, a: Any, b: Any) -> Any:
         return a + b
     if ka != "number" or kb != "number":
         raise ExprError("cannot %s %s and %s" % (VERB[op], described(a), described(b)))
-    if op == "+":
-        return a + b
-    if op == "-":
-        return a - b
-    if op == "*":
-        return a * b
-    if b == 0:
+    if op == "/" and b == 0:
         raise ExprError("division by zero")
-    return a / b
+    try:
+        value = a + b if op == "+" else a - b if op == "-" else a * b if op == "*" else a / b
+    except OverflowError:   # an int too large for a float (a / b)
+        raise ExprError("cannot %s %s and %s: the result is too large" % (VERB[op], described(a), described(b)))
+    if isinstance(value, int) and value.bit_length() > MAX_INT_BITS:   # a number squared in a loop
+        raise ExprError("the result would have about %d digits, more than a number may have (%d)" % (
+            value.bit_length() * 0.30103, MAX_INT_DIGITS))
+    return value
 
 
 VERB = {"+": "add", "-": "subtract", "*": "multiply", "/": "divide"}
