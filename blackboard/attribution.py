@@ -114,20 +114,28 @@ class Attribution:
             self._refreshed = now
         try:
             entries = self._announcements() or {}
-        except (OSError, ValueError) as exc:
-            log.warning("cannot read the module announcements: %s", exc)
+        except Exception as exc:  # OSError, ValueError, or anything an odd master answer raises
+            log.warning("cannot read the module announcements (%s: %.200s)", type(exc).__name__, exc)
             return
         nodes: Dict[str, str] = {}
         outputs: Dict[str, Dict[str, List[str]]] = {}
-        for module, entry in entries.items() if isinstance(entries, Mapping) else ():
-            if not isinstance(entry, Mapping) or not isinstance(entry.get("node"), str):
-                continue
-            nodes[entry["node"]] = module
+        try:
+            items = list(entries.items()) if isinstance(entries, Mapping) else []
+        except Exception as exc:  # whatever the parameter server holds, results go on being stored
+            log.warning("ignored the malformed module announcements (%s: %s)", type(exc).__name__, exc)
+            items = []
+        for module, entry in items:
+            # one malformed announcement (even one nested too deep to decode: RecursionError) is
+            # skipped alone: it must never cost the others, nor the results being attributed
             try:
+                if not isinstance(entry, Mapping) or not isinstance(entry.get("node"), str):
+                    continue
+                nodes[entry["node"]] = module
                 functions = json.loads(entry.get("definition", ""))["Functions"]
                 outputs[module] = {f["Name"]: [p["Name"] for p in f["Output-params"]] for f in functions}
-            except (ValueError, KeyError, TypeError):
-                log.warning("ignored the malformed announcement of module %r", module)
+            except Exception as exc:
+                log.warning("ignored the malformed announcement of module %.80r (%s: %.200s)", module,
+                            type(exc).__name__, exc)
         with self._lock:
             self._nodes.update(nodes)
             self._outputs.update(outputs)

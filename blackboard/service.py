@@ -18,11 +18,18 @@ from blackboard.store import Store, rows_of
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
 
-__all__ = ["BlackboardService"]
+__all__ = ["BlackboardService", "MAX_NAMES", "MAX_HISTORY"]
 
 log = logging.getLogger("bmtree.blackboard")
 
 _RESULT, _REQUEST, _STOP = 0, 1, 2
+
+# Per request, far above what a robot's tree asks (a few names, a short history): more names are
+# refused at once, with the limit named, before any value is read; a longer history is what the store
+# keeps of a name (it holds no more). The answer is also bounded by
+# ``max_bytes``: one that would not fit is answered by an error naming both sizes.
+MAX_NAMES = 256       # distinct names (duplicates are answered once)
+MAX_HISTORY = 1000    # values per name a history gives, when the store keeps every value (else what it keeps)
 
 
 class BlackboardService:
@@ -164,7 +171,12 @@ class BlackboardService:
         ids: List[str] = []
         for kind, payload, stamp in items:
             if kind == _RESULT:
-                self._decode_result(payload, stamp, rows, ids)
+                try:
+                    self._decode_result(payload, stamp, rows, ids)
+                except Exception as exc:  # one bad result must never cost the others of its batch
+                    self.rejected += 1
+                    log.warning("ignored a result that could not be handled (%s: %.200s): %.200r",
+                                type(exc).__name__, exc, payload)
                 continue
             self._commit(rows, ids)
             rows, ids = [], []
@@ -195,11 +207,15 @@ class BlackboardService:
             return
         module, function, call_id = result.basic_mod, result.function, result.call_id
         if self.attribution is not None:
-            if call_id is not None:
-                self.attribution.done(call_id)
-            elif module is None or function is None:
-                module, found, call_id = self.attribution.attribute(publisher, result.names, module)
-                function = function or found
+            try:
+                if call_id is not None:
+                    self.attribution.done(call_id)
+                elif module is None or function is None:
+                    module, found, call_id = self.attribution.attribute(publisher, result.names, module)
+                    function = function or found
+            except Exception as exc:  # the result is stored all the same, with what it says itself
+                log.warning("could not attribute a result of %s (%s: %.200s); storing it as it came", publisher,
+                            type(exc).__name__, exc)
         if call_id is not None:
             ids.append(call_id)
         rows.extend(rows_of(result.names, raw["rostypes"], raw["msgs"], module, function, call_id, stamp))
@@ -266,6 +282,12 @@ class BlackboardService:
             if request_id is not None:
                 self._publish_answer(BlackboardAnswer.encode_raw([], [], [], request_id, [], "bad request: %s" % exc))
             return
+        refused = self._bound(req)
+        if refused:
+            self.rejected += 1
+            log.warning("refused a request: %s", refused)
+            self._refuse(req, "bad request: %s" % refused)
+            return
         if req.after and self.threaded and not self._all_stored(req.after):
             # The results this request must see are still on their way (they travel on
             # another connection than the request): answer once they are committed.
@@ -273,6 +295,28 @@ class BlackboardService:
             self._enqueue((_REQUEST, threading.Event(), 0.0))  # wakes the worker to set its timer
             return
         self._reply(req)
+
+    def _bound(self, req: BlackboardRequest) -> str:
+        """Dedupe ``req.var_names`` (keeping order); why ``req`` is refused, or ``''``."""
+        req.var_names = list(OrderedDict.fromkeys(req.var_names))
+        if len(req.var_names) > MAX_NAMES:
+            return "%d distinct names asked (at most %d per request)" % (len(req.var_names), MAX_NAMES)
+        keep = getattr(self.store, "keep", 0) or 0
+        most = keep if keep > 0 else MAX_HISTORY
+        if req.history > most:   # the store never holds more of a name: "all you have", answered as such
+            req.history = most
+        return ""
+
+    def _refuse(self, req: BlackboardRequest, error: str) -> None:
+        """Answer ``req`` by ``error`` alone (no names, nothing missing: it was not answered)."""
+        self._publish_answer(BlackboardAnswer.encode_raw([], [], [], req.request_id, [], error))
+
+    def _too_large(self, req: BlackboardRequest, size: int, exact: bool) -> None:
+        self.rejected += 1
+        error = ("answer too large: %s%d bytes, over the limit of %d bytes (--max-bytes); ask for fewer names "
+                 "or a shorter history" % ("" if exact else "at least ", size, self.max_bytes))
+        log.warning("did not send the answer to request %s: %s", req.request_id, error)
+        self._refuse(req, error)
 
     def _all_stored(self, call_ids: List[str]) -> bool:
         return all(c in self._recent or self.store.has_call(c) for c in call_ids)
@@ -304,11 +348,16 @@ class BlackboardService:
         missing: List[str] = []
         errors: List[str] = []
         found = []
+        size = 0  # a lower bound of the answer's encoded size: stop reading as soon as it cannot fit
         if req.call_id is not None:
             found.extend(self.store.by_call(req.call_id))
+            size += sum(len(v.msg) + len(v.name) + len(v.rostype) for v in found)
             if not found and not req.var_names:
                 missing.append(req.call_id)
         for name in req.var_names:
+            if size > self.max_bytes:
+                self._too_large(req, size, False)
+                return
             try:
                 values = self.store.latest(name, req.history)
             except ValueError as exc:
@@ -319,12 +368,21 @@ class BlackboardService:
                 missing.append(name)
             for v in values:
                 v.name = name
+                size += len(v.msg) + len(name) + len(v.rostype)
             found.extend(values)
+        if size > self.max_bytes:
+            self._too_large(req, size, False)
+            return
         for v in found:
             names.append(v.name)
             types.append(v.rostype)
             texts.append(v.msg)
             sources.append(v.source)
         unstored = [c for c in req.after if not self._all_stored([c])]
-        self._publish_answer(BlackboardAnswer.encode_raw(names, types, texts, req.request_id, missing,
-                                                         "; ".join(errors), sources, unstored))
+        text = BlackboardAnswer.encode_raw(names, types, texts, req.request_id, missing, "; ".join(errors), sources,
+                                           unstored)
+        encoded = len(text.encode("utf-8"))
+        if encoded > self.max_bytes:
+            self._too_large(req, encoded, True)
+            return
+        self._publish_answer(text)
