@@ -11,10 +11,10 @@ import time
 import xmlrpc.client
 
 import pytest
-import yaml
 
 from coordinator.runlog import read_log
 from tests.integration.conftest import bmtree_cmd, start_sim_module
+from tests.integration.test_recording_ros import world
 
 TREE = """format: 1
 name: drive_and_clean
@@ -32,18 +32,6 @@ cleanup_timeout: 8
 """
 
 
-def _crawl_world(tmp_path):
-    """The shipped house at 0.25 m/s: the kitchen is half a minute away, back to the entrance a second."""
-    from modules.sim import DEFAULT_WORLD
-
-    with open(DEFAULT_WORLD) as fh:
-        world = yaml.safe_load(fh)
-    world["speed"] = 0.25
-    path = tmp_path / "crawl.yaml"
-    path.write_text(yaml.safe_dump(world))
-    return str(path)
-
-
 def _run_node(master, pid):
     """The node of the ``bmtree run`` process ``pid`` (``/bmtree_<pid>_<ms>``)."""
     _, _, state = master.getSystemState("/test")
@@ -54,7 +42,7 @@ def _run_node(master, pid):
 
 @pytest.mark.parametrize("how", ["rosnode kill", "same name"])
 def test_a_shutdown_request_of_the_run_node_stops_the_run_as_ctrl_c_does(ros_graph, tmp_path, how):
-    crawl = _crawl_world(tmp_path)
+    crawl = world(tmp_path, "crawl.yaml", speed=0.25)   # the kitchen half a minute away
     start_sim_module(ros_graph, "navigation", crawl)
     start_sim_module(ros_graph, "speech")
     tree = tmp_path / "drive_and_clean.yaml"
