@@ -9,6 +9,7 @@ dies, even by SIGKILL or the OOM killer: nothing is orphaned.
 """
 from __future__ import annotations
 
+import http.client
 import os
 import shutil
 import signal
@@ -91,6 +92,7 @@ class RosGraph:
         self.master: Optional[subprocess.Popen] = None
         self.nodes: List[subprocess.Popen] = []
         self._last: Set[int] = set()  # pids of the nodes stopped after the others
+        self._names: Set[str] = set()  # every node name started, for forget_dead_nodes
         self._logs: List = []
 
     @property
@@ -169,6 +171,7 @@ class RosGraph:
         proc = subprocess.Popen([*orphan_guard(), *argv], env=dict(self.env, **(env or {})), stdin=subprocess.DEVNULL,
                                 stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
         self.nodes.append(proc)
+        self._names.add(name)
         if stop_last:
             self._last.add(proc.pid)
         if wait:
@@ -210,6 +213,8 @@ class RosGraph:
         end_processes([p for p in self.nodes if p.pid in self._last], 3.0)
         self.nodes.clear()
         self._last.clear()
+        if self.master is None and self.uri:
+            self.forget_dead_nodes()
         if self.master is not None:
             # SIGTERM: a process started with SIGINT ignored (``cmd &`` in a script, nohup) passes
             # that on, and rosmaster, a plain Python program, then ignores Ctrl-C; bmtree's nodes
@@ -221,6 +226,37 @@ class RosGraph:
         self._logs.clear()
         if self._tmp:
             shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def forget_dead_nodes(self) -> List[str]:
+        """Unregister, from a master this graph shares, what its nodes killed outright (SIGKILL, or a
+        stop that timed out) left there, as ``rosnode cleanup`` does for them alone: a later user of the
+        master would otherwise see the node registered, publishing and subscribing. A node that answers
+        is left alone. Returns the names cleaned up."""
+        master = xmlrpc.client.ServerProxy(self.uri)
+        forgotten = []
+        try:
+            _, _, state = master.getSystemState("/bmtree")
+            for name in sorted(self._names):
+                code, _, uri = master.lookupNode("/bmtree", name)
+                if code != 1 or node_alive(uri, 0.5):
+                    continue
+                publishers, subscribers, services = state
+                for topic, nodes in publishers:
+                    if name in nodes:
+                        master.unregisterPublisher(name, topic, uri)
+                for topic, nodes in subscribers:
+                    if name in nodes:
+                        master.unregisterSubscriber(name, topic, uri)
+                for service, nodes in services:
+                    if name in nodes:
+                        code, _, service_uri = master.lookupService("/bmtree", service)
+                        if code == 1:
+                            master.unregisterService(name, service, service_uri)
+                forgotten.append(name)
+        except (OSError, xmlrpc.client.Error, http.client.HTTPException):
+            pass  # the master is gone: nothing is left to clean
+        self._names.clear()
+        return forgotten
 
     def __enter__(self) -> RosGraph:
         return self

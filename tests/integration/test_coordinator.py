@@ -313,6 +313,36 @@ def test_closing_a_graph_stops_its_nodes_together_and_the_stop_last_ones_after(t
     assert (tmp_path / "last").read_text() == "gone gone"
 
 
+def test_a_graph_on_a_shared_master_unregisters_its_killed_nodes_when_closed(ros_master, tmp_path):
+    """A node killed outright stays registered; the next test (or run) on the master found a
+    /PYTHON_BM publishing and subscribing that was long gone. A live node of another graph is left."""
+    import xmlrpc.client
+
+    from coordinator.graph import RosGraph
+
+    def registered(name):
+        pubs, subs, _ = xmlrpc.client.ServerProxy(ros_master).getSystemState("/t")[2]
+        return any(name in nodes for _, nodes in pubs + subs)
+
+    other = RosGraph(str(tmp_path / "other"), master_uri=ros_master)
+    graph = RosGraph(str(tmp_path / "ros"), master_uri=ros_master)
+    try:
+        other.start_node([sys.executable, os.path.join(NODES, "legacy_python_bm.py"), "__name:=alive_arm"],
+                         "/alive_arm")
+        proc = graph.start_node([sys.executable, os.path.join(NODES, "legacy_python_bm.py"), "__name:=killed_arm"],
+                                "/killed_arm")
+        graph.kill_node(proc)
+        assert registered("/killed_arm")
+    finally:
+        graph.close()
+    try:
+        assert not registered("/killed_arm")
+        assert registered("/alive_arm")
+    finally:
+        other.close()
+    assert not registered("/alive_arm")  # ended by asking: it unregistered itself
+
+
 def test_two_runs_on_one_master_are_each_told_of_the_other(ros_graph, tmp_path):
     """Two runs on one master share the Blackboard's names, the run stream and the control topics:
     the second one says so before it starts, and the first one, already running, gets a notice
