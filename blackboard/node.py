@@ -96,6 +96,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     rospy.core.add_preshutdown_hook(_kicked_out)
     log_to_rosout()
     db = args.db or patiently(lambda: rospy.get_param("~db", ""))
+    if not isinstance(db, str):  # set on the master after this node read its parameters
+        db = ""
     path = os.path.expanduser(db or default_db_path())  # ~/ from a launch file
     keep = args.keep if args.keep is not None else DEFAULT_KEEP
     max_bytes = args.max_bytes if args.max_bytes is not None else DEFAULT_MAX_BYTES

@@ -14,7 +14,7 @@ from collections import OrderedDict
 from typing import Any, Callable, List, Optional, Set, Tuple
 
 from blackboard.attribution import Attribution
-from blackboard.store import Store, rows_of
+from blackboard.store import Store, name_problem, rows_of
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
 
@@ -30,6 +30,25 @@ _RESULT, _REQUEST, _STOP = 0, 1, 2
 # ``max_bytes``: one that would not fit is answered by an error naming both sizes.
 MAX_NAMES = 256       # distinct names (duplicates are answered once)
 MAX_HISTORY = 1000    # values per name a history gives, when the store keeps every value (else what it keeps)
+
+
+class _Limited:
+    """A warning said at most once per ``period`` seconds, with how many were held back since: a sender
+    that repeats a bad result must not flood the log."""
+
+    def __init__(self, period: float = 10.0):
+        self.period = period
+        self._last: Optional[float] = None
+        self.held = 0
+
+    def warn(self, fmt: str, *args: Any) -> None:
+        now = time.monotonic()
+        if self._last is not None and now - self._last < self.period:
+            self.held += 1
+            return
+        more = " (and %d more like it since the last such warning)" % self.held if self.held else ""
+        self._last, self.held = now, 0
+        log.warning(fmt + "%s", *args, more)
 
 
 class BlackboardService:
@@ -65,6 +84,7 @@ class BlackboardService:
         self.attribution = attribution
         self.after_wait = after_wait
         self._deferred: List[Tuple[float, BlackboardRequest]] = []
+        self._bad_names = _Limited()  # values refused for their names
         self._recent: OrderedDict = OrderedDict()  # call ids committed lately
         # Items received but not yet handled, and the store's lock: a request arriving when
         # nothing is pending is answered at once in the caller's thread (one hand-off less),
@@ -218,7 +238,15 @@ class BlackboardService:
                             type(exc).__name__, exc)
         if call_id is not None:
             ids.append(call_id)
-        rows.extend(rows_of(result.names, raw["rostypes"], raw["msgs"], module, function, call_id, stamp))
+        names, rostypes, texts = result.names, raw["rostypes"], raw["msgs"]
+        bad = [i for i, name in enumerate(names) if name_problem(name)]
+        if bad:  # refused alone: the result's other values, and the batch, are stored
+            self.rejected += len(bad)
+            self._bad_names.warn("refused %d value(s) of a result of %s.%s (call %s): %s, %.60r", len(bad), module,
+                                 function, call_id, name_problem(names[bad[0]]), names[bad[0]])
+            keep = [i for i in range(len(names)) if i not in set(bad)]
+            names, rostypes, texts = ([seq[i] for i in keep] for seq in (names, rostypes, texts))
+        rows.extend(rows_of(names, rostypes, texts, module, function, call_id, stamp))
 
     def _commit(self, rows: List[tuple], ids: List[str]) -> None:
         if not rows and not ids:

@@ -8,9 +8,10 @@ from __future__ import annotations
 import os
 import sqlite3
 from dataclasses import dataclass
-from typing import Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
-__all__ = ["Store", "StoredValue", "default_db_path", "parse_name", "DEFAULT_KEEP"]
+__all__ = ["Store", "StoredValue", "default_db_path", "parse_name", "DEFAULT_KEEP", "MAX_NAME", "name_problem",
+           "shown_name"]
 
 DEFAULT_KEEP = 1000
 
@@ -62,6 +63,28 @@ def parse_name(name: str) -> Tuple[Optional[str], Optional[str], str]:
     if len(parts) == 3 and all(parts):
         return parts[0], parts[1], parts[2]
     raise ValueError("invalid name %r: expected 'name' or 'module/function/name'" % (name,))
+
+
+MAX_NAME = 256   # characters of a value's name: far above any output's name
+
+
+def name_problem(name: Any) -> str:
+    """Why ``name`` cannot be a stored value's name, "" if it can: a request must be able to ask for it
+    (``name``, not ``module/function/name``) and a dump to show it on its line."""
+    if not isinstance(name, str) or not name:
+        return "an empty name"
+    if len(name) > MAX_NAME:
+        return "a name longer than %d characters" % MAX_NAME
+    if "/" in name:
+        return "a name with '/' (a request would read it as module/function/name)"
+    if not name.isprintable():
+        return "a name with control characters"
+    return ""
+
+
+def shown_name(name: Any) -> str:
+    """A stored name as a dump line shows it: quoted when it is not a usable name (an old store's '')."""
+    return name if not name_problem(name) else repr(name)
 
 
 class Store:
@@ -155,6 +178,14 @@ class Store:
 
     def has_call(self, call_id: str) -> bool:
         return self.db.execute("SELECT 1 FROM value WHERE call_id = ? LIMIT 1", (call_id,)).fetchone() is not None
+
+    def latest_each(self) -> List[Tuple[Any, int, StoredValue]]:
+        """(name, count, newest value) of every name stored, by name, each name as it is stored (an old
+        store may hold names no request can ask for, such as '')."""
+        cur = self.db.execute("SELECT v.name, c.n, v.rostype, v.msg, v.basic_mod, v.function, v.call_id, v.stamp"
+                              " FROM value v JOIN (SELECT MAX(id) AS last, COUNT(*) AS n FROM value GROUP BY name) c"
+                              " ON v.id = c.last ORDER BY v.name")
+        return [(row[0], row[1], StoredValue(*row[:1], *row[2:])) for row in cur]
 
     def names(self) -> List[Tuple[str, int, float]]:
         """(name, count, newest stamp) of every name stored."""

@@ -31,6 +31,7 @@ from coordinator.cliutil import (
 )
 from coordinator.errors import EnvironmentProblem, InvalidInput, TreeErrors, UsageError
 from coordinator.runcmd import cmd_demo, cmd_run
+from coordinator.yamlsrc import read_text
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions
 
 __all__ = ["main", "make_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV"]
@@ -71,20 +72,39 @@ def cmd_schema(args: argparse.Namespace) -> int:
     if not args.markdown:
         print(json.dumps(json_schema(), indent=2, ensure_ascii=False))
     elif args.write:
-        try:
-            with open(args.write, encoding="utf-8") as fh:
-                text = fh.read()
+        reference = "it should be the language reference, trees/README.md"
+        try:   # bounded, devices refused (/dev/full reads zeros for ever), a folder is EISDIR
+            text = read_text(args.write)
+        except OSError as exc:
+            raise UsageError("--write %s: cannot read it: %s; %s" % (args.write, exc.strerror or exc, reference))
         except UnicodeDecodeError as exc:
-            raise UsageError("--write %s: not UTF-8 text (byte %d); it should be the language reference, "
-                             "trees/README.md" % (args.write, exc.start))
+            raise UsageError("--write %s: not UTF-8 text (byte %d); %s" % (args.write, exc.start, reference))
         new = replace_tables(text)
         if new != text:
-            with open(args.write, "w", encoding="utf-8") as fh:
-                fh.write(new)
+            _replace_file(args.write, new)
         print("%s: %s" % (args.write, "updated" if new != text else "up to date"))
     else:
         sys.stdout.write(markdown_tables())
     return EXIT_OK
+
+
+def _replace_file(path: str, text: str) -> None:
+    """``path`` (through a symlink) made ``text`` whole or not at all: written beside it, then renamed over
+    it (a full disk leaves the old file); an unwritable one is a bad argument, as ``render -o`` says."""
+    import tempfile
+
+    target = os.path.realpath(path)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".%s." % os.path.basename(target), dir=os.path.dirname(target))
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.chmod(tmp, os.stat(target).st_mode & 0o7777)
+        os.replace(tmp, target)
+    except OSError as exc:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+        raise UsageError("--write %s: cannot write it: %s (the file is unchanged)" % (path, exc.strerror or exc))
 
 
 def offline_tree(path: str, defs: Dict[str, ModuleDefinition]) -> Any:
@@ -193,7 +213,7 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
     import datetime
     import sqlite3
 
-    from blackboard.store import Store, default_db_path
+    from blackboard.store import Store, default_db_path, shown_name
 
     path = args.db or default_db_path()
     if not os.path.exists(path):
@@ -218,14 +238,16 @@ def cmd_blackboard(args: argparse.Namespace) -> int:
                 return EXIT_FAILED
             print("%-26s %-10s %-20s %-22s %s" % ("time", "call_id", "module.function", "type", "value"))
             for v in values:
-                t = datetime.datetime.fromtimestamp(v.stamp).isoformat(sep=" ", timespec="milliseconds")
+                try:
+                    t = datetime.datetime.fromtimestamp(v.stamp).isoformat(sep=" ", timespec="milliseconds")
+                except (TypeError, ValueError, OverflowError, OSError):  # an old or foreign store's row
+                    t = str(v.stamp)
                 print("%-26s %-10s %-20s %-22s %s" % (t, (v.call_id or "-")[:10], "%s.%s" % (v.basic_mod, v.function),
                                                        v.rostype, v.msg))
             return EXIT_OK
         print("%-24s %6s  %-22s %s" % ("name", "count", "type", "latest value"))
-        for name, count, _stamp in store.names():
-            latest = store.latest(name)[0]
-            print("%-24s %6d  %-22s %s" % (name, count, latest.rostype, latest.msg))
+        for name, count, latest in store.latest_each():  # each name as stored: an old store may hold ''
+            print("%-24s %6d  %-22s %s" % (shown_name(name), count, latest.rostype, latest.msg))
         return EXIT_OK
     finally:
         store.close()
@@ -237,14 +259,25 @@ def cmd_test(args: argparse.Namespace) -> int:
     return run_scenarios(args.scenarios, modules=args.modules, coverage=args.coverage)
 
 
+def _runs_dir(args: argparse.Namespace) -> None:
+    """``--dir`` given names a folder (a typo is no "no recorded runs", exit 0); the default one may not
+    exist yet (nothing recorded)."""
+    if args.dir is not None and not os.path.isdir(args.dir):
+        raise UsageError("--dir %s: %s" % (args.dir, "not a folder" if os.path.exists(args.dir) else
+                                            "no such folder (the default is $ROS_HOME/bmtree/runs)"))
+
+
 def cmd_runs(args: argparse.Namespace) -> int:
     from coordinator.replay import cmd_runs as runs
 
+    _runs_dir(args)
     return runs(args)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from coordinator.replay import cmd_replay as replay
+
+    _runs_dir(args)
 
     if args.web:
         from coordinator.webview import cmd_replay_web

@@ -5,6 +5,7 @@ these objects, so a module is described once, as data.
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -333,15 +334,15 @@ def _no_duplicate_keys(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
 
 def load_definition(path: str) -> ModuleDefinition:
     """Load and validate one definition file."""
+    from coordinator.yamlsrc import read_text  # bounded; a device refused, a FIFO not waited on at open
+
     try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read(_MAX_FILE + 1)
+        text = read_text(path, _MAX_FILE)
     except OSError as exc:
-        raise DefinitionError(["%s: cannot read: %s" % (path, exc.strerror or exc)])
+        raise DefinitionError(["%s: cannot read: %s%s" % (path, exc.strerror or exc, ": not a module definition"
+                                                           if exc.errno == errno.EFBIG else "")])
     except UnicodeDecodeError as exc:
         raise DefinitionError(["%s: cannot read: not UTF-8 text (byte %d)" % (path, exc.start)])
-    if len(text) > _MAX_FILE:
-        raise DefinitionError(["%s: larger than %d characters: not a module definition" % (path, _MAX_FILE)])
     try:
         check_depth(text)
         data = json.loads(text, object_pairs_hook=_no_duplicate_keys)

@@ -200,7 +200,7 @@ class ModuleNode:
         if self.max_bytes is None:
             value = patiently(lambda: rospy.get_param("~max_bytes", DEFAULT_MAX_BYTES))
             if isinstance(value, bool) or not isinstance(value, int) or value < MIN_MAX_BYTES:
-                raise BindingError("parameter ~max_bytes must be a whole number of at least %d, got %r" % (
+                raise BindingError("parameter ~max_bytes must be a whole number of at least %d, got %.80r" % (
                     MIN_MAX_BYTES, value))
             self.max_bytes = value
         if name != self.definition.name:
@@ -278,20 +278,20 @@ def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:
     world writes them), checked like a world's."""
     if raw is None or raw == "":
         return {}
-    import yaml
-
+    from coordinator.errors import TreeErrors
+    from coordinator.yamlsrc import load_value
     from modules.sim.world import Fault, WorldError
 
-    if isinstance(raw, str):
+    if isinstance(raw, str):  # a launch file's <param value="..."/>: bounded as a world file is
         try:
-            raw = yaml.safe_load(raw)
-        except yaml.YAMLError as exc:
-            raise BindingError("parameter ~faults is not valid YAML: %s" % exc)
+            raw = load_value(raw, "~faults")
+        except TreeErrors as exc:
+            raise BindingError("parameter ~faults is not valid YAML: %s" % exc.errors[0])
     if not isinstance(raw, dict):
-        raise BindingError("parameter ~faults must be a mapping of function -> fault, got %r" % (raw,))
+        raise BindingError("parameter ~faults must be a mapping of function -> fault, got %.80r" % (raw,))
     out = {}
     for fn, spec in raw.items():
-        if fn not in definition.functions:
+        if not isinstance(fn, str) or fn not in definition.functions:
             raise BindingError("parameter ~faults: module %r has no function %r" % (definition.name, fn))
         try:
             out[fn] = Fault.parse("%s.%s" % (definition.name, fn), spec)

@@ -19,8 +19,14 @@ from typing import Any, Dict, Optional
 from modules.runtime import Failure
 from modules.sim.robot import AT_PARAM, ODOMETER_PARAM, ODOMETER_TOPIC, RobotState, SimModule
 from modules.sim.world import World
+from modules.sim.worldfile import number
 
 __all__ = ["Battery"]
+
+
+def _metres(value: Any) -> Optional[float]:
+    """A distance driven as navigation gives it (a finite number, 0 or more), else None."""
+    return number(value, 0.0, float("inf"))
 
 
 class Battery(SimModule):
@@ -71,8 +77,11 @@ class Battery(SimModule):
         return level
 
     def _heard_odometer(self, msg: Any) -> None:
+        metres = _metres(getattr(msg, "data", None))
+        if metres is None:  # not navigation's: a NaN or an infinity would drain the battery for good
+            return
         with self.state.lock:
-            self.state.odometer = max(self.state.odometer, float(msg.data))
+            self.state.odometer = max(self.state.odometer, metres)
         self._update()
 
     def _mirror(self) -> None:
@@ -82,7 +91,7 @@ class Battery(SimModule):
         odometer = self._rospy.get_param(ODOMETER_PARAM, 0.0)
         at = self._rospy.get_param(AT_PARAM, None)
         with self.state.lock:
-            self.state.odometer = max(self.state.odometer, float(odometer or 0.0))
+            self.state.odometer = max(self.state.odometer, _metres(odometer) or 0.0)
             if at is not None:
                 self.state.at = str(at)
 

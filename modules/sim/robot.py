@@ -22,6 +22,7 @@ from typing import Any, Callable, Dict, List, Optional
 from modules.outcome import Outcome
 from modules.runtime import BasicModule, Failure
 from modules.sim.world import Fault, ScheduledEvent, World
+from modules.sim.worldfile import MAX_SECONDS
 
 __all__ = ["SimModule", "RobotState", "Navigation", "Vision", "Speech", "ROOM_PARAM", "SAID_TOPIC",
            "ODOMETER_PARAM", "ODOMETER_TOPIC", "AT_PARAM"]
@@ -153,6 +154,8 @@ class Navigation(SimModule):
         with self.state.lock:
             x0, y0 = self.state.x, self.state.y
         total = self.world.travel_time((x0, y0), (x, y))
+        if not total <= MAX_SECONDS:  # NaN or a target far beyond any house: never a drive for ever
+            raise Failure("cannot drive to (%g, %g): it would take %g s (at most %d)" % (x, y, total, MAX_SECONDS))
         steps = max(1, int(total / self.step))
         try:
             for i in range(1, steps + 1):

@@ -7,15 +7,28 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
-import yaml
-
 from comm.errors import did_you_mean
 from modules.outcome import Outcome, OutcomeError, OutcomeKind, fail, outcome_from_dict
+from modules.sim.worldfile import (
+    DEFAULT_WORLD,
+    MAX_RATE,
+    MAX_SECONDS,
+    MAX_TIMES,
+    MIN_SPEED,
+    WHOLE,
+    Problems,
+    WorldError,
+    coordinates,
+    default_data,
+    is_text,
+    name_of,
+    number,
+    read_world,
+    shown,
+)
 
 __all__ = ["World", "WorldError", "DEFAULT_WORLD", "Fault", "INJECTED", "describe_faults", "BatterySpec",
            "ScheduledEvent"]
-
-DEFAULT_WORLD = os.path.join(os.path.dirname(__file__), "world.yaml")
 
 #: ends the answer of every injected fault: on the tree's side it looks like the hardware's own failure otherwise
 INJECTED = " (injected fault)"
@@ -24,9 +37,8 @@ CRASH_TEXT = "injected crash"
 
 log = logging.getLogger("bmtree.module")
 
+_default_data = default_data  # the default house's top-level keys (as from_dict's base)
 
-class WorldError(ValueError):
-    """A world file that cannot be used (the message names the key)."""
 
 
 def _crash(text: str) -> Any:
@@ -37,7 +49,7 @@ def _crash(text: str) -> Any:
     return crash
 
 
-def _crash_text(value: Any) -> str:
+def _crashis_text(value: Any) -> str:
     return CRASH_TEXT if value is True or value is None or value == "" else str(value)
 
 
@@ -67,13 +79,6 @@ def _same_file(a: str, b: str) -> bool:
         return False
 
 
-def _default_data() -> Dict[str, Any]:
-    """The default house's top-level keys, as its file writes them."""
-    with open(DEFAULT_WORLD, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    return data if isinstance(data, dict) else {}
-
-
 @dataclass
 class Fault:
     """An outcome that replaces a function's own answer, for ``times`` calls (None: all).
@@ -88,26 +93,46 @@ class Fault:
     what: str = ""  # as written, for the module's log: "fail 'wheel motor overheated' after 2 s"
 
     @classmethod
-    def parse(cls, key: str, raw: Any) -> Fault:
+    def parse(cls, key: str, raw: Any, problems: Optional[Problems] = None, where: Any = None) -> Optional[Fault]:
+        """The fault ``raw`` of function ``key``; WorldError naming every problem, or with ``problems``
+        they are added there (then None). ``where``: the mapping holding ``raw`` (its position)."""
+        own = problems is None
+        found = Problems(None) if problems is None else problems
+        before = len(found.lines)
+        fault = cls._parse(key, raw, found, where)
+        if own:
+            found.check()
+        return fault if len(found.lines) == before else None
+
+    @classmethod
+    def _parse(cls, key: str, raw: Any, problems: Problems, where: Any) -> Optional[Fault]:
         if not isinstance(raw, dict):
-            raise WorldError("faults.%s must be a mapping" % key)
-        unknown = set(raw) - set(_FAULT_KEYS)
-        if unknown:
-            raise WorldError("faults.%s: unknown keys %s (use %s)" % (
-                key, ", ".join(sorted(map(str, unknown))), ", ".join(_FAULT_KEYS)))
+            problems.add("faults.%s must be a mapping (%s)" % (key, ", ".join(_FAULT_KEYS)), where, key)
+            return None
+        before = len(problems.lines)
+        for k in raw:
+            if k not in _FAULT_KEYS:
+                problems.add("faults.%s: unknown keys %s (use %s)" % (key, k, ", ".join(_FAULT_KEYS)), raw, k, True)
         times = raw.get("times")
-        if times is not None and (not isinstance(times, int) or times < 0):
-            raise WorldError("faults.%s.times must be a non-negative integer" % key)
+        if times is not None and (isinstance(times, bool) or not isinstance(times, int) or not 0 <= times <= MAX_TIMES):
+            problems.add("faults.%s.times must be a whole number from 0 to %d, got %s" % (key, MAX_TIMES, shown(times)),
+                         raw, "times")
+        delay = number(raw.get("delay", 0.0), 0.0, MAX_SECONDS)
+        if delay is None:
+            problems.add("faults.%s.delay must be a number of seconds from 0 to %d (a day), got %s" % (
+                key, MAX_SECONDS, shown(raw.get("delay"))), raw, "delay")
+        for k in ("fail", "reject", "crash"):
+            if k in raw and not is_text(raw[k]):
+                problems.add("faults.%s.%s must be a text (the reason), got %s" % (key, k, shown(raw[k])), raw, k)
+        if len(problems.lines) > before or delay is None:
+            return None
         spec = {k: v for k, v in raw.items() if k != "times" and not (k in ("hang", "crash") and v is False)}
-        try:
-            delay = float(spec.get("delay", 0.0))
-        except (TypeError, ValueError):
-            raise WorldError("faults.%s.delay must be a number of seconds" % key)
         later = " after %g s" % delay if delay else ""
         if "crash" in spec:
             if len(spec) > (2 if "delay" in spec else 1):
-                raise WorldError("faults.%s: crash goes alone (with delay, times)" % key)
-            text = _crash_text(spec["crash"])
+                problems.add("faults.%s: crash goes alone (with delay, times)" % key, where, key)
+                return None
+            text = _crashis_text(spec["crash"])
             return cls(Outcome(OutcomeKind.RESPOND, fn=_crash(text), delay=delay), times,
                        ("crash" if text == CRASH_TEXT else "crash %r" % text) + later)
         if set(spec) <= {"delay"}:
@@ -115,10 +140,12 @@ class Fault:
         for kind, default in (("fail", "failed"), ("reject", "rejected")):
             if kind in spec and (spec[kind] is True or spec[kind] is None or spec[kind] == ""):
                 spec[kind] = default  # not "True" (injected fault)
+        spec["delay"] = delay
         try:
             outcome = outcome_from_dict(spec)
         except OutcomeError as exc:
-            raise WorldError("faults.%s: %s" % (key, exc))
+            problems.add("faults.%s: %s" % (key, exc), where, key)
+            return None
         if outcome.kind in (OutcomeKind.FAIL, OutcomeKind.REJECT):
             what = "%s %r" % (outcome.kind.value, outcome.reason)
             outcome.reason += INJECTED
@@ -175,26 +202,45 @@ class BatterySpec:
     dock: str = ""                  # where battery.charge works: a room or place ("": the start room)
 
     @classmethod
-    def parse(cls, raw: Any, source: str) -> BatterySpec:
+    def parse(cls, raw: Any, source: str, problems: Optional[Problems] = None, where: Any = None) -> BatterySpec:
+        """The battery ``raw``; WorldError naming every problem, or with ``problems`` they are added there
+        (then the defaults stand for the bad values). ``where``: the world mapping holding it."""
+        found = Problems(source) if problems is None else problems
+        before = len(found.lines)
+        spec = cls._parse(raw, found, where)
+        if problems is None:
+            found.check()
+        return spec if len(found.lines) == before else cls()
+
+    @classmethod
+    def _parse(cls, raw: Any, problems: Problems, where: Any) -> BatterySpec:
         if raw is None:
             return cls()
         if not isinstance(raw, dict):
-            raise WorldError("%s: battery must be a mapping of %s" % (source, ", ".join(_BATTERY_KEYS)))
+            problems.add("battery must be a mapping of %s" % ", ".join(_BATTERY_KEYS), where, "battery")
+            return cls()
         values: Dict[str, Any] = {}
         for key, value in raw.items():
             if key not in _BATTERY_KEYS:
-                raise WorldError("%s: battery.%s: unknown key%s (battery has %s)" % (
-                    source, key, did_you_mean(str(key), _BATTERY_KEYS), ", ".join(_BATTERY_KEYS)))
-            if key == "dock":
-                values[key] = "" if value is None else str(value)
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
-                raise WorldError("%s: battery.%s must be a non-negative number, got %r" % (source, key, value))
-            values[key] = float(value)
-        spec = cls(**values)
-        if spec.level > 100 or spec.low > 100:
-            raise WorldError("%s: battery.level and battery.low are percentages (0-100)" % source)
-        return spec
+                problems.add("battery.%s: unknown key%s (battery has %s)" % (
+                    key, did_you_mean(str(key), _BATTERY_KEYS), ", ".join(_BATTERY_KEYS)), raw, key, True)
+            elif key == "dock":
+                if not is_text(value) or isinstance(value, bool):
+                    problems.add("battery.dock must be a room or place, got %s" % shown(value), raw, key)
+                else:
+                    values[key] = "" if value is None else str(value)
+            else:
+                percent = key in ("level", "low")
+                amount = number(value, 0.0, 100.0 if percent else MAX_RATE)
+                if amount is None and percent and number(value, 0.0, float("inf")) is not None:
+                    problems.add("battery.level and battery.low are percentages (0-100), got %s: %s" % (
+                        key, shown(value)), raw, key)
+                elif amount is None:
+                    problems.add("battery.%s must be a non-negative number%s, got %s" % (
+                        key, "" if percent else " (at most %g)" % MAX_RATE, shown(value)), raw, key)
+                else:
+                    values[key] = amount
+        return cls(**values)
 
 
 _BATTERY_KEYS = ("level", "drain_per_metre", "drain_per_second", "low", "charge_per_second", "dock")
@@ -215,40 +261,54 @@ class ScheduledEvent:
         return "%s.%s" % (self.module, self.name)
 
 
-def _parse_events(raw: Any, source: str) -> List[ScheduledEvent]:
+_EVENT_KEYS = ("at", "event", "params")
+
+
+def _parse_events(raw: Any, problems: Problems, where: Any) -> List[ScheduledEvent]:
     """The world's ``events:``, each checked against its simulated module's definition."""
     if raw is None:
         return []
     if not isinstance(raw, list):
-        raise WorldError("%s: events must be a list of {at: seconds, event: module.event, params: {...}}" % source)
+        problems.add("events must be a list of {at: seconds, event: module.event, params: {...}}", where, "events")
+        return []
     known = _sim_events()
     out = []
     for i, entry in enumerate(raw):
-        where = "%s: events[%d]" % (source, i)
+        path = "events[%d]" % i
         if not isinstance(entry, dict):
-            raise WorldError("%s must be a mapping {at: seconds, event: module.event, params: {...}}" % where)
-        unknown = sorted(str(k) for k in entry if k not in ("at", "event", "params"))
-        if unknown:
-            raise WorldError("%s: unknown key %r%s (an event has at, event, params)" % (
-                where, unknown[0], did_you_mean(unknown[0], ("at", "event", "params"))))
-        at = entry.get("at")
-        if isinstance(at, bool) or not isinstance(at, (int, float)) or at < 0:
-            raise WorldError("%s.at must be a non-negative number of seconds, got %r" % (where, at))
-        name = str(entry.get("event", ""))
-        ev = known.get(name)
+            problems.add("%s must be a mapping {at: seconds, event: module.event, params: {...}}" % path, raw, i)
+            continue
+        before = len(problems.lines)
+        for k in entry:
+            if k not in _EVENT_KEYS:
+                problems.add("%s: unknown key %r%s (an event has at, event, params)" % (
+                    path, str(k), did_you_mean(str(k), _EVENT_KEYS)), entry, k, True)
+        at = number(entry.get("at"), 0.0, MAX_SECONDS)
+        if at is None:
+            problems.add("%s.at must be a non-negative number of seconds (at most %d, a day), got %s" % (
+                path, MAX_SECONDS, shown(entry.get("at"))), entry, "at" if "at" in entry else WHOLE)
+        name = entry.get("event", "")
+        ev = known.get(name) if isinstance(name, str) else None
         if ev is None:
-            raise WorldError("%s.event: %r is not an event of the simulated robot%s (its events: %s)" % (
-                where, name, did_you_mean(name, sorted(known)), ", ".join(sorted(known))))
+            name = str(name)
+            problems.add("%s.event: %r is not an event of the simulated robot%s (its events: %s)" % (
+                path, name[:60], did_you_mean(name, sorted(known)), ", ".join(sorted(known))), entry,
+                "event" if "event" in entry else WHOLE)
         params = entry.get("params") or {}
         if not isinstance(params, dict):
-            raise WorldError("%s.params must be a mapping of the event's parameters" % where)
-        try:
-            ev.build_values(params)
-        except ValueError as exc:
-            raise WorldError("%s.params: %s" % (where, exc))
-        module, event = name.split(".", 1)
-        out.append(ScheduledEvent(float(at), module, event, dict(params)))
+            problems.add("%s.params must be a mapping of the event's parameters" % path, entry, "params")
+        elif ev is not None:
+            try:
+                ev.build_values(params)
+            except (ValueError, TypeError, OverflowError) as exc:
+                problems.add("%s.params: %s" % (path, exc), entry, "params")
+        if len(problems.lines) == before and at is not None and ev is not None:
+            module, event = name.split(".", 1)
+            out.append(ScheduledEvent(at, module, event, dict(params)))
     return out
+
+
+_THING_KEYS = ("room", "x", "y", "z", "answers")
 
 
 @dataclass
@@ -271,28 +331,19 @@ class World:
 
     @classmethod
     def load(cls, path: str = DEFAULT_WORLD, others: Any = ()) -> World:
-        """The world in ``path``; WorldError says where when it cannot be read or is not valid.
-        Each top-level key the file leaves out is the default house's (``DEFAULT_WORLD``), so a
-        file of ``faults:`` alone is the default house with those faults (see ``from_dict``'s ``base``).
-        ``others``: the ``module.function`` of the user's own modules its faults may name too (the
-        ``--module`` of ``bmtree run --sim``), or True for any function of a module that is not
-        simulated (a simulated module's node, which knows only its own)."""
-        try:
-            with open(path, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh)
-        except OSError as exc:
-            raise WorldError("%s: cannot read: %s" % (path, exc.strerror or exc))
-        except UnicodeDecodeError as exc:
-            raise WorldError("%s: not UTF-8 text (byte %d)" % (path, exc.start))
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = "%s:%d:%d" % (path, mark.line + 1, mark.column + 1) if mark is not None else path
-            raise WorldError("%s: not valid YAML: %s" % (where, getattr(exc, "problem", None) or exc))
+        """The world in ``path``; WorldError names every problem, each at its ``file:line:column``.
+        The file is read bounded (:func:`coordinator.yamlsrc.read_text`: size, devices, FIFOs; then the
+        safe YAML loader's depth and node limits). Each top-level key the file leaves out is the default
+        house's (``DEFAULT_WORLD``), so a file of ``faults:`` alone is the default house with those faults
+        (see ``from_dict``'s ``base``). ``others``: the ``module.function`` of the user's own modules its
+        faults may name too (the ``--module`` of ``bmtree run --sim``), or True for any function of a
+        module that is not simulated (a simulated module's node, which knows only its own)."""
+        data = read_world(path)
         if data is None:  # an empty file: the default house as it is
             data = {}
         base = None
         if not _same_file(path, DEFAULT_WORLD):
-            base = _default_data()
+            base = default_data()
         return cls.from_dict(data, path, others, base=base)
 
     @classmethod
@@ -304,14 +355,18 @@ class World:
         taken as it is; a key ``data`` gives replaces it whole. So ``data`` that gives ``rooms`` is a
         house of its own: the places, objects, people and start it takes from ``base`` must be in its
         rooms, and an error says which key came from ``base`` and that it must be given too.
+        Every problem is found before WorldError says them all.
         """
+        problems = Problems(source)
         if not isinstance(data, dict):
-            raise WorldError("%s: the world must be a mapping" % source)
+            problems.add("the world must be a mapping (of %s)" % ", ".join(_WORLD_KEYS), data)
+            problems.check()
         for key in data:  # a misspelt key would silently leave its part of the world out
             if key not in _WORLD_KEYS:
-                raise WorldError("%s: unknown key %r%s (a world has %s)" % (
-                    source, key, did_you_mean(str(key), _WORLD_KEYS), ", ".join(_WORLD_KEYS)))
+                problems.add("unknown key %r%s (a world has %s)" % (
+                    key, did_you_mean(str(key), _WORLD_KEYS), ", ".join(_WORLD_KEYS)), data, key, True)
         inherited = set()  # the top-level keys taken from base
+        top = data
         if base is not None:
             inherited = {k for k in base if k not in data}
             data = dict(data, **{k: base[k] for k in inherited})
@@ -325,48 +380,93 @@ class World:
             if key not in inherited and "rooms" in inherited:
                 return " (the rooms are the default house's, %s: give rooms: for others)" % DEFAULT_WORLD
             return ""
+
+        def mapping(key: str, what: str) -> Dict[Any, Any]:
+            value = data.get(key)
+            if value is None:
+                return {}
+            if not isinstance(value, dict):
+                problems.add("%s must be a mapping of %s" % (key, what), top, key)
+                return {}
+            return value
+
+        rooms: Dict[str, Tuple[float, float]] = {}
+        named = set()  # every room written with a name, usable or not: no second error for its things
+        raw_rooms = mapping("rooms", "room -> {x: metres, y: metres}")
+        for n, r in raw_rooms.items():
+            name = name_of(problems, "rooms", n, raw_rooms)
+            named.add(n)
+            if not isinstance(r, dict):
+                problems.add("rooms.%s must be a mapping {x: metres, y: metres}" % n, raw_rooms, n)
+                continue
+            for k in r:
+                if k not in ("x", "y"):
+                    problems.add("rooms.%s.%s: unknown key%s (a room has x, y)" % (n, k, did_you_mean(str(k), "xy")),
+                                 r, k, True)
+            xy = coordinates(problems, "rooms.%s" % n, r, ("x", "y"))
+            if name is not None and xy is not None:
+                rooms[name] = (xy["x"], xy["y"])
+
+        def things(key: str) -> Dict[str, Thing]:
+            out = {}
+            raw = mapping(key, "name -> {room: ..., x: metres, y: metres}")
+            for n, t in raw.items():
+                name = name_of(problems, key, n, raw)
+                if not isinstance(t, dict):
+                    problems.add("%s.%s must be a mapping {room: ..., x: metres, y: metres}" % (key, n), raw, n)
+                    continue
+                for k in t:
+                    if k not in _THING_KEYS:
+                        problems.add("%s.%s.%s: unknown key%s (%s has %s)" % (
+                            key, n, k, did_you_mean(str(k), _THING_KEYS), key, ", ".join(_THING_KEYS)), t, k, True)
+                room = t.get("room")
+                if "room" not in t:
+                    problems.add("%s.%s: room is missing" % (key, n), t)
+                elif not isinstance(room, str) or room not in named:
+                    problems.add("%s.%s.room: unknown room %s%s" % (key, n, shown(room), why(key)), t, "room")
+                answers = t.get("answers") or []
+                if not isinstance(answers, list) or not all(is_text(a) and a is not None for a in answers):
+                    problems.add("%s.%s.answers must be a list of texts" % (key, n), t, "answers")
+                    answers = []
+                xyz = coordinates(problems, "%s.%s" % (key, n), t, ("x", "y", "z"))
+                if name is not None and xyz is not None and room in rooms:
+                    out[name] = Thing(name, room, xyz["x"], xyz["y"], xyz.get("z", 0.0), [str(a) for a in answers])
+            return out
+
+        places, objects, people = things("places"), things("objects"), things("people")
+        start = data.get("start", next(iter(rooms), ""))
+        if not isinstance(start, str) or start not in named:
+            problems.add("start: unknown room %s%s" % (shown(start), why("start")), top, "start")
+        speed = number(data.get("speed", 1.0), MIN_SPEED, float("inf"))
+        if speed is None:
+            problems.add("speed must be a finite number of metres per second, at least %g, got %s" % (
+                MIN_SPEED, shown(data.get("speed"))), top, "speed")
+        raw_faults = mapping("faults", "module.function -> fault")
         known = _sim_functions()
         simulated = {f.split(".")[0] for f in known}
-        for key in data.get("faults") or {}:
-            if str(key) in known or (others is True and str(key).split(".")[0] not in simulated):
+        faults = {}
+        for key, spec in raw_faults.items():
+            key = str(key)
+            if not (key in known or (others is True and key.split(".")[0] not in simulated)
+                    or (others is not True and key in set(others))):
+                mine = [] if others is True else sorted(others)
+                problems.add("faults.%s: not a function of the simulated robot%s%s" % (
+                    key, " or of your --module" if mine else "", did_you_mean(key, known + mine)), raw_faults, key, True)
                 continue
-            if others is not True and str(key) in set(others):
-                continue
-            mine = [] if others is True else sorted(others)
-            raise WorldError("%s: faults.%s: not a function of the simulated robot%s%s" % (
-                source, key, " or of your --module" if mine else "", did_you_mean(str(key), known + mine)))
-        try:
-            rooms = {n: (float(r["x"]), float(r["y"])) for n, r in (data.get("rooms") or {}).items()}
-
-            def things(key: str) -> Dict[str, Thing]:
-                out = {}
-                for n, t in (data.get(key) or {}).items():
-                    if t["room"] not in rooms:
-                        raise WorldError("%s: %s.%s.room: unknown room %r%s" % (source, key, n, t["room"], why(key)))
-                    out[n] = Thing(n, t["room"], float(t["x"]), float(t["y"]), float(t.get("z", 0.0)),
-                                   [str(a) for a in t.get("answers", [])])
-                return out
-
-            world = cls(rooms=rooms, places=things("places"), objects=things("objects"), people=things("people"),
-                        start=str(data.get("start", next(iter(rooms), ""))), speed=float(data.get("speed", 1.0)),
-                        faults={k: Fault.parse(k, v) for k, v in (data.get("faults") or {}).items()},
-                        written_faults={str(k): v for k, v in (data.get("faults") or {}).items()},
-                        battery=BatterySpec.parse(data.get("battery"), source),
-                        events=_parse_events(data.get("events"), source))
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            if isinstance(exc, WorldError):
-                raise
-            raise WorldError("%s: malformed world: %s" % (source, exc))
-        if world.start not in rooms:
-            raise WorldError("%s: start: unknown room %r%s" % (source, world.start, why("start")))
-        if world.speed <= 0:
-            raise WorldError("%s: speed must be positive" % source)
-        if not world.battery.dock:
-            world.battery.dock = world.start
-        elif world.locate(world.battery.dock) is None:
-            raise WorldError("%s: battery.dock: unknown room or place %r%s" % (
-                source, world.battery.dock, did_you_mean(world.battery.dock, list(rooms) + list(world.places))))
-        return world
+            fault = Fault.parse(key, spec, problems, raw_faults)
+            if fault is not None:
+                faults[key] = fault
+        battery = BatterySpec.parse(data.get("battery"), source, problems, top)
+        events = _parse_events(data.get("events"), problems, top)
+        if not battery.dock:
+            battery.dock = start if isinstance(start, str) else ""
+        elif battery.dock not in named and battery.dock not in places:
+            problems.add("battery.dock: unknown room or place %r%s" % (
+                battery.dock, did_you_mean(battery.dock, list(rooms) + list(places))), data.get("battery"), "dock")
+        problems.check()
+        return cls(rooms=rooms, places=places, objects=objects, people=people, start=start, speed=speed,
+                   faults=faults, written_faults={str(k): v for k, v in raw_faults.items()}, battery=battery,
+                   events=events)
 
     def locate(self, place: str) -> Optional[Tuple[str, float, float]]:
         """(room, x, y) of a room or a place, None if unknown."""
