@@ -8,11 +8,11 @@ warning in one without (the key would be replaced the day a cleanup is added).
 """
 from __future__ import annotations
 
-import math
 import os
 from typing import Any, List, Tuple
 
 from coordinator.errors import TreeError
+from coordinator.nodes.base import finite_number, shown
 from coordinator.nodes.task import CLEANUP_KEYS, DEFAULT_CLEANUP_TIMEOUT, ENDINGS, TASK, task_node
 from coordinator.nodes.timeouts import long_seconds
 from coordinator.treeast import TreeFile, TreeNode
@@ -30,9 +30,9 @@ def parse_cleanup(p: Any, data: Any, tree: TreeFile) -> None:
         tree.reserved_inputs = {k: declared.key_pos[k] for k in CLEANUP_KEYS if k in declared}
     if "cleanup_timeout" in data:
         value, at = data["cleanup_timeout"], data.val_pos["cleanup_timeout"]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        if not finite_number(value) or value <= 0:
             p.err(at, "cleanup_timeout must be a positive number of seconds (the cleanup's time limit, "
-                      "default %g), got %r" % (DEFAULT_CLEANUP_TIMEOUT, value))
+                      "default %g), got %s" % (DEFAULT_CLEANUP_TIMEOUT, shown(value)))
         else:
             tree.cleanup_timeout = float(value)
             long_seconds(p, value, at, "cleanup_timeout")   # 3000: milliseconds by habit, as timeout: says

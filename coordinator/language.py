@@ -15,7 +15,7 @@ from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_k
 from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
-from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
+from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option, shown
 from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, top_key_hint
 from coordinator.parsehints import LEAF_OPTIONS, closest, misplaced, nearby, nest_hint, unquoted
 from coordinator.refs import RefError
@@ -373,7 +373,7 @@ class Parser:
             if type_name == "bool":
                 self.err(at, "%r must be true or false" % label)
             else:
-                self.err(at, "%s of %s must be %s, got %r" % (label, node.kind, t.expect, value))
+                self.err(at, "%s of %s must be %s, got %s" % (label, node.kind, t.expect, shown(value)))
             return None
         return value
 

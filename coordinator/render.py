@@ -1,65 +1,102 @@
-"""A tree drawn for people (``bmtree render``): py_trees' dot graph, labelled with what each node does.
+"""A tree drawn for people (``bmtree render``): a dot graph in py_trees' style (its shapes and colours
+of sequences, selectors, parallels, decorators and leaves), labelled with what each node does.
 
-py_trees names graph nodes after behaviours and makes repeated names unique by appending ``*``
-(``speech.say``, ``speech.say*``, …), and it shows only the name: a named ``timeout`` hides its
-seconds, a call its inputs. Here each node's label is its own name, then, on a second line, what
-its kind and parameters are when a name hides them, and a leaf's main argument as written where its
-name does not say it: a call's inputs, a ``set``'s values, a ``fail``'s text, a ``wait_event``'s
-``where:`` (cut to :data:`MAX_DETAIL` characters).
+Each node's label is its own name, then, on a second line, what its kind and parameters are when a
+name hides them, and a leaf's main argument as written where its name does not say it: a call's
+inputs, a ``set``'s values, a ``fail``'s text, a ``wait_event``'s ``where:`` (cut to
+:data:`MAX_DETAIL` characters). A graph node's id is its name, made unique by ``*2``, ``*3``, … (the
+second ``speech.say`` is ``speech.say*2``; the id is what an svg shows as a node's tooltip). Every
+id and label is quoted with its quotes and backslashes escaped (a name may hold any text), and the
+graph is built in one pass over the tree: py_trees' ``dot_tree`` compared each name with all the
+names given before it and appended a ``*`` per repeat (a sequence of 5,000 ``wait: 1`` took minutes
+and wrote 25 MB).
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List, Set
+from typing import Any, Dict, List, Optional, Set, Tuple
 
 import py_trees
-from py_trees import behaviour
+import pydot
+from py_trees import behaviour, composites, decorators
 
 from coordinator.refs import Ref
 
 __all__ = ["tree_graph"]
 
 MAX_DETAIL = 48  # characters of a label's second line
+_FONT = "times-roman"
 
 
 def tree_graph(name: str, root: behaviour.Behaviour, switches: Set[str]) -> Any:
     """The pydot graph of the built tree ``root`` (``switches``: names of ``switch`` nodes)."""
-    graph = py_trees.display.dot_tree(root, collapse_decorators=False)
-    graph.set_name(name)
-    by_dot_name = _dot_names(root)
-    for node in graph.get_nodes():
-        dot_name = node.get_name().strip('"')
-        b = by_dot_name.get(dot_name)
-        label = node.get_label()
-        if b is None or not isinstance(label, str):
-            continue
-        label = label.strip('"').replace("Ⓜ ", "")  # py_trees' memory mark: no font here has it (an empty box)
-        if dot_name != b.name:
-            label = label.replace(dot_name, b.name, 1)
-        detail = _detail(b)
-        if detail:
-            label += "\n" + detail
-        node.set_label(_quoted(label))
-        if b.name in switches:  # py_trees draws a composite it does not know as a grey leaf
-            node.set_shape("diamond")
-            node.set_fillcolor("plum")
+    graph = pydot.Dot(graph_name=_quoted(name), graph_type="digraph", ordering="out")
+    graph.set_graph_defaults(fontname=_FONT)
+    graph.set_node_defaults(fontname=_FONT)
+    graph.set_edge_defaults(fontname=_FONT)
+    ids = _Ids()
+    todo: List[Tuple[behaviour.Behaviour, Optional[str]]] = [(root, None)]
+    while todo:  # depth first, children in order: each node, then the edge to it, as py_trees wrote them
+        b, parent = todo.pop()
+        node_id = ids.new(b.name)
+        shape, colour = ("diamond", "plum") if b.name in switches else _look(b)  # a switch: not a grey leaf
+        graph.add_node(pydot.Node(_quoted(node_id), label=_quoted(_label(b)), shape=shape, style="filled",
+                                  fillcolor=colour, fontsize=9, fontcolor="black"))
+        if parent is not None:
+            graph.add_edge(pydot.Edge(_quoted(parent), _quoted(node_id)))
+        todo.extend((c, node_id) for c in reversed(b.children))
     return graph
 
 
-def _dot_names(root: behaviour.Behaviour) -> Dict[str, behaviour.Behaviour]:
-    """Graph node name → behaviour, made unique exactly as ``py_trees.display.dot_tree`` does."""
-    names: Dict[str, behaviour.Behaviour] = {root.name: root}
+class _Ids:
+    """Unique graph node ids: a name, then ``name*2``, ``name*3``, … for its repeats (the number a
+    name tries next is remembered: no search over the ids given)."""
 
-    def add(parent: behaviour.Behaviour) -> None:
-        for c in parent.children:
-            dot_name = c.name
-            while dot_name in names:
-                dot_name += "*"
-            names[dot_name] = c
-            if c.children:
-                add(c)
+    def __init__(self) -> None:
+        self.used: Set[str] = set()
+        self.next: Dict[str, int] = {}
 
-    add(root)
-    return names
+    def new(self, name: str) -> str:
+        n = self.next.get(name, 1)
+        node_id = name if n == 1 else "%s*%d" % (name, n)
+        while node_id in self.used:   # a node named 'x*2' itself
+            n += 1
+            node_id = "%s*%d" % (name, n)
+        self.next[name] = n + 1
+        self.used.add(node_id)
+        return node_id
+
+
+def _look(b: behaviour.Behaviour) -> Tuple[str, str]:
+    """py_trees' shape and fill colour of a behaviour."""
+    if isinstance(b, composites.Selector):
+        return "octagon", "cyan"
+    if isinstance(b, composites.Sequence):
+        return "box", "orange"
+    if isinstance(b, composites.Parallel):
+        return "parallelogram", "gold"
+    if isinstance(b, decorators.Decorator):
+        return "ellipse", "ghostwhite"
+    return "ellipse", "gray"
+
+
+def _label(b: behaviour.Behaviour) -> str:
+    """The name (a synchronised parallel's mark before it), a parallel's policy, then :func:`_detail`
+    (py_trees' memory mark is left out: no font here has it, it showed as an empty box)."""
+    label = b.name
+    policy = getattr(b, "policy", None)
+    if isinstance(b, composites.Parallel) and policy is not None:
+        if getattr(policy, "synchronise", False):
+            symbols = py_trees.display.unicode_symbols if py_trees.console.has_unicode() else \
+                py_trees.display.ascii_symbols
+            label = "%s %s" % (symbols["synchronised"], label)
+        said = type(policy).__name__
+        selected = getattr(policy, "children", None)
+        if selected is not None:
+            index = {id(c): i for i, c in enumerate(b.children)}
+            said += "(%s)" % ", ".join(sorted(str(index[id(c)]) for c in selected if id(c) in index))
+        label += "\n" + said
+    detail = _detail(b)
+    return label + "\n" + detail if detail else label
 
 
 def _detail(b: behaviour.Behaviour) -> str:

@@ -411,13 +411,24 @@ def read_text(path: str, limit: Optional[int] = None) -> str:
     huge file must not fill the memory); devices are refused (a terminal would wait for input). Raises
     OSError, and UnicodeDecodeError over the whole bytes (see :func:`text_pos`)."""
     limit = MAX_BYTES if limit is None else limit
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO without a writer: no wait at open
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO without a writer: no wait at open
+    except ValueError:   # os.open's own error for a NUL in the name (an include: "a\0b")
+        raise OSError(errno.EINVAL, "a file name cannot hold a NUL character") from None
     with os.fdopen(fd, "rb") as fh:
         mode = os.fstat(fd).st_mode
         if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) or stat.S_ISSOCK(mode):
             raise OSError(errno.EINVAL, "not a regular file")
-        os.set_blocking(fd, True)   # a pipe (bash's <(...)) is read as a file
-        data = fh.read(limit + 1)
+        data = b""
+        if stat.S_ISFIFO(mode):   # a pipe (bash's <(...), a mkfifo) is read as a file while a writer has it open
+            try:
+                data = os.read(fd, limit + 1)
+                if not data:   # no writer (and nothing left in it): it would read as an empty file
+                    raise OSError(errno.ENODATA, "a pipe that no program writes to (start the writer first)")
+            except BlockingIOError:   # a writer that has not written yet: wait for it
+                pass
+        os.set_blocking(fd, True)
+        data += fh.read(limit + 1 - len(data))
     if len(data) > limit:
         raise OSError(errno.EFBIG, "larger than %d MiB" % (limit >> 20) if limit >= 1 << 20
                       else "larger than %d bytes" % limit)

@@ -82,6 +82,8 @@ def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
 
 _WRITTEN = ("succeed", "fail", "reject", "hang")
 _OPTIONS = ("delay", "ignores_cancel")
+#: The longest delay an outcome may have: a timer thread waits it out.
+MAX_DELAY = 86400
 
 
 def outcome_from_dict(raw: Any) -> Outcome:
@@ -96,12 +98,15 @@ def outcome_from_dict(raw: Any) -> Outcome:
         raise OutcomeError("an outcome has one of %s (and optionally delay, ignores_cancel), got %s%s" % (
             ", ".join(_WRITTEN), ", ".join(map(str, raw)), ": " + "; ".join(hints) if hints else ""))
     kind = kinds[0]
+    written = raw.get("delay", 0.0)
     try:
-        delay = float(raw.get("delay", 0.0))
-    except (TypeError, ValueError):
-        raise OutcomeError("delay must be a number of seconds, got %r" % (raw.get("delay"),))
-    if not delay >= 0 or delay == float("inf"):  # NaN fails the first test
-        raise OutcomeError("delay must be a finite number of seconds, 0 or more, got %r" % (raw.get("delay"),))
+        delay = float(written) if not isinstance(written, bool) else float("nan")
+    except (TypeError, ValueError, OverflowError):   # OverflowError: a whole number past 1.8e308
+        delay = float("nan")
+    if not 0 <= delay <= MAX_DELAY:  # NaN fails it; 1e300 s would end the timer thread that waits it out
+        shown = repr(written) if len(repr(written)) <= 40 else "a whole number of %d digits" % len(str(written)) \
+            if isinstance(written, int) else "a %s of %d characters" % (type(written).__name__, len(repr(written)))
+        raise OutcomeError("delay must be a number of seconds from 0 to %d (a day), got %s" % (MAX_DELAY, shown))
     ignores = raw.get("ignores_cancel", False)
     if not isinstance(ignores, bool):
         raise OutcomeError("ignores_cancel is true or false, got %r" % (ignores,))

@@ -8,7 +8,7 @@ generated from these objects).
 from __future__ import annotations
 
 import abc
-import math
+import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Set, Tuple
 
@@ -26,10 +26,11 @@ if TYPE_CHECKING:  # pragma: no cover
     from coordinator.yamlsrc import LMap
     from modules.definition import FunctionDefinition
 
-__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "fixed", "join",
-           "meet", "param_keys", "repeated_outputs", "run_param", "where"]
+__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "finite_number",
+           "fixed", "join", "meet", "param_keys", "repeated_outputs", "run_param", "shown", "where"]
 
 NO_DEFAULT = object()
+_MAX = sys.float_info.max
 _NOTHING: FrozenSet[str] = frozenset()
 
 
@@ -53,9 +54,18 @@ class ValueType:
     expect: str = ""
 
 
-def _num(v: Any) -> bool:
-    """A finite number: ``.inf`` seconds would make a bounded loop or wait endless."""
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+def finite_number(v: Any) -> bool:
+    """A finite number, not a bool (``.inf`` seconds would make a bounded loop or wait endless); compared,
+    not converted: ``math.isfinite`` of a whole number beyond a float's range raises OverflowError."""
+    return v.__class__ is not bool and isinstance(v, (int, float)) and -_MAX <= v <= _MAX   # NaN: False
+
+
+def shown(v: Any) -> str:
+    """``repr(v)``, but a whole number beyond a float's range by its size (an error line, not 400 digits)."""
+    if v.__class__ is bool or not isinstance(v, int) or finite_number(v):
+        return repr(v)
+    digits = "%d digits" % len(str(abs(v))) if v.bit_length() < 14000 else "thousands of digits"  # str: <= 4300
+    return "a %swhole number of %s (numbers go up to 1.8e308)" % ("negative " if v < 0 else "", digits)
 
 
 _NODE = {"$ref": "#/definitions/node"}
@@ -66,9 +76,9 @@ TYPES: Dict[str, ValueType] = {t.name: t for t in (
     ValueType("count", "an integer ≥ 1", {"anyOf": [{"type": "integer", "minimum": 1}, _PARAM]},
               lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
     ValueType("seconds", "seconds (> 0)", {"anyOf": [{"type": "number", "exclusiveMinimum": 0}, _PARAM]},
-              lambda v: _num(v) and v > 0, "a positive number of seconds"),
+              lambda v: finite_number(v) and v > 0, "a positive number of seconds"),
     ValueType("seconds0", "seconds (≥ 0)", {"anyOf": [{"type": "number", "minimum": 0}, _PARAM]},
-              lambda v: _num(v) and v >= 0, "a number of seconds >= 0"),
+              lambda v: finite_number(v) and v >= 0, "a number of seconds >= 0"),
     ValueType("policy", "`all` or `one`", {"enum": ["all", "one"]}),
     ValueType("children", "list of children", {"type": "array", "minItems": 1, "items": _NODE}),
     ValueType("node", "a node", _NODE),
@@ -111,7 +121,7 @@ def run_param(value: Any, lookup: Callable[[str], Any], type_name: str, label: s
         v = int(v)
     t = TYPES[type_name]
     if t.ok is not None and not t.ok(v):
-        return None, "%s %s is %r, not %s" % (label, value, v, t.expect)
+        return None, "%s %s is %s, not %s" % (label, value, shown(v), t.expect)
     return v, ""
 
 
@@ -155,7 +165,7 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
             value = int(value)   # as run_param takes it
         t = TYPES[type_name]
         if t.ok is not None and not t.ok(value):
-            found.append((0, "%s is %r, not %s" % (label, value, t.expect)))
+            found.append((0, "%s is %s, not %s" % (label, shown(value), t.expect)))
     if not found:
         return
     at = at or (where() if callable(where) else where)

@@ -4,10 +4,9 @@ seconds, a ``$reference`` or a ``$( … )`` expression, or, where the kind has n
 ``.inf``) is an error that says how to write it for that kind."""
 from __future__ import annotations
 
-import math
 from typing import Any, Dict
 
-from coordinator.nodes.base import TYPES, Option
+from coordinator.nodes.base import TYPES, Option, finite_number, shown
 from coordinator.treeast import TreeNode
 
 __all__ = ["LONG_SECONDS", "NO_TIMEOUT", "long_seconds", "timeout_option", "with_no_timeout"]
@@ -37,8 +36,8 @@ def timeout_option(p: Any, node: TreeNode, raw: Any, option: Option, kind: str, 
     elif isinstance(v, bool):
         p.err(at, "%s is %s (YAML reads an unquoted yes/no/on/off as true or false): %s" % (
             label, str(v).lower(), how))
-    elif isinstance(v, (int, float)) and not (math.isfinite(v) and v > 0):
-        p.err(at, "%s must be %s, got %r: %s" % (label, expect, v, how))
+    elif isinstance(v, (int, float)) and not (finite_number(v) and v > 0):
+        p.err(at, "%s must be %s, got %s: %s" % (label, expect, shown(v), how))
     elif isinstance(v, str) and (not v.startswith("$") or v.startswith("$$")):
         p.err(at, "%s must be %s%s, got %r: %s" % (label, expect, " or 'none'" if unlimited else "", v, how))
     else:
@@ -55,7 +54,7 @@ them (a warning), unless a whole number of half hours (1800, 3600: a limit for a
 
 def long_seconds(p: Any, value: Any, at: Any, label: str) -> None:
     """Warn about a duration written in milliseconds by habit: ``timeout: 3000`` is 50 minutes."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if not finite_number(value):
         return
     if value < LONG_SECONDS or value % 1800 == 0:
         return

@@ -29,6 +29,7 @@ import yaml
 
 from comm.errors import ProtocolError, did_you_mean
 from coordinator.errors import Pos, TreeError, TreeErrors
+from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.mocks import (
     MockError,
     MockModule,
@@ -137,8 +138,8 @@ def load_script(path: str, definitions: Dict[str, ModuleDefinition]) -> Tuple[Mo
             if k not in _EVENT_KEYS:
                 errors.append(TreeError(ev.key_pos[k], "unknown event key %r%s" % (k, did_you_mean(k, _EVENT_KEYS))))
         when = ev.get("at", 0.0)
-        if isinstance(when, bool) or not isinstance(when, (int, float)) or not 0 <= when < float("inf"):
-            errors.append(TreeError(pos_of(ev, "at", at), "at must be a number of seconds >= 0, got %r" % (when,)))
+        if not finite_number(when) or when < 0:
+            errors.append(TreeError(pos_of(ev, "at", at), "at must be a number of seconds >= 0, got %s" % shown(when)))
         if str(ev["event"]) not in definition.events:
             errors.append(TreeError(pos_of(ev, "event", at), "module %r has no event %r%s" % (
                 name, ev["event"], did_you_mean(ev["event"], definition.events) or " (its events: %s)" % (

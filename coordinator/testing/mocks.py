@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
 from coordinator.context import plain
+from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import legacy_times
 from modules.definition import FunctionDefinition, ModuleDefinition
 from modules.outcome import (
@@ -134,6 +135,14 @@ def outcome_from_dict(raw: Any) -> Outcome:
         return _outcome_from_dict(raw)
     except OutcomeError as exc:
         raise MockError(str(exc))
+
+
+def _at(at: Any) -> float:
+    """An event's ``at`` (seconds) as a float; MockError for what is not a finite number."""
+    __tracebackhide__ = True
+    if not finite_number(at):
+        raise MockError("at must be a finite number of seconds, got %s" % shown(at))
+    return float(at)
 
 
 def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
@@ -316,7 +325,7 @@ class Mocks:
         """Emit ``module.event`` with ``params`` at ``at`` seconds after the start (of the run, or of a mock node)."""
         __tracebackhide__ = True
         mod, name = self._checked_event(target, params)
-        self.scheduled_events.append((float(at), mod, name, dict(params)))
+        self.scheduled_events.append((_at(at), mod, name, dict(params)))
 
     def event_after(self, call: str, at: float, target: str, params: Optional[Dict[str, Any]] = None,
                     nth: int = 1) -> None:
@@ -329,7 +338,7 @@ class Mocks:
         if isinstance(nth, bool) or not isinstance(nth, int) or nth < 1:
             raise MockError("nth is a whole number >= 1, got %r" % (nth,))
         mod, name = self._checked_event(target, dict(params or {}))
-        self.call_events.append((call, nth, float(at), mod, name, dict(params or {})))
+        self.call_events.append((call, nth, _at(at), mod, name, dict(params or {})))
 
     def _checked_event(self, target: str, params: Dict[str, Any]) -> Tuple[str, str]:
         __tracebackhide__ = True

@@ -22,6 +22,7 @@ import yaml
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
 from coordinator.errors import Pos
+from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import ExpectedCall, expected_message, want_form
 from coordinator.yamlsrc import LList, LMap, pos_of
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions
@@ -176,7 +177,7 @@ def event_problem(said: str, event: Any, params: Mapping[str, Any]) -> str:
 
 # expect: duration -----------------------------------------------------------------------------------
 def _seconds(value: Any) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and 0 <= value < float("inf")
+    return finite_number(value) and value >= 0
 
 
 def check_duration(expect: Any, at: Pos, add: Add) -> None:
@@ -193,7 +194,7 @@ def check_duration(expect: Any, at: Pos, add: Add) -> None:
             add(raw.key_pos[k] if isinstance(raw, LMap) else d_at, "unknown duration key %r%s: duration takes "
                 "at_least and/or at_most (simulated seconds)" % (k, did_you_mean(k, DURATION_KEYS)))
         elif not _seconds(v):
-            add(pos_of(raw, k, d_at), "duration %s must be a number of seconds >= 0, got %r" % (k, v))
+            add(pos_of(raw, k, d_at), "duration %s must be a number of seconds >= 0, got %s" % (k, shown(v)))
     low, high = raw.get("at_least"), raw.get("at_most")
     if _seconds(low) and _seconds(high) and low > high:
         add(d_at, "duration at_least %g is above at_most %g: no run can pass" % (low, high))

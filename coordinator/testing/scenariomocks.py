@@ -7,6 +7,7 @@ from typing import Any, Dict, List
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
 from coordinator.errors import Pos, TreeError
+from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import legacy_times
 from coordinator.testing.mocks import (
     MockError,
@@ -48,8 +49,8 @@ def check_keys(m: LMap, allowed: Any, what: str, out: Problems) -> None:
 def number(m: LMap, key: str, default: float, at: Pos, out: Problems) -> float:
     """``m[key]`` as a non-negative number of seconds, else ``default`` after a positioned error."""
     value = m.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < float("inf"):  # NaN too
-        out.add(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %r" % (key, value))
+    if not finite_number(value) or value < 0:
+        out.add(pos_of(m, key, at), "%s must be a number of seconds >= 0, got %s" % (key, shown(value)))
         return default
     return float(value)
 

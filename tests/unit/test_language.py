@@ -166,7 +166,7 @@ def test_render_labels_say_what_names_hide_and_no_uniqueness_stars(tmp_path):
     assert bmtree(["render", str(tree), "-o", str(dot)]) == 0
     text = dot.read_text()
     assert '"speech.say" [label="speech.say\\ntext: \'hi\'"' in text, text
-    assert '"speech.say*" [label="speech.say\\ntext: $who"' in text, text
+    assert '"speech.say*2" [label="speech.say\\ntext: $who"' in text, text
     assert '[label="follow until stop\\ntimeout 300s"' in text, text
     assert 'label="speech.say*' not in text
 

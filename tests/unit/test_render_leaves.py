@@ -49,5 +49,5 @@ def test_render_shows_a_sets_values_and_a_wait_events_where(tmp_path):
     assert labels["set count, place"] == "set count, place\\ncount: 0, place: $who"
     assert labels["reset"] == "reset\\nset count · count: 1"
     assert labels["arm.fault"] == "arm.fault\\nwhere: code > 2"
-    assert labels["arm.fault*"] == "arm.fault"           # no where: nothing more to say
+    assert labels["arm.fault*2"] == "arm.fault"           # no where: nothing more to say
     assert labels["check count < 3"] == "check count < 3"  # its name says its expression already

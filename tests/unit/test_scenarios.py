@@ -242,7 +242,7 @@ def test_a_scenario_file_is_read_with_the_tree_files_limits(tmp_path, capsys):
     ("  - name: a\n    mocks: {speech.say: []}\n",
      "4:25: mocks.speech.say: an empty list of outcomes (leave the function out for the mock's default)"),
     ("  - name: a\n    mocks: {speech.say: {succeed: {}, delay: .nan}}\n",
-     "4:25: delay must be a finite number of seconds, 0 or more, got nan"),
+     "4:25: delay must be a number of seconds from 0 to 86400 (a day), got nan"),
 ])
 def test_a_scenario_value_of_the_wrong_kind_is_a_positioned_error(tmp_path, capsys, scenario, says):
     path = tmp_path / "s.scenarios.yaml"
