@@ -303,6 +303,8 @@ class Event(_Values):
     event: str
     names: List[str] = field(default_factory=list)
     msgs: List[Any] = field(default_factory=list)
+    #: The node that published it (ROS connection header ``callerid``), set by the receiver; never encoded.
+    publisher: Optional[str] = field(default=None, compare=False, repr=False)
 
     def encode(self) -> str:
         out: Dict[str, Any] = {"basic_mod": self.basic_mod, "event": self.event}

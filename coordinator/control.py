@@ -29,6 +29,7 @@ import json
 import logging
 import os
 import queue
+import re
 import threading
 import time
 from typing import Any, Callable, Dict, List, Set, Tuple
@@ -36,14 +37,16 @@ from typing import Any, Callable, Dict, List, Set, Tuple
 from py_trees.common import Status
 
 from comm import settle_new_connection
-from comm.errors import did_you_mean
+from comm.errors import ProtocolError, did_you_mean
+from comm.messages import load_payload
 from comm.nodelife import registering
 from coordinator.context import WAKE
 from coordinator.runevents import RunObserver, notify
 
 log = logging.getLogger("bmtree.coordinator")
 
-__all__ = ["Controller", "ControlClient", "ros_controller", "parse_command", "REQUEST", "REPLY", "COMMANDS"]
+__all__ = ["Controller", "ControlClient", "ros_controller", "parse_command", "read_request", "Unreadable", "REQUEST",
+           "REPLY", "COMMANDS"]
 
 REQUEST = "/bmtree/run/control_request"
 REPLY = "/bmtree/run/control_reply"
@@ -158,6 +161,9 @@ class Controller(RunObserver):
     def _answer_guarded(self, cmd: Any) -> None:
         """Apply and answer one command; a malformed one (not a mapping, a command that is not text, a value
         too deep or too large to read) is refused with why, and never stops the ticking thread."""
+        if isinstance(cmd, Unreadable):
+            self._answer(_plain(cmd), False, "malformed command: %s" % cmd.args[0])
+            return
         if not isinstance(cmd, dict) or not isinstance(cmd.get("command"), str):
             what = type(cmd.get("command")).__name__ if isinstance(cmd, dict) else type(cmd).__name__
             self._answer(_plain(cmd), False, "malformed command: 'command' is text (one of: %s), got %s" % (
@@ -484,28 +490,38 @@ def ros_controller(enabled: bool, max_bytes: int = MAX_REQUEST) -> Controller:
     ctl = Controller(enabled, reply=lambda r: pub.publish(String(json.dumps(r, default=str))))
 
     def got(msg: Any) -> None:
-        try:
-            if len(msg.data) > max_bytes:
-                raise ValueError("larger than %d bytes" % max_bytes)
-            cmd = json.loads(msg.data)
-            if not isinstance(cmd, dict):
-                raise ValueError("not a JSON object")
-        except (ValueError, TypeError, AttributeError) as exc:
-            pub.publish(String(json.dumps({"id": None, "ok": False, "answer": "bad request: %s" % exc})))
-            return
-        if cmd.get("to") not in (None, "", rospy.get_name()):
-            return  # for another run on this master (bmtree watch names the run it shows)
         header = getattr(msg, "_connection_header", None) or {}
-        cmd["by"] = str(header.get("callerid", "?"))
-        ctl.submit(cmd)
+        by = str(header.get("callerid", "?"))
+        cmd = read_request(msg.data, max_bytes, by)
+        if isinstance(cmd, dict):
+            if cmd.get("to") not in (None, "", rospy.get_name()):
+                return  # for another run on this master (bmtree watch names the run it shows)
+            cmd["by"] = by
+        ctl.submit(cmd)  # (one that cannot be read is refused as every malformed command is)
 
     with registering():
         ctl.subscription = rospy.Subscriber(REQUEST, String, got, queue_size=100)
     return ctl
 
 
+class Unreadable(ValueError):
+    """A request that cannot be read (not a JSON object, too large, nested too deep): refused as every
+    malformed command is (:meth:`Controller._answer_guarded`), its ``id`` read from the text if it can be."""
+
+
+def read_request(text: Any, max_bytes: int = MAX_REQUEST, by: str = "?") -> Any:
+    """The command of a request's JSON text, or an :class:`Unreadable` saying why there is none; never raises."""
+    try:
+        return load_payload(text, max_bytes)  # size, then depth, before the parser (it recurses)
+    except ProtocolError as exc:
+        found = re.search(r'"id"\s*:\s*"([^"\\]{1,200})"', text[:max_bytes]) if isinstance(text, str) else None
+        return Unreadable("the request cannot be read: %s" % str(exc)[:200], by, found.group(1) if found else None)
+
+
 def _plain(cmd: Any) -> Dict[str, Any]:
     """What a refused malformed command's record keeps: its id, command and sender as short text."""
+    if isinstance(cmd, Unreadable):
+        return {"id": cmd.args[2], "command": "?", "by": cmd.args[1]}
     if not isinstance(cmd, dict):
         return {"command": "?"}
     return {k: str(cmd[k])[:80] for k in ("id", "command", "by", "to") if k in cmd}

@@ -60,7 +60,7 @@ from coordinator.rosstream import RosStreamSink
 from coordinator.runevents import Notice
 from coordinator.sender import TopicSender, peer_gone, topic_senders, widen_accept_queue
 from coordinator.startguard import MasterGone, StartupGuard
-from coordinator.transport import Transport
+from coordinator.transport import Screen, Transport
 from modules.definition import ModuleDefinition
 from modules.discovery import LiveModule, live_modules
 
@@ -111,6 +111,7 @@ class RosTransport(Transport):
         self._pings: Dict[str, str] = {}  # ping call_id -> module
         self._ponged: Set[str] = set()  # modules that answered a ping
         self._cond = threading.Condition()
+        self.screen = Screen()  # what arrives, checked against the definitions of the run's modules
 
     def open(self) -> None:
         """Init the rospy node (once per process) and the topics."""
@@ -147,27 +148,32 @@ class RosTransport(Transport):
         return rospy.Publisher(topic, self._String, queue_size=SEND_QUEUE, tcp_nodelay=True)
 
     def _on(self, cls: Any, intercept: Optional[Callable[[Any], bool]] = None) -> Callable[[Any], None]:
+        """A subscriber's callback: results and events go through the screen (a malformed answer to a call
+        awaited fails it, an event breaking its definition is refused: :class:`~coordinator.transport.Screen`)."""
         def callback(msg: Any) -> None:
-            try:
-                item = cls.decode(msg.data, self.max_bytes)
-            except ProtocolError as exc:
-                log.warning("ignored a malformed %s: %s", cls.__name__, exc)
-                return
-            except Exception as exc:  # nothing a sender writes may stop a subscriber
-                log.warning("ignored a malformed %s (%s: %s)", cls.__name__, type(exc).__name__, exc)
-                return
-            if intercept is not None and intercept(item):
-                return
+            header = getattr(msg, "_connection_header", None) or {}
+            node = header.get("callerid") if isinstance(header, dict) else None
             if cls is FunctionResult:
-                header = getattr(msg, "_connection_header", None) or {}
-                item.publisher = header.get("callerid")
-                if item.call_id is None and item.basic_mod is None:
-                    item.basic_mod = self.node_modules.get(item.publisher or "")
-                self.watchdog.call_done(item.call_id)
-                self._check_twice(item, header)
-            elif cls is BlackboardAnswer:
-                self.watchdog.request_done(item.request_id)
-            self._deliver(item)
+                items = self.screen.result(msg.data, self.max_bytes, node)
+            elif cls is Event:
+                items = self.screen.event(msg.data, self.max_bytes, node)
+            else:
+                try:
+                    items = [cls.decode(msg.data, self.max_bytes)]
+                except Exception as exc:  # nothing a sender writes may stop a subscriber
+                    log.warning("ignored a malformed %s (%s: %s)", cls.__name__, type(exc).__name__, exc)
+                    return
+            for item in items:
+                if intercept is not None and isinstance(item, cls) and intercept(item):
+                    continue
+                if isinstance(item, FunctionResult):
+                    if item.call_id is None and item.basic_mod is None:
+                        item.basic_mod = self.node_modules.get(item.publisher or "")
+                    self.watchdog.call_done(item.call_id)
+                    self._check_twice(item, header)
+                elif isinstance(item, BlackboardAnswer):
+                    self.watchdog.request_done(item.request_id)
+                self._deliver(item)
         return callback
 
     def _check_twice(self, result: FunctionResult, header: Mapping[str, str]) -> None:
@@ -210,7 +216,8 @@ class RosTransport(Transport):
             if isinstance(item, Notice) and item.what in ("master_down", "master_back"):
                 # it happened before the first tick: the run's clock would date it at 0.0 s
                 item = Notice(item.what, "during start-up, before the first tick: " + item.text)
-            deliver(item)
+            for taken in self.screen.take_event(item) if isinstance(item, Event) else [item]:
+                deliver(taken)  # (an event that came before the definitions were known is checked now)
         self.watchdog.start()
         if self._bb_watch is None:
             self._bb_watch = NodeWatch(lambda: node_of(BLACKBOARD), uri_of, self._blackboard_gone,
@@ -273,6 +280,7 @@ class RosTransport(Transport):
                 return
         if call.call_id:
             self.watchdog.call_sent(call.call_id, call.basic_mod)
+        self.screen.sent(call)
         if route is not None:  # kept while the module's node is not connected (restarting), sent when it is
             self._to_route(route, call.encode(), key=call.call_id)
         else:
@@ -308,6 +316,7 @@ class RosTransport(Transport):
         self.watchdog.call_done(key)
 
     def send_cancel(self, cancel: CancelRequest) -> None:
+        self.screen.ended([cancel.call_id])
         route = self._routes.get(cancel.basic_mod)
         if route is not None and cancel.call_id and route.discard(cancel.call_id):
             return  # its module never got the call
@@ -349,6 +358,8 @@ class RosTransport(Transport):
         Raises:
             EnvironmentProblem: what is missing or different, after ``timeout`` seconds.
         """
+        modules = set(modules)
+        self.screen.know({m: d for m, d in (definitions or {}).items() if m in modules})
         wait_ready(self, modules, timeout, definitions, blackboard, legacy, notify, where)
 
     def _set_routes(self, lives: List[LiveModule]) -> None:
@@ -365,6 +376,7 @@ class RosTransport(Transport):
                 fresh.append(live)
         for live in lives:
             self.whereabouts.seen(live.name, live.node, live.uri)
+        self.screen.know({live.name: live.definition for live in lives}, replace=False)
         with registering():
             senders = topic_senders([live.call_topic or "" for live in fresh], self._String, SEND_QUEUE,
                                     on_connect=self._connected)
@@ -382,6 +394,7 @@ class RosTransport(Transport):
         ids = [key for key in keys if self.watchdog.owes(key)]
         for key in ids:
             self.watchdog.call_done(key)
+        self.screen.ended(ids)
         if ids:
             node = self.whereabouts.known(module) or "?"
             reason = "no node of it connected to %s within %gs (node %s: restarting, or unable to reach this " \
@@ -393,6 +406,7 @@ class RosTransport(Transport):
         """A lost module's dead connection is closed before the run hears of it: a retry then waits
         for the restarted node instead of going into the old socket."""
         if isinstance(item, ModuleLost):
+            self.screen.ended(item.call_ids)
             route = self._routes.get(item.module)
             if route is not None:
                 for call_id in item.call_ids:  # kept for a connection that will not come: never sent

@@ -12,6 +12,7 @@ cannot be reached from here (:func:`listed_modules`).
 from __future__ import annotations
 
 import json
+import logging
 import math
 import socket
 from concurrent.futures import ThreadPoolExecutor
@@ -31,6 +32,8 @@ __all__ = ["PARAM_ROOT", "LiveModule", "live_modules", "listed_modules", "announ
            "legacy_announcement", "node_alive", "probe_nodes"]
 
 PARAM_ROOT = "/bmtree/modules"
+
+log = logging.getLogger("bmtree.discovery")
 
 
 @dataclass
@@ -115,14 +118,29 @@ def _announced(master: Any) -> Dict[str, LiveModule]:
         return {}
     found: Dict[str, LiveModule] = {}
     if not isinstance(params, dict):
+        _malformed("", None, "not a mapping of module name to announcement (got %s)" % type(params).__name__)
         return found
     for name, entry in sorted(params.items()):
-        if not isinstance(entry, dict) or not isinstance(entry.get("node"), str):
+        if not isinstance(entry, dict):
+            _malformed(name, None, "the announcement is not a mapping (got %s)" % type(entry).__name__)
+            continue
+        if not isinstance(entry.get("node"), str):
+            _malformed(name, None, "its key 'node' is not text (got %s)" % type(entry.get("node")).__name__)
             continue
         try:
             definition = _definition(entry.get("definition"), entry["node"])
-        except (ValueError, TypeError, RecursionError, ProtocolError, DefinitionError):
+        except DefinitionError as exc:
+            _malformed(name, entry["node"], "its definition is invalid: %s" % "; ".join(exc.problems[:3]))
             continue
+        except (ValueError, TypeError, RecursionError, ProtocolError) as exc:
+            _malformed(name, entry["node"], "its definition cannot be read (%s: %s)" % (type(exc).__name__, exc))
+            continue
+        odd = [key for key in ("call_topic", "cancel_topic") if entry.get(key) is not None and _topic(entry, key) is None]
+        if odd:  # taken without them: its calls or cancels go to the shared topics
+            _malformed(name, entry["node"], "%s: not a topic it may use (%s), so the shared one is used" % (
+                " and ".join(odd), ", ".join("%.80r" % (entry[key],) for key in odd)))
+        else:
+            _WARNED.pop(_announcer(name, entry["node"]), None)  # (said again if it turns bad again)
         uri = entry.get("uri")
         if not isinstance(uri, str) or not uri.startswith("http"):
             try:
@@ -133,6 +151,26 @@ def _announced(master: Any) -> Dict[str, LiveModule]:
                                  call_topic=_topic(entry, "call_topic"), cancel_topic=_topic(entry, "cancel_topic"),
                                  legacy=entry.get("legacy") is True, call_limit=_limit(entry.get("call_limit")))
     return found
+
+
+_WARNED: Dict[Tuple[str, Optional[str]], str] = {}  # (module, node) -> what was said of its announcement
+
+
+def _announcer(name: Any, node: Optional[str]) -> Tuple[str, Optional[str]]:
+    return str(name)[:200], node
+
+
+def _malformed(name: Any, node: Optional[str], why: str) -> None:
+    """Say once per announcer (module and node) what is wrong with its announcement (skipped, or taken
+    without what is wrong), not at every look: a run's preflight reads them twice a second."""
+    key = _announcer(name, node)
+    if key in _WARNED:
+        return
+    if len(_WARNED) >= 1000:
+        _WARNED.clear()
+    _WARNED[key] = why
+    log.warning("malformed module announcement %s/%.80s%s: %.500s", PARAM_ROOT, str(name),
+                " by node %s" % node if node else "", why)
 
 
 def probe_nodes(uris: Iterable[str], timeout: float = 1.0) -> List[str]:

@@ -130,12 +130,12 @@ class Call(Leaf):
         if result.status != "succeeded":
             self.ctx.finish(rec, result.status, result.error)
             return self._ended(result.status, result.error, "%s %s: %s" % (rec.target, result.status, result.error))
-        try:
+        try:   # (the transport's screen checks answers to calls it sent; an original module's come here)
             fn.check_result(result)
         except ProtocolError as exc:
             self.ctx.finish(rec, RecordStatus.FAILED, str(exc))
-            return self._ended(RecordStatus.FAILED, str(exc),
-                               "%s answered outputs that break its definition: %s" % (rec.target, exc))
+            return self._ended(RecordStatus.FAILED, str(exc), "%s answered outputs that break its definition%s: %s" % (
+                rec.target, " (node %s)" % result.publisher if result.publisher else "", exc))
         values = result.values
         rec.output_messages = dict(values)
         if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:

@@ -11,13 +11,12 @@ from comm.messages import (
     BlackboardAnswer,
     BlackboardRequest,
     CancelRequest,
-    Event,
     FunctionCall,
     FunctionResult,
 )
 from coordinator.clock import Clock
 from coordinator.testing.mocks import MockModule, Mocks, mock_module
-from coordinator.transport import Transport
+from coordinator.transport import Screen, Transport
 from modules.execution import ClockExecutor
 from modules.runtime import ModuleServer
 
@@ -36,6 +35,7 @@ class InProcessTransport(Transport):
         self._blackboard_lock = threading.Lock()   # results (timer thread) and requests (tick thread) may race
         self.sent: List[Any] = []
         self._made: Dict[str, int] = {}  # calls sent, per module.function (for the events tied to them)
+        self.screen = Screen(mocks.definitions)  # what the modules send, checked as the ROS transport does
         executor = ClockExecutor(clock)
         self.servers: Dict[str, ModuleServer] = {
             name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
@@ -78,17 +78,20 @@ class InProcessTransport(Transport):
             impl._start_events()
 
     def _on_event(self, text: str) -> None:
-        self._deliver(Event.decode(text))
+        for item in self.screen.event(text):   # as over ROS: one that breaks its definition is refused
+            self._deliver(item)
 
     def _on_answer(self, text: str) -> None:
         self._deliver(BlackboardAnswer.decode(text))
 
     def _on_result(self, text: str) -> None:
         self.blackboard.on_result(text, stamp=self.clock.now())
-        self._deliver(FunctionResult.decode(text))
+        for item in self.screen.result(text):   # as over ROS: a malformed answer fails its call
+            self._deliver(item)
 
     def send_call(self, call: FunctionCall) -> None:
         self.sent.append(call)
+        self.screen.sent(call)
         server = self.servers.get(call.basic_mod)
         if server is not None:                               # else nobody listens, as on a robot
             server.handle_call(call.encode())
@@ -109,6 +112,7 @@ class InProcessTransport(Transport):
 
     def send_cancel(self, cancel: CancelRequest) -> None:
         self.sent.append(cancel)
+        self.screen.ended([cancel.call_id])
         server = self.servers.get(cancel.basic_mod)
         if server is not None:
             server.handle_cancel(cancel.encode())
