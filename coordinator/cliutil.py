@@ -21,7 +21,10 @@ class PlainError(UsageError):
 
 
 def err(text: str) -> None:
-    sys.stderr.write(text.rstrip("\n") + "\n")
+    """A line (or lines) on stderr; control characters in it (a module's error text) escaped."""
+    from coordinator.runevents import terminal_text
+
+    sys.stderr.write(terminal_text(text.rstrip("\n")) + "\n")
 
 
 def definitions_from(paths: Optional[List[str]]) -> Dict[str, ModuleDefinition]:

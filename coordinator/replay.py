@@ -13,15 +13,22 @@ import datetime
 import os
 import sys
 import types
-from typing import Any, Callable, Dict, Optional, Set, TextIO, Tuple
+from typing import Any, Callable, Dict, List, Optional, Set, TextIO, Tuple
 
 from coordinator.context import LATE_ANSWER
 from coordinator.replaystate import Failure, Replay
-from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word
+from coordinator.runevents import (
+    CLEANUP_NOTICES,
+    TerminalText,
+    cleanup_said,
+    control_line,
+    status_word,
+    terminal_text,
+)
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log, writer_alive
 from coordinator.runner import Display, call_line, cleanup_stop_label, late_line, stop_label
 
-__all__ = ["Failure", "Replay", "find_run", "cmd_runs", "cmd_replay"]
+__all__ = ["Failure", "Replay", "find_run", "read_run", "cmd_runs", "cmd_replay"]
 
 
 def find_run(ref: str, directory: Optional[str] = None) -> str:
@@ -47,8 +54,13 @@ def find_run(ref: str, directory: Optional[str] = None) -> str:
 
 
 def cmd_runs(args: Any) -> int:
+    from coordinator.cliutil import err
+
     directory = args.dir or default_runs_dir()
-    runs = list_runs(directory)
+    problems: List[str] = []
+    runs = list_runs(directory, problems)
+    for problem in problems:  # each log that is not listed, or is listed without its last record: why
+        err("warning: %s" % problem)
     if not runs:
         print("no recorded runs in %s" % directory)
         return 0
@@ -57,7 +69,8 @@ def cmd_runs(args: Any) -> int:
     for k, r in enumerate(reversed(runs[-args.limit:] if args.limit else runs), 1):
         start = datetime.datetime.fromtimestamp(r.started).strftime("%Y-%m-%d %H:%M:%S")
         dur = "%.2fs" % r.duration if isinstance(r.duration, (int, float)) else "-"
-        print("%3d  %-19s  %-24s %9s  %-11s %s" % (k, start, r.name[:24], dur, status_word(r.status), r.reason))
+        print(terminal_text("%3d  %-19s  %-24s %9s  %-11s %s" % (k, start, r.name[:24], dur, status_word(r.status),
+                                                                r.reason), newlines=False))
     return 0
 
 
@@ -263,10 +276,20 @@ def _test_command(log: RunLog, scenario: str) -> str:
     return command
 
 
+def read_run(ref: str, directory: Optional[str]) -> RunLog:
+    """The log ``ref`` names (:func:`find_run`), read, with a warning on stderr for each line skipped."""
+    from coordinator.cliutil import err
+
+    log = read_log(find_run(ref, directory))
+    for line in log.warning_lines():
+        err(line)
+    return log
+
+
 def cmd_replay(args: Any) -> int:
-    out = sys.stdout
-    path = find_run(args.run, args.dir)
-    log = read_log(path)
+    out: Any = TerminalText(sys.stdout)  # a module's error text, a log's names: never the terminal's controls
+    log = read_run(args.run, args.dir)
+    path = log.path
     if args.scenario:
         from coordinator.scenariogen import write_scenario
 
@@ -304,7 +327,7 @@ def cmd_replay(args: Any) -> int:
         _report(replay, out)
         return 0
     if args.speed:
-        _play(replay, out, args.speed)
+        _play(replay, sys.stdout, args.speed)  # (its display escapes its own text: it moves the cursor)
     else:
         display = Display(out, tty=False)
         while replay.next(display) is not None:

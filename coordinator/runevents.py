@@ -20,13 +20,51 @@ from typing import Any, Dict, Iterable, List, Optional, TextIO, Tuple
 import py_trees
 from py_trees.common import Status
 
-__all__ = ["Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
+__all__ = ["terminal_text", "TerminalText", "Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
            "halted_word", "cleanup_said",
            "CLEANUP_NOTICES", "IncludeArgs", "include_label"]
 
 log = logging.getLogger("bmtree.coordinator")
 
 Change = Tuple[Any, Status, Status]  # (behaviour, old status, new status)
+
+# control characters (C0 but tab and newline, DEL, C1) and lone surrogates: a module's text holding them
+# (``\x1b[2J``, a bare ``\r``) would clear, move or recolour the terminal it is shown on
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\ud800-\udfff]")
+_CONTROL_OR_NEWLINE = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\ud800-\udfff]")
+
+
+def _escaped(m: Any) -> str:
+    code = ord(m.group())
+    if code in (10, 13):
+        return "\\n" if code == 10 else "\\r"
+    return "\\x%02x" % code if code < 0x100 else "\\u%04x" % code
+
+
+def terminal_text(text: Any, newlines: bool = True) -> str:
+    """``text`` safe to print on a terminal: each control character but tab (and newline, unless
+    ``newlines`` is False: a line of a table or of a view that must stay one line) shown escaped
+    (``\\x1b``), so that text from a module or a log never drives the terminal. Every terminal output
+    of a run's text (``bmtree run``, ``watch``, ``replay``, ``runs``, errors) goes through it."""
+    text = text if isinstance(text, str) else str(text)
+    pattern = _CONTROL if newlines else _CONTROL_OR_NEWLINE
+    return pattern.sub(_escaped, text) if pattern.search(text) else text
+
+
+class TerminalText:
+    """A text stream that writes everything through :func:`terminal_text` (newlines kept)."""
+
+    def __init__(self, stream: TextIO):
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        return self.stream.write(terminal_text(text))
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+    def isatty(self) -> bool:
+        return self.stream.isatty()
 
 
 @dataclass
@@ -270,7 +308,7 @@ class NoticeLines(RunObserver):
         self._start = ctx.clock.now()
 
     def on_notice(self, notice: Any, now: float) -> None:
-        self.stream.write("[%7.3fs] NOTICE    %s\n" % (now - self._start, notice.text))
+        self.stream.write(terminal_text("[%7.3fs] NOTICE    %s" % (now - self._start, notice.text)) + "\n")
         self.stream.flush()
 
 
@@ -308,9 +346,9 @@ class Display(RunObserver):
         for b, before, status in changes:
             if status != Status.INVALID:
                 extra = " (%s)" % b.feedback_message if status == Status.FAILURE and b.feedback_message else ""
-                self.stream.write("[%7.3fs] %-9s %s%s\n" % (now, status.value, self._label(b), extra))
+                self.stream.write(terminal_text("[%7.3fs] %-9s %s%s" % (now, status.value, self._label(b), extra)) + "\n")
             elif before == Status.RUNNING:
-                self.stream.write("[%7.3fs] %-9s %s\n" % (now, halted_word(b), self._label(b)))
+                self.stream.write(terminal_text("[%7.3fs] %-9s %s" % (now, halted_word(b), self._label(b))) + "\n")
         self.stream.flush()
 
     def _label(self, b: Any) -> str:
@@ -330,7 +368,7 @@ class Display(RunObserver):
             if self.root is not None:
                 self._draw(now - self._start)
             return
-        self.stream.write("[%7.3fs] %-9s %s\n" % (now - self._start, kind, text))
+        self.stream.write(terminal_text("[%7.3fs] %-9s %s" % (now - self._start, kind, text)) + "\n")
         self.stream.flush()
 
     def on_end(self, result: Any) -> None:
@@ -349,6 +387,7 @@ class Display(RunObserver):
                 b.name = name
         if self._note:
             text += "\n" + self._note
+        text = terminal_text(text)
         if self._lines:
             self.stream.write("\x1b[%dA\x1b[J" % self._lines)
         self.stream.write(text + "\n")

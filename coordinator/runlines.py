@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
 from py_trees.common import Status
 
 from coordinator.context import CallRecord, late_answer_text
-from coordinator.runevents import status_word
+from coordinator.runevents import status_word, terminal_text
 
 if TYPE_CHECKING:
     from coordinator.runner import RunResult
@@ -31,13 +31,13 @@ def call_line(started: float, target: Any, status: Any, duration: Optional[float
     line = "  +%7.3fs  %-26s %-11s %8s  %s" % (started, target, status, dur, error or "")
     if inputs is not None:
         line += "%sinputs %s" % ("  " if error else "", short_json(inputs))
-    return line.rstrip()
+    return terminal_text(line.rstrip())
 
 
 def late_line(text: str) -> str:
     """Under its call in an end-of-run summary (live and ``bmtree replay``): the answer that came after
     the call had ended (``text``: its notice, which says when). Not a call's line: no ``+`` time."""
-    return " " * 14 + "late answer: " + text
+    return terminal_text(" " * 14 + "late answer: " + text)
 
 
 def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:
@@ -95,7 +95,7 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:
             lines.append(late_line(late_answer_text(c, result.started)))
-    return lines
+    return [terminal_text(line) for line in lines]   # a module's error, a tree's names: never the terminal's
 
 
 def cleanup_lines(result: RunResult) -> List[str]:

@@ -9,24 +9,25 @@ thread only hands over the tick's lines; the thread writes them and ``fsync``s.
 """
 from __future__ import annotations
 
-import json
 import os
 import queue
 import re
+import stat
 import threading
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 
 from comm.errors import InvalidInput
 from comm.nodelife import registering
-from coordinator.runstream import Sink
+from coordinator.runstream import MAX_RECORD_BYTES, Sink, parse_record, record_problem, version_problem
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
-           "new_log_path", "prune", "empty_file", "last_alive", "writer_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES"]
+           "new_log_path", "prune", "empty_file", "last_alive", "writer_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES",
+           "MAX_RECORD_BYTES", "max_log_bytes"]
 
 DEFAULT_KEEP = 50
-MAX_LOG_BYTES = 256 << 20         # a log larger than this is refused, not read
-MAX_RECORD_BYTES = 64 << 20
+MAX_LOG_BYTES = 64 << 20          # a log larger than this is refused, not read (read, it takes ~10 times that)
+MAX_WARNINGS = 10                 # lines skipped that a reader names (then how many more)
 _SUFFIX = ".jsonl"
 HEARTBEAT = 1.0  # seconds: a quiet run's log is touched this often, so a killed run's length is known
 _NAME = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.jsonl$")
@@ -53,7 +54,8 @@ def _logs_in(directory: str) -> List[str]:
         names = [n for n in os.listdir(directory) if _NAME.match(n)]
     except OSError:
         return []
-    return [os.path.join(directory, n) for n in sorted(names)]
+    paths = [os.path.join(directory, n) for n in sorted(names)]
+    return [p for p in paths if os.path.isfile(p)]  # a FIFO of that name would hang the reader
 
 
 def prune(directory: str, keep: int) -> List[str]:
@@ -157,16 +159,16 @@ def _is_run_log(path: str) -> bool:
         return False
     try:
         return _head(path) is not None
-    except (OSError, ValueError, RecursionError):
+    except (OSError, ValueError):
         return False
 
 
-def _head(path: str) -> Optional[Dict[str, Any]]:
-    """The first record of ``path`` if it is a run log's ``tree`` record (OSError, ValueError for an
-    unreadable or non-JSON first line)."""
+def _head(path: str) -> Dict[str, Any]:
+    """The first record of ``path``, a run log's ``tree`` record (RunLogError why not; OSError)."""
     with open(path, "rb") as fh:
-        head = json.loads(fh.readline(MAX_RECORD_BYTES).decode("utf-8"))
-    return head if isinstance(head, dict) and head.get("type") == "tree" else None
+        raw = fh.readline(MAX_RECORD_BYTES + 1)
+    rec, problem = _parse(raw)
+    return _header(path, 1, rec, problem or "")
 
 
 class RunLogWriter(Sink):
@@ -238,6 +240,20 @@ class RunLog:
     records: List[Dict[str, Any]]
     truncated: bool = False        # the last line was cut (the process died while writing)
     mtime: Optional[float] = None  # when the file was last written or touched (the writer's heartbeat)
+    warnings: List[str] = field(default_factory=list)  # the first lines skipped, each ``path:line: why``
+    skipped: int = 0               # how many lines were skipped (not records this bmtree can use)
+
+    def skip(self, why: str) -> None:
+        self.skipped += 1
+        if len(self.warnings) < MAX_WARNINGS:
+            self.warnings.append(why)
+
+    def warning_lines(self) -> List[str]:
+        """What a reader tells on stderr of the lines it skipped (at most MAX_WARNINGS of them)."""
+        out = ["warning: %s (line skipped)" % w for w in self.warnings]
+        if self.skipped > len(self.warnings):
+            out.append("warning: %s: %d more lines skipped" % (self.path, self.skipped - len(self.warnings)))
+        return out
 
     @property
     def tree(self) -> Dict[str, Any]:
@@ -270,52 +286,82 @@ def last_alive(started: float, last_t: Any, mtime: Optional[float]) -> float:
     return t
 
 
-# what the readers of a log rely on, wherever a record has the key
-_FIELDS = (("t", (int, float), "a number of seconds"), ("started", (int, float), "a number of seconds"),
-           ("duration", (int, float), "a number of seconds"), ("ticks", int, "a whole number"),
-           ("blackboard", dict, "a mapping"), ("nodes", list, "a list"), ("changes", list, "a list"),
-           ("inputs", dict, "a mapping"), ("outputs", dict, "a mapping"), ("params", dict, "a mapping"))
+def max_log_bytes() -> int:
+    """How large a run log may be to be read: MAX_LOG_BYTES, or ``$BMTREE_MAX_LOG_MB`` megabytes."""
+    env = os.environ.get("BMTREE_MAX_LOG_MB", "")
+    try:
+        return int(env) << 20 if env and int(env) > 0 else MAX_LOG_BYTES
+    except ValueError:
+        raise RunLogError("BMTREE_MAX_LOG_MB must be a whole number of megabytes, got %r" % env)
+
+
+def _parse(raw: bytes) -> Tuple[Optional[Dict[str, Any]], str]:
+    """One line decoded: (the record, '') or (None, why not): :func:`coordinator.runstream.parse_record`."""
+    if len(raw) > MAX_RECORD_BYTES:
+        return None, "a line of %d bytes, more than the %d a record may have" % (len(raw), MAX_RECORD_BYTES)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return None, "not UTF-8 text (byte %d of the line)" % (exc.start + 1)
+    return parse_record(text)
+
+
+def _header(path: str, number: int, rec: Optional[Dict[str, Any]], problem: str) -> Dict[str, Any]:
+    """The first record, a run log's ``tree`` record (RunLogError saying why the log cannot be read)."""
+    if rec is None:
+        raise RunLogError("%s:%d: %s" % (path, number, problem))
+    if not isinstance(rec, dict) or rec.get("type") != "tree":
+        raise RunLogError("%s:%d: not a bmtree run log (it must start with a 'tree' record)" % (path, number))
+    said = version_problem(rec.get("v"))
+    if said is not None:
+        raise RunLogError("%s:%d: this run log was %s" % (path, number, said))
+    problem = record_problem(rec) or ""
+    if problem:
+        raise RunLogError("%s:%d: %s" % (path, number, problem))
+    return rec
 
 
 def read_log(path: str) -> RunLog:
-    """Read a run log; a cut last line is dropped. RunLogError for anything else that is wrong."""
-    size = os.path.getsize(path)
-    mtime = os.path.getmtime(path)
-    if size > MAX_LOG_BYTES:
-        raise RunLogError("%s: %d bytes is larger than the %d a run log may have" % (path, size, MAX_LOG_BYTES))
-    records: List[Dict[str, Any]] = []
-    truncated = False
-    with open(path, "rb") as fh:
-        lines = fh.read().split(b"\n")
-    last = len(lines) - 1
-    for i, raw in enumerate(lines):
+    """Read a run log: a cut last line is dropped, and every other line that is not a record this bmtree
+    can use is skipped, said in ``warnings`` (``path:line: why``). RunLogError when the log cannot be
+    read at all: not a regular file, larger than :func:`max_log_bytes`, its ``tree`` record unusable."""
+    limit = max_log_bytes()
+    try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise RunLogError("%s: not a run log (not a regular file)" % path)
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1) if st.st_size <= limit else b""
+    except OSError as exc:
+        raise RunLogError("%s: %s" % (path, exc.strerror or exc))
+    if st.st_size > limit or len(data) > limit:  # (or it grew past the limit while read)
+        raise RunLogError("%s: %s is larger than the %d MB a run log may have to be read (BMTREE_MAX_LOG_MB=N "
+                          "reads up to N MB)" % (path, "%.1f MB" % (max(st.st_size, len(data)) / 2.0 ** 20), limit >> 20))
+    lines = data.split(b"\n")
+    del data
+    log = RunLog(path, [], mtime=st.st_mtime)
+    ids: Set[int] = set()
+    for number, raw in enumerate(lines, 1):
         if not raw.strip():
             continue
-        if len(raw) > MAX_RECORD_BYTES:
-            raise RunLogError("%s:%d: record larger than %d bytes" % (path, i + 1, MAX_RECORD_BYTES))
-        try:
-            rec = json.loads(raw.decode("utf-8"))
-        except RecursionError:
-            raise RunLogError("%s:%d: a record nested too deep to be bmtree's" % (path, i + 1))
-        except (ValueError, UnicodeDecodeError) as exc:
-            if i == last:      # no newline after it: the writer was killed in the middle of it
-                truncated = True
-                break
-            raise RunLogError("%s:%d: not a JSON record: %s" % (path, i + 1, exc))
-        if not isinstance(rec, dict) or not isinstance(rec.get("type"), str):
-            raise RunLogError("%s:%d: a record is a JSON object with a 'type'" % (path, i + 1))
-        for key, kinds, what in _FIELDS:
-            value = rec.get(key)
-            if value is not None and (not isinstance(value, kinds) or isinstance(value, bool)):
-                raise RunLogError("%s:%d: %r of the %s record must be %s, got %r" % (
-                    path, i + 1, key, rec["type"], what, value if len(repr(value)) < 80 else type(value).__name__))
-        records.append(rec)
-    if not records or records[0].get("type") != "tree":
+        rec, problem = _parse(raw)
+        if rec is None and number == len(lines):   # no newline after it: the writer was killed in the middle of it
+            log.truncated = True
+            break
+        if not log.records:
+            log.records.append(_header(path, number, rec, problem))
+            ids = {n["id"] for n in log.records[0]["nodes"]}
+            continue
+        problem = problem or record_problem(rec, ids) or ""
+        if not problem and rec.get("type") == "tree":
+            problem = "a second tree record (a run log holds one run)"
+        if problem:
+            log.skip("%s:%d: %s" % (path, number, problem))
+        else:
+            log.records.append(rec)
+    if not log.records:
         raise RunLogError("%s:1: not a bmtree run log (it must start with a 'tree' record)" % path)
-    if records[0].get("v") != 1:
-        raise RunLogError("%s:1: run log version %r is not supported (this bmtree reads version 1)" % (
-            path, records[0].get("v")))
-    return RunLog(path, records, truncated, mtime)
+    return log
 
 
 @dataclass
@@ -329,20 +375,34 @@ class RunSummary:
     extra: Dict[str, Any] = field(default_factory=dict)
 
 
-def _tail_record(path: str) -> Optional[Dict[str, Any]]:
+def _tail_record(path: str, ids: Set[int]) -> Tuple[Optional[Dict[str, Any]], str]:
+    """The last complete record of ``path`` (a cut last line is dropped) and, when it cannot be used,
+    why (``path:line: why``; the log reads as one without an end)."""
     with open(path, "rb") as fh:
         fh.seek(0, os.SEEK_END)
         size = fh.tell()
         fh.seek(max(0, size - 65536))
         tail = fh.read().split(b"\n")
-    for raw in reversed(tail):
-        try:
-            rec = json.loads(raw.decode("utf-8"))
-        except (ValueError, UnicodeDecodeError, RecursionError):
-            continue
-        if isinstance(rec, dict):
-            return rec
-    return None
+    for back, raw in enumerate(reversed(tail)):
+        if back == len(tail) - 1 and size > 65536:
+            break      # the start of the block, in the middle of a line
+        rec, problem = _parse(raw)
+        if rec is None and (back == 0 or not raw.strip()):
+            continue   # the cut last line, or the empty one after the last newline
+        problem = problem or record_problem(rec, ids) or ""
+        if not problem:
+            return rec, ""
+        return None, "%s:%d: %s" % (path, _line_count(path) + 1 - back, problem)
+    return None, ""
+
+
+def _line_count(path: str) -> int:
+    """The lines of ``path`` (its newlines), read in blocks."""
+    n = 0
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            n += block.count(b"\n")
+    return n
 
 
 def writer_alive(head: Dict[str, Any]) -> bool:
@@ -368,29 +428,34 @@ def writer_alive(head: Dict[str, Any]) -> bool:
     return (b"bmtree" in cmdline or b"coordinator" in cmdline) and since <= started + 2.0  # btime is whole seconds
 
 
-def list_runs(directory: str) -> List[RunSummary]:
-    """Every run log of ``directory``, oldest first; unreadable files are skipped."""
+def list_runs(directory: str, problems: Optional[List[str]] = None) -> List[RunSummary]:
+    """Every run log of ``directory``, oldest first. A file that is not a run log bmtree can read is left
+    out, and why is added to ``problems`` (``path:line: why``); a log whose last record cannot be used
+    is listed as one without an end, and why is added too."""
     out = []
     for path in _logs_in(directory):
         try:
             head = _head(path)
-            if head is None:
-                continue
-            tail = _tail_record(path)
-            end = tail if tail is not None and tail.get("type") == "end" else None
-            last_t = tail.get("t") if isinstance(tail, dict) else None
-            duration = end.get("t") if end else last_t
-            started = float(head.get("started") or 0.0)
-            if end is None and started:  # killed: it lived until its log was last written or touched
-                duration = last_alive(started, duration, os.path.getmtime(path))
-            running = end is None and writer_alive(head)
-            out.append(RunSummary(
-                path=path, name=str(head.get("name", "?")), started=started,
-                duration=float(duration) if duration is not None else None,
-                status=str(end.get("status")) if end else "RUNNING" if running else "UNFINISHED",
-                reason=str(end.get("reason") or "") if end else
-                "still running (pid %s)" % head.get("pid") if running else
-                "the log ends without an end record (killed?)"))
-        except (OSError, ValueError, TypeError, UnicodeDecodeError, RecursionError):
-            continue  # not a log bmtree wrote, or damaged: `bmtree replay FILE` says what is wrong
+            tail, problem = _tail_record(path, {n["id"] for n in head["nodes"]})
+            mtime = os.path.getmtime(path)
+        except (OSError, ValueError) as exc:  # not a log bmtree wrote, or damaged: `bmtree replay FILE` says more
+            if problems is not None:
+                problems.append("%s (not listed)" % (exc if isinstance(exc, RunLogError) else "%s: %s" % (path, exc)))
+            continue
+        if problem and problems is not None:
+            problems.append(problem)
+        end = tail if tail is not None and tail.get("type") == "end" else None
+        last_t = tail.get("t") if tail is not None else None
+        duration = end.get("t") if end else last_t
+        started = float(head.get("started") or 0.0)
+        if end is None and started:  # killed: it lived until its log was last written or touched
+            duration = last_alive(started, duration, mtime)
+        running = end is None and writer_alive(head)
+        out.append(RunSummary(
+            path=path, name=str(head.get("name", "?")), started=started,
+            duration=float(duration) if duration is not None else None,
+            status=str(end.get("status")) if end else "RUNNING" if running else "UNFINISHED",
+            reason=str(end.get("reason") or "") if end else
+            "still running (pid %s)" % head.get("pid") if running else
+            "the log ends without an end record (killed?)"))
     return out

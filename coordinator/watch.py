@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import os
 import sys
@@ -22,7 +21,8 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals, leave_graph
 from comm.nodeopts import PORT, seconds
-from coordinator.runstream import to_json
+from coordinator.runevents import terminal_text
+from coordinator.runstream import parse_record, to_json
 from coordinator.watchstate import SnapshotSink, WatchState
 from coordinator.watchterm import Keys, LiveView, key_reader, keys_help
 from coordinator.watchview import LinePrinter
@@ -57,10 +57,8 @@ class RosWatcher:
             self._subs.append(rospy.Subscriber("%s/%s" % (self.namespace, c), String, self._got, queue_size=1000))
 
     def _got(self, msg: Any) -> None:
-        try:
-            rec = json.loads(msg.data)
-        except (ValueError, TypeError, AttributeError):
-            return
+        data = getattr(msg, "data", None)
+        rec, _why = parse_record(data) if isinstance(data, str) else (None, "")
         if not isinstance(rec, dict):
             return
         if rec.get("type") in ("tree", "snapshot"):
@@ -251,7 +249,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     """Attach, show, and return when the run ends (or at once if it already ended), unless --follow."""
     import rospy
 
-    from coordinator.cliutil import EXIT_ENV, EXIT_OK, err, master_up
+    from coordinator.cliutil import EXIT_ENV, EXIT_INVALID, EXIT_OK, err, master_up
 
     if not master_up(args.wait):
         err("error: no ROS master at %s" % os.environ.get("ROS_MASTER_URI", "http://localhost:11311/"))
@@ -314,9 +312,15 @@ def cmd_watch(args: argparse.Namespace) -> int:
         elif tty:
             view = LiveView(state, footer=keys_help, summary=True).start()
             key_reader(Keys(view, client, stop, to).press, stop)
-        if not wait(lambda s: bool(s.nodes), args.wait if not args.follow else 1e9):
+        if not wait(lambda s: bool(s.nodes or s.refused), args.wait if not args.follow else 1e9) or state.refused:
             if signals.requested or stop.is_set():
                 return EXIT_OK
+            if state.refused:  # a newer bmtree's run: what this one would show of it could be wrong
+                if view is not None:
+                    view.stop(final=False)
+                    view = None
+                err("error: %s" % state.refused)
+                return EXIT_INVALID
             if view is not None:
                 view.stop(final=False)
                 view = None
@@ -333,8 +337,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
             watcher.show_next()  # a run going on already; else the next run's tree is shown when it comes
             wait(lambda s, shown=run: s.run != shown or s.end is None, 1e9)
         if server is not None and state.end is not None and not (signals.requested or stop.is_set()):
-            print("the run ended: %s; the page keeps showing it (--follow serves it for the next run too)"
-                  % state.end.get("status"))
+            print(terminal_text("the run ended: %s; the page keeps showing it (--follow serves it for the next run "
+                                "too)" % state.end.get("status")))
             sys.stdout.flush()
             if wait(lambda s: server.end_served.is_set(), END_GRACE):
                 wait(lambda s: False, 1.0)
@@ -427,7 +431,7 @@ def cmd_control(args: argparse.Namespace) -> int:
         with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
             leave_graph(steps, err, stopped_at=held.last_signal if held else None)
     if reply.get("ok"):
-        print(reply.get("answer"))
+        print(terminal_text(str(reply.get("answer"))))
         return EXIT_OK
     err("refused: %s" % reply.get("answer"))
     return EXIT_ENV if str(reply.get("answer", "")).startswith("no run answered") else EXIT_INVALID

@@ -16,13 +16,12 @@ records aside (:class:`OtherRuns`), with a notice of the watch's own for each.
 """
 from __future__ import annotations
 
-import json
 import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from coordinator.runevents import IncludeArgs, cleanup_said, status_word
-from coordinator.runstream import VERSION, Sink, to_json
+from coordinator.runstream import VERSION, Sink, parse_record, record_problem, to_json, version_problem
 from coordinator.watchruns import OtherRuns, run_matches
 from coordinator.watchstops import StopCalls, run_stop_status
 
@@ -44,6 +43,9 @@ class WatchState:
         self.only = only
         #: the runs on the same stream that are not shown, their records kept aside
         self.others = OtherRuns()
+        #: why the run to show cannot be (its stream is of a format this bmtree does not read), or ''
+        self.refused = ""
+        self.skipped = 0  # records left out: not of a shape this bmtree reads
         self._reset()
 
     def _reset(self, run: str = "") -> None:
@@ -89,21 +91,36 @@ class WatchState:
     # applying ---------------------------------------------------------------------------
     def apply_text(self, text: str) -> None:
         """One record's JSON text; a malformed one is ignored (it must never stop a watcher)."""
-        try:
-            rec = json.loads(text)
-        except ValueError:
-            return
-        if isinstance(rec, dict):
+        rec, _why = parse_record(text)
+        if rec is not None:
             self.apply(rec)
 
-    def apply(self, rec: Dict[str, Any]) -> None:
+    def apply(self, rec: Any) -> None:
+        """One record; one not of a shape this bmtree reads (:func:`coordinator.runstream.record_problem`,
+        as a run log's reader checks it) is left out, never half applied; the tree record of a newer
+        bmtree's run to show makes :attr:`refused` say so."""
         with self.lock:
+            if not self._usable(rec):
+                self.skipped += 1
+                return
             try:
                 self._apply(rec)
             except (TypeError, ValueError, KeyError, IndexError, AttributeError):
                 return
             self.version += 1
             self.changed.notify_all()
+
+    def _usable(self, rec: Any) -> bool:
+        run = str(rec.get("run") or "") if isinstance(rec, dict) else ""
+        if isinstance(rec, dict) and rec.get("type") == "tree" and version_problem(rec.get("v")) is not None:
+            if not self.nodes and not self.refused and (not self.only or run_matches(run, self.only)):
+                self.refused = "the run %s%s on the run stream was %s" % (
+                    run or "?", " (%s)" % rec["name"] if isinstance(rec.get("name"), str) else "",
+                    version_problem(rec.get("v")))
+                self.changed.notify_all()
+            return False
+        mine = self.nodes and (not run or run == self.run)
+        return record_problem(rec, {n.get("id") for n in self.nodes} if mine else None) is None
 
     def _apply(self, rec: Dict[str, Any]) -> None:
         kind = rec.get("type")

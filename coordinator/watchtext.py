@@ -9,7 +9,7 @@ import re
 import textwrap
 from typing import Any, Dict, List, Optional
 
-from coordinator.runevents import cleanup_said, status_word
+from coordinator.runevents import cleanup_said, status_word, terminal_text
 from coordinator.watchstate import WatchState
 
 __all__ = ["brief", "values_text", "cut", "share", "where_text", "pending_text", "call_text", "result_text",
@@ -176,4 +176,4 @@ def summary_lines(state: WatchState) -> List[str]:
                            "the calls of a caller that is gone; other modules may run them to their end)")
         for note in state.notes:
             out.append(str(note.get("text")))
-    return out
+    return [terminal_text(line) for line in out]

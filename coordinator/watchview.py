@@ -17,7 +17,7 @@ from typing import Any, Dict, List, Optional, TextIO, Tuple
 from rich.console import Group
 from rich.text import Text
 
-from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word
+from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word, terminal_text
 from coordinator.watchstate import WatchState
 from coordinator.watchtext import call_text, pending_text, result_text, values_text, wrap
 from coordinator.watchtext import cut as _cut
@@ -189,12 +189,20 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                 + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
                 + _panel("call log", calls[len(calls) - takes[3]:], max(len(calls), state.calls_total), "none"))
         out = [head] + tree + body + end + [Text(line, style="dim") for line in foot]
-    out = out[:height]
+    out = [_safe(line) for line in out[:height]]
     for line in out:
         line.no_wrap = True
         line.overflow = "ellipsis"
         line.truncate(width, overflow="ellipsis")
     return Group(*out)
+
+
+def _safe(line: Text) -> Text:
+    """``line`` with its control characters escaped (:func:`terminal_text`; rich passes an ESC through):
+    a module's error text must not drive the terminal, nor a newline break the one-line layout."""
+    plain = line.plain
+    safe = terminal_text(plain, newlines=False)
+    return line if safe == plain else Text(safe, style=line.style)
 
 
 def _notice_style(rec: Dict[str, Any]) -> str:
@@ -247,7 +255,7 @@ class LinePrinter:
 
     def _write(self, lines: List[str]) -> None:
         for line in lines:
-            self.out.write(line + "\n")
+            self.out.write(terminal_text(line) + "\n")
         self.out.flush()
 
     def record(self, rec: Dict[str, Any], state: WatchState) -> None:
@@ -320,8 +328,8 @@ class LinePrinter:
         if kind == "tick" and self._end is not None and state.tick >= self._end[0]:
             lines.append(self._end[1])
             self._end = None
-        for line in lines:
-            self.out.write(line.rstrip() + "\n")
+        for line in lines:  # a module's text holds no control character the terminal would obey
+            self.out.write(terminal_text(line.rstrip()) + "\n")
         if lines:
             self.out.flush()
 

@@ -269,11 +269,10 @@ def replay_meta(log: Any) -> Dict[str, Any]:
 
 def cmd_replay_web(args: Any) -> int:
     """``bmtree replay RUN --web``: the recorded run on the page, with a timeline to scrub."""
-    from coordinator.replay import find_run
-    from coordinator.runlog import read_log
+    from coordinator.replay import read_run
 
-    path = find_run(args.run, args.dir)
-    log = read_log(path)
+    log = read_run(args.run, args.dir)   # (the lines it skips are said on stderr)
+    path = log.path
     meta = replay_meta(log)
     server = WebServer(None, args.bind, args.port, at=replay_states(list(log.records), meta["duration"]),
                        duration=meta["duration"], replay=meta)

@@ -255,7 +255,7 @@ def test_stream_flushes_every_tick_and_closes_at_the_end(sim_defs):
     assert {"key": "object_room", "value": "kitchen"}.items() <= writes[-1].items()
 
 
-def test_a_cut_last_line_is_dropped_and_a_bad_line_is_an_error(sim_defs, tmp_path):
+def test_a_cut_last_line_is_dropped_and_a_bad_line_is_skipped_with_a_warning(sim_defs, tmp_path):
     log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
     with open(log_path) as fh:
         lines = fh.read().splitlines()
@@ -265,8 +265,9 @@ def test_a_cut_last_line_is_dropped_and_a_bad_line_is_an_error(sim_defs, tmp_pat
     assert log.truncated and log.end is None and len(log.records) == len(lines) - 1
     bad = tmp_path / "bad.jsonl"
     bad.write_text(lines[0] + "\n{oops\n" + lines[1] + "\n")
-    with pytest.raises(RunLogError, match=r"bad.jsonl:2: not a JSON record"):
-        read_log(str(bad))
+    log = read_log(str(bad))
+    assert len(log.records) == 2 and log.skipped == 1
+    assert log.warning_lines()[0].startswith("warning: %s:2: not a JSON record" % bad)
     other = tmp_path / "other.jsonl"
     other.write_text('{"type": "tick"}\n')
     with pytest.raises(RunLogError, match="not a bmtree run log"):
@@ -322,6 +323,8 @@ def test_record_and_scenario_never_write_into_a_users_file(sim_defs, tmp_path, m
 
 
 def test_a_damaged_run_log_is_an_error_that_says_where_and_runs_lists_the_others(sim_defs, tmp_path, capsys):
+    """A log whose tree record is unusable is refused (exit 2), saying where and why; a bad later line
+    is skipped with a warning naming it, and the rest is shown."""
     log_path, _run = recorded(GO, sim_defs, tmp_path, lambda m: None)
     lines = open(log_path).read().splitlines()
     runs = tmp_path / "runs"
@@ -333,16 +336,22 @@ def test_a_damaged_run_log_is_an_error_that_says_where_and_runs_lists_the_others
            "e-end": lines[:-1] + [json.dumps(dict(json.loads(lines[-1]), duration="x"))]}
     for n, (name, content) in enumerate(sorted(bad.items())):
         (runs / ("2026010%d-120000-bbbbbb-%s.jsonl" % (n + 2, name))).write_text("\n".join(content) + "\n")
-    assert [r.name for r in list_runs(str(runs))] == ["go_kitchen", "go_kitchen", "go_kitchen"]  # deep, bad start: out
-    says = {"b-deep": ":1: a record nested too deep to be bmtree's",
-            "c-started": ":1: 'started' of the tree record must be a number of seconds, got 'abc'",
-            "d-board": ":1: 'blackboard' of the tree record must be a mapping, got [1]",
-            "e-end": ":%d: 'duration' of the end record must be a number of seconds, got 'x'" % len(lines)}
+    assert [(r.name, r.status) for r in list_runs(str(runs))] == [("go_kitchen", "SUCCESS"),
+                                                                   ("go_kitchen", "UNFINISHED")]
+    says = {"b-deep": ":1: a record nested deeper than 100 levels, too deep to be bmtree's",
+            "c-started": ":1: 'started' of the tree record must be a Unix time, got 'abc'",
+            "d-board": ":1: 'blackboard' of the tree record must be a mapping, got [1]"}
     for n, (name, message) in enumerate(sorted(says.items())):
         path = str(runs / ("2026010%d-120000-bbbbbb-%s.jsonl" % (n + 2, name)))
         for extra in ([], ["--at", "0.1"], ["--scenario", str(tmp_path / "out.yaml")]):
             assert cli.main(["replay", path] + extra) == 2
             assert capsys.readouterr().err == "error: %s%s\n" % (path, message)
+    path = str(runs / "20260105-120000-bbbbbb-e-end.jsonl")
+    assert cli.main(["replay", path]) == 0
+    out, err = capsys.readouterr()
+    assert err == "warning: %s:%d: 'duration' of the end record must be a number of seconds, got 'x' (line skipped)\n" % (
+        path, len(lines))
+    assert "go_kitchen: UNFINISHED" in out
 
 
 def test_retention_keeps_or_drops_a_runs_log_and_sim_folder_together(tmp_path):
@@ -483,7 +492,7 @@ def test_cli_replay_of_a_bad_file_exits_2(tmp_path, capsys):
     bad.write_text("not json\n{}\n")
     assert cli.main(["replay", str(bad)]) == 2
     assert "x.jsonl:1: not a JSON record" in capsys.readouterr().err
-    assert cli.main(["runs", "--dir", str(tmp_path / "none")]) == 0
+    assert cli.main(["runs", "--dir", str(tmp_path)]) == 0   # a folder with no run logs
     assert "no recorded runs" in capsys.readouterr().out
 
 
@@ -636,8 +645,10 @@ def test_a_malformed_record_is_a_clear_error(sim_defs, tmp_path, capsys):
     lines = open(log_path).read().splitlines()
     bad = tmp_path / "bad.jsonl"
     bad.write_text("\n".join([lines[0], '{"v":1,"type":"tick","t":0.1,"changes":[[[1],"BOGUS"]]}'] + lines[1:]) + "\n")
-    assert cli.main(["replay", str(bad)]) == 2
-    assert "bad.jsonl: record 2 (tick) is malformed" in capsys.readouterr().err
+    assert cli.main(["replay", str(bad)]) == 0   # the line is skipped, the rest shown
+    out, err = capsys.readouterr()
+    assert "bad.jsonl:2: a change of the tick record is not [node id, status, why?] of a node of the tree" in err
+    assert "go_kitchen: SUCCESS" in out
 
 
 def test_a_timeout_says_what_was_still_running(sim_defs, tmp_path):
