@@ -15,6 +15,7 @@ from __future__ import annotations
 import base64
 import binascii
 import math
+import sys
 from typing import Any, Optional, Tuple
 
 import genpy
@@ -28,6 +29,7 @@ _INT_RANGES = {"int8": (-1 << 7, (1 << 7) - 1), "uint8": (0, 255), "int16": (-1 
                "int64": (-1 << 63, (1 << 63) - 1), "uint64": (0, (1 << 64) - 1), "byte": (-1 << 7, (1 << 7) - 1),
                "char": (0, 255)}
 _FLOAT32_MAX = 3.4028234663852886e38
+_FLOAT64_MAX = sys.float_info.max
 _PLAIN = frozenset(list(_INT_RANGES) + ["float32", "float64", "string", "bool", "time", "duration"])
 _TIME_FIELDS = {"time": (("secs", "uint32"), ("nsecs", "uint32")),
                 "duration": (("secs", "int32"), ("nsecs", "int32"))}
@@ -85,6 +87,9 @@ def type_words(t: str, scalar: bool = True) -> str:
 def _shown(value: Any) -> str:
     if isinstance(value, genpy.Message):
         return "a %s" % value._type
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 100:  # not 400 digits
+        return "a %swhole number of %s digits" % ("negative " if value < 0 else "", len(str(abs(value)))
+                                                   if value.bit_length() < 14000 else "thousands of")
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
@@ -124,13 +129,16 @@ def _misfit(t: str, value: Any, field: str, named: str, scalar: bool, got: str =
             return wrong_kind()
         low, high = _INT_RANGES[t]
         if not low <= value <= high:
-            return field, "takes a whole number from %d to %d (%s), got %d" % (low, high, named, value)
+            return field, "takes a whole number from %d to %d (%s), got %s" % (low, high, named, _shown(value))
         return None
     if t in ("float32", "float64"):
         if not isinstance(value, (int, float)):
             return wrong_kind()
-        if t == "float32" and math.isfinite(value) and abs(value) > _FLOAT32_MAX:
+        # compared, never converted: math.isfinite of a whole number past a float's range overflows
+        if t == "float32" and not (isinstance(value, float) and math.isinf(value)) and abs(value) > _FLOAT32_MAX:
             return field, "takes a number from -3.4e38 to 3.4e38 (%s), got %s" % (named, _shown(value))
+        if isinstance(value, int) and not -_FLOAT64_MAX <= value <= _FLOAT64_MAX:
+            return field, "takes a number from -1.8e308 to 1.8e308 (%s), got %s" % (named, _shown(value))
         return None
     if t == "string":
         return None if isinstance(value, str) else wrong_kind()

@@ -4,6 +4,7 @@ a scenario (a mock's outputs, a call built while the tree runs), a module runtim
 from __future__ import annotations
 
 import json
+import math
 import threading
 import types
 
@@ -218,3 +219,22 @@ def test_a_reference_is_said_in_its_own_words():
     assert misfit_text("std_msgs/String", resolve_type("geometry_msgs/Point")(), got="$p, which holds %s" % (
         type_words("geometry_msgs/Point"))) == "takes text (std_msgs/String), got $p, which holds a mapping of fields x, y, z"
     assert misfit_text("geometry_msgs/Point", {"x": 1.0}) == ""
+
+
+@pytest.mark.parametrize("rostype,value,said", [
+    ("std_msgs/Float64", 10 ** 400, "takes a number from -1.8e308 to 1.8e308 (std_msgs/Float64), got a whole number of "
+                                     "401 digits"),
+    ("std_msgs/Float32", -10 ** 400, "takes a number from -3.4e38 to 3.4e38 (std_msgs/Float32), got a negative whole "
+                                     "number of 401 digits"),
+    ("std_msgs/Int32", 10 ** 400, "takes a whole number from -2147483648 to 2147483647 (std_msgs/Int32), got a whole "
+                                  "number of 401 digits"),
+    ("geometry_msgs/Point", {"x": 10 ** 400}, "(geometry_msgs/Point): field x takes a number from -1.8e308 to 1.8e308 "
+                                              "(float64), got a whole number of 401 digits"),
+])
+def test_a_whole_number_past_a_types_range_is_said_by_its_size(rostype, value, said):
+    """It was genpy's struct.error text followed by all 401 digits (and an OverflowError for a Float32)."""
+    with pytest.raises(ValueMisfit) as info:
+        to_message(rostype, value, allow_scalar=True)
+    assert str(info.value) == "value " + said
+    assert math.isnan(to_message("std_msgs/Float32", float("nan"), allow_scalar=True).data)  # NaN and inf still pass
+    assert to_message("std_msgs/Float32", float("-inf"), allow_scalar=True).data == float("-inf")
