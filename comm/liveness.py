@@ -69,6 +69,11 @@ class Watchdog:
         say: log each loss.
         unregistered_lost: a node the master does not know is lost (False: only a process seen gone is;
             a restarted master knows no node until each registers again).
+        restart_grace: seconds a call sent after its node's process was found gone waits for the node
+            to be started again (a respawn, a retry sent at once), while ``registered(node)`` says the
+            master still has the dead process (killed outright or crashed: it stays registered until its
+            successor registers, and the call would be lost on the old one). A node stopped cleanly
+            unregistered: a call to it is lost at once.
 
     A module node uses one over the callers of its running calls (keys are then node names):
     a call whose caller's process is gone is cancelled.
@@ -77,7 +82,8 @@ class Watchdog:
     def __init__(self, deliver: Callable[[Any], None], resolve: Callable[[str], Optional[str]],
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
                  ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine, say: bool = True,
-                 unregistered_lost: bool = True):
+                 unregistered_lost: bool = True, restart_grace: float = 0.0,
+                 registered: Callable[[str], bool] = lambda node: True):
         self.deliver = deliver
         self.say = say  # log each loss (a module node watching its callers says it in its own words)
         self.unregistered_lost = unregistered_lost
@@ -91,6 +97,9 @@ class Watchdog:
         self._calls: Dict[str, Tuple[str, float]] = {}  # call_id -> (module, when it was sent)
         self._requests: Set[str] = set()
         self._known: Dict[str, Tuple[str, str, int]] = {}  # module -> (node, uri, pid)
+        self.restart_grace = restart_grace
+        self.registered = registered
+        self._gone: Dict[str, Tuple[str, float]] = {}  # key -> (URI of a process found gone, when found)
         self._stop = threading.Event()
         self._owing = threading.Event()  # set while something is owed (and on stop): an idle watchdog sleeps
         self._thread: Optional[threading.Thread] = None
@@ -230,9 +239,18 @@ class Watchdog:
                 return None
             if not uri:  # for a caller: perhaps a restarted master it has not registered with again yet
                 return "node %s is not registered with the master" % node if self.unregistered_lost else None
+            gone = self._gone.get(key) if key != BLACKBOARD else None
+            if gone is not None and gone[0] == uri and self.registered(node):   # not started again (yet)
+                waited = self._oldest_wait(key, gone[1])
+                if waited < self.restart_grace:
+                    return None
+                return "node %s stopped (its process is gone) and was not started again within %gs" % (
+                    node, self.restart_grace)
+            self._gone.pop(key, None)
             try:
                 pid = self._ask(key, uri)
             except OSError:
+                self._gone[key] = (uri, time.monotonic())
                 return "node %s stopped (its process is gone)" % node
             if pid is not None:
                 self._known[key] = (node, uri, pid)
@@ -254,8 +272,16 @@ class Watchdog:
         if now == -1 and new_uri and new_uri != uri:
             return "node %s was restarted (it cannot know the calls sent to its previous process)" % node
         if now == -1:
+            if new_uri == uri:
+                self._gone[key] = (uri, time.monotonic())
             return "node %s stopped (its process is gone)" % node
         return "node %s was restarted (pid %d, was %d)" % (node, now, pid)
+
+    def _oldest_wait(self, key: str, found: float) -> float:
+        """How long the oldest call owed by ``key`` has waited since its process was found gone (0: none)."""
+        with self._lock:
+            sent = [when for m, when in self._calls.values() if m == key]
+        return time.monotonic() - max(min(sent), found) if sent else 0.0
 
 
 class NodeWatch:

@@ -97,7 +97,7 @@ class RosTransport(Transport):
         #: where each module's node is, or was last seen: a node that stopped cleanly leaves no trace on the master
         self.whereabouts = Whereabouts(self._run_node)
         self.watchdog = Watchdog(self._from_watchdog, self.whereabouts.node_of, self.whereabouts.uri_of,
-                                 period=liveness)
+                                 period=liveness, restart_grace=hold_limit, registered=self.whereabouts.registered)
         self._pubs: Dict[str, Any] = {}
         self._subs: List[Any] = []
         self._String: Any = None

@@ -112,3 +112,14 @@ class Whereabouts:
                 self._uris[node] = uri
                 return uri
             return self._uris.get(node)
+
+    @staticmethod
+    def registered(node: str) -> bool:
+        """Whether ``node`` still has topics or services registered with the master: a process killed
+        outright keeps them (a crash, which a respawn follows), one stopped cleanly removed them (the
+        master's ``lookupNode`` still answers for it). False when the master cannot be asked."""
+        try:
+            state = master_api("/bmtree_liveness", LIVENESS_QUESTION).getSystemState()
+        except Exception:  # the master is away: no grace, as before it
+            return False
+        return any(node in nodes for part in state for _, nodes in part)

@@ -399,3 +399,68 @@ def test_watchdog_asks_only_about_calls_in_flight_for_a_period(monkeypatch):
     dog.check()
     assert asked == ["http://h/bm_b/"]
     assert len(got) == 1 and got[0].module == "b" and got[0].call_ids == ["slow"]
+
+
+def test_a_call_sent_after_its_node_was_found_gone_waits_for_the_node_to_be_started_again(monkeypatch):
+    """kill -9 leaves the node registered at its dead URI until the new process registers: a retry sent
+    at once was lost on the dead process a period later (a respawn taking a second under load made a
+    ``retry: 3`` fail three times in 0.5 s). It waits ``restart_grace`` for a new process, then is lost."""
+    from comm import liveness
+
+    clock = {"now": 100.0}
+    monkeypatch.setattr(liveness, "time", type("T", (), {"monotonic": staticmethod(lambda: clock["now"])}))
+    state = {"uri": "http://h:1/", "alive": {"http://h:1/": 10}}
+
+    def pid(uri):
+        if uri not in state["alive"]:
+            raise OSError("refused")
+        return state["alive"][uri]
+
+    got = []
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: state["uri"], period=0.25,
+                            line=lambda uri, timeout, caller: _AskEveryTime(uri, pid), restart_grace=10.0)
+    dog.call_sent("a", "probe")
+    clock["now"] += 0.3
+    dog.check()                       # the watch begins: pid 10
+    state["alive"].clear()            # kill -9: still registered at h:1
+    clock["now"] += 0.3
+    dog.check()
+    assert [(g.call_ids, g.reason) for g in got] == [(["a"], "node /bm_probe stopped (its process is gone)")]
+    dog.call_sent("retry", "probe")   # sent at once
+    for _ in range(30):               # 9 s: not started again yet
+        clock["now"] += 0.3
+        dog.check()
+    assert len(got) == 1
+    state.update(uri="http://h:2/", alive={"http://h:2/": 11})   # the new process registers
+    clock["now"] += 0.3
+    dog.check()
+    assert len(got) == 1 and dog.owes("retry")
+    state["alive"].clear()            # and dies too, and is never started again
+    clock["now"] += 0.3
+    dog.check()
+    assert got[-1].call_ids == ["retry"] and got[-1].reason == "node /bm_probe stopped (its process is gone)"
+    dog.call_sent("last", "probe")
+    for _ in range(40):
+        clock["now"] += 0.3
+        dog.check()
+    assert got[-1].call_ids == ["last"] and got[-1].reason == (
+        "node /bm_probe stopped (its process is gone) and was not started again within 10s")
+
+
+def test_a_call_to_a_node_stopped_cleanly_is_lost_at_once_not_held_for_a_restart():
+    """A node stopped on purpose unregistered its topics: no respawn is coming, and a call held for one
+    ran when the node was started again much later (a follower moving 40 s after it was asked)."""
+    from comm import liveness
+
+    got = []
+    dog = liveness.Watchdog(got.append, lambda m: "/bm_probe", lambda n: "http://h:1/", period=0,
+                            line=lambda uri, timeout, caller: _AskEveryTime(uri, _refused), restart_grace=10.0,
+                            registered=lambda node: False)
+    for call_id in ("a", "b"):
+        dog.call_sent(call_id, "probe")
+        dog.check()
+        assert got[-1].call_ids == [call_id] and got[-1].reason == "node /bm_probe stopped (its process is gone)"
+
+
+def _refused(uri):
+    raise OSError("refused")
