@@ -19,7 +19,8 @@ from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
 
 from comm.errors import InvalidInput
 from comm.nodelife import registering
-from coordinator.runstream import MAX_RECORD_BYTES, Sink, parse_record, record_problem, version_problem
+from coordinator.runrecords import MAX_RECORD_BYTES, parse_record, record_problem, version_problem
+from coordinator.runstream import Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
            "new_log_path", "prune", "empty_file", "last_alive", "writer_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES",
@@ -296,7 +297,7 @@ def max_log_bytes() -> int:
 
 
 def _parse(raw: bytes) -> Tuple[Optional[Dict[str, Any]], str]:
-    """One line decoded: (the record, '') or (None, why not): :func:`coordinator.runstream.parse_record`."""
+    """One line decoded: (the record, '') or (None, why not): :func:`coordinator.runrecords.parse_record`."""
     if len(raw) > MAX_RECORD_BYTES:
         return None, "a line of %d bytes, more than the %d a record may have" % (len(raw), MAX_RECORD_BYTES)
     try:

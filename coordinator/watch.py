@@ -22,7 +22,8 @@ from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals, leave_graph
 from comm.nodeopts import PORT, seconds
 from coordinator.runevents import terminal_text
-from coordinator.runstream import parse_record, to_json
+from coordinator.runrecords import parse_record
+from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
 from coordinator.watchterm import Keys, LiveView, key_reader, keys_help
 from coordinator.watchview import LinePrinter

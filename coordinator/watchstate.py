@@ -21,7 +21,8 @@ import time
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from coordinator.runevents import IncludeArgs, cleanup_said, status_word
-from coordinator.runstream import VERSION, Sink, parse_record, record_problem, to_json, version_problem
+from coordinator.runrecords import parse_record, record_problem, version_problem
+from coordinator.runstream import VERSION, Sink, to_json
 from coordinator.watchruns import OtherRuns, run_matches
 from coordinator.watchstops import StopCalls, run_stop_status
 
@@ -96,7 +97,7 @@ class WatchState:
             self.apply(rec)
 
     def apply(self, rec: Any) -> None:
-        """One record; one not of a shape this bmtree reads (:func:`coordinator.runstream.record_problem`,
+        """One record; one not of a shape this bmtree reads (:func:`coordinator.runrecords.record_problem`,
         as a run log's reader checks it) is left out, never half applied; the tree record of a newer
         bmtree's run to show makes :attr:`refused` say so."""
         with self.lock:

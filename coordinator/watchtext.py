@@ -5,6 +5,7 @@ view has ended (README, "Watching a run"). Plain text: :mod:`coordinator.watchvi
 from __future__ import annotations
 
 import json
+import math
 import re
 import textwrap
 from typing import Any, Dict, List, Optional
@@ -19,11 +20,11 @@ _BARE = re.compile(r"^[\w./@+-]+$")  # a string shown without quotes (``kitchen`
 
 
 def brief(value: Any) -> str:
-    """A value in few characters: ``{x:0,y:1.5,z:0}``, ``[a,b]``, ``kitchen``, ``"two words"``."""
+    """A value in few characters: ``{x:0,y:1.5,z:0}``, ``[a,b]``, ``kitchen``, ``"two words"``, ``NaN``."""
     if isinstance(value, bool) or value is None:
         return json.dumps(value)
-    if isinstance(value, float):
-        return "%.6g" % value
+    if isinstance(value, float):  # NaN, Infinity, -Infinity as the other panels, replay and the page say them
+        return "%.6g" % value if math.isfinite(value) else json.dumps(value)
     if isinstance(value, int):
         return str(value)
     if isinstance(value, str):

@@ -211,7 +211,16 @@ function rows(id, items, cells, cols) {
   }
 }
 
-const js = (v) => JSON.stringify(v);
+// a value as compact JSON; a float JSON has no number for comes as {"$numberDouble": "NaN"} ("Infinity",
+// "-Infinity": runstream.to_json) and is shown bare, NaN, Infinity, -Infinity, as the terminal shows it
+const NONFINITE = "$numberDouble", NONFINITE_TEXTS = ["NaN", "Infinity", "-Infinity"];
+function js(v) {
+  if (Array.isArray(v)) return "[" + v.map(js).join(",") + "]";
+  if (v === null || typeof v !== "object") return JSON.stringify(v);
+  const keys = Object.keys(v);
+  if (keys.length === 1 && keys[0] === NONFINITE && NONFINITE_TEXTS.indexOf(v[NONFINITE]) >= 0) return v[NONFINITE];
+  return "{" + keys.map((k) => JSON.stringify(k) + ":" + js(v[k])).join(",") + "}";
+}
 const sec = (v) => (Number(v) || 0).toFixed(2) + "s";
 const pad2 = (n) => String(n).padStart(2, "0");
 function wall(epoch, withDate) {

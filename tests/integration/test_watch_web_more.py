@@ -1,7 +1,8 @@
 """The web view in a real browser (headless chromium, as test_watch_web.py): readable panels at
 800 px, whole node names and a failed node's reason on the graph, the running node kept in view in
 a tree of 240 nodes, a title naming the run, a killed run's replay, the jump to the failure, the
-Blackboard node's notices highlighted, and a page opened after ``watch --web``'s run has ended.
+Blackboard node's notices highlighted, NaN and infinities shown as such, and a page opened after
+``watch --web``'s run has ended.
 
 The replays are of logs recorded here on mocks (simulated time: no ROS, fast); the live part is a
 ``bmtree run --sim``."""
@@ -16,6 +17,7 @@ import pytest
 from tests.conftest import TREES
 from tests.integration.test_watch_web import browser, keep, node_status, start_web, stop, text, wait_until
 from tests.integration.watchkit import GO, SimRun, slow_world
+from tests.unit.test_nonfinite_values import nan_run_log
 from tests.unit.test_recording import recorded
 
 FIND_APPLE = os.path.join(TREES, "find_apple.yaml")
@@ -182,6 +184,22 @@ def test_a_huge_tree_keeps_the_root_then_the_running_node_in_view(page, sim_defs
     wait_until(d, lambda d: node_status(d, "g36 step 0 say something") == "RUNNING")
     assert d.execute_script("return document.getElementById('graph').scrollTop") == 0
     assert not d.execute_script(IN_VIEW, "g36 step 0 say something")
+
+
+BLACKBOARD = "return [...document.querySelectorAll('#blackboard tr')].map(r => [...r.cells].map(c => c.textContent))"
+
+
+def test_nan_and_infinities_are_shown_as_such(page, sim_defs, tmp_path):
+    """A run whose values hold NaN and infinities (a Float64 output, ``.inf`` in the tree, an event's
+    param): the page stayed blank, ``(waiting for a run)``, its JSON.parse refusing Python's NaN."""
+    d = page(nan_run_log(sim_defs, tmp_path))
+    wait_until(d, lambda d: "result: SUCCESS" in text(d, "result"))
+    assert d.execute_script(BLACKBOARD) == [["far", "Infinity"], ["level", "NaN"], ["limit", "NaN"],
+                                            ["low_at", "-Infinity"], ["near", "-Infinity"]]
+    assert 'battery.low{"percentage":-Infinity}' in text(d, "events")
+    d.execute_script("const s=document.getElementById('scrub'); s.value=0; s.dispatchEvent(new Event('input'));")
+    wait_until(d, lambda d: text(d, "at").startswith("0.00s of"))
+    assert ["level", "NaN"] in d.execute_script(BLACKBOARD) and "low_at" not in text(d, "blackboard")
 
 
 def test_a_page_opened_after_the_run_ended_still_gets_its_end(driver, tmp_path):
