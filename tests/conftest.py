@@ -1,6 +1,8 @@
 """Shared paths for the test suite (the fixtures come from the bmtree pytest plugin)."""
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import shutil
 import tempfile
@@ -41,6 +43,20 @@ def private_ros_home():
 # tests/reliability holds the long fault runs of `make reliability` (BMTREE_RELIABILITY=1); the
 # reduced versions of the others run in the normal suite.
 collect_ignore = [] if os.environ.get("BMTREE_RELIABILITY") == "1" else ["reliability"]
+
+
+@contextlib.contextmanager
+def log_records(name, level=logging.NOTSET):
+    """The records logger ``name`` emits meanwhile, as a list (pytest's caplog is off in this suite)."""
+    records = []
+    handler = logging.Handler(level)
+    handler.emit = records.append
+    logger = logging.getLogger(name)
+    logger.addHandler(handler)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
 
 
 def until(check, timeout=10.0, said=None):

@@ -21,6 +21,7 @@ from coordinator.context import RunContext
 from coordinator.transport import Transport
 from modules.definition import DefinitionError, load_definition, parse_definition
 from modules.runtime import BasicModule, ModuleServer
+from tests.conftest import log_records
 
 DEF = {"Basic Module": "probe", "Brief Description": "", "Hardware Required": [], "Functions": [
     {"Name": "echo", "Exec-condition": "", "Description": "", "Concurrent": True,
@@ -339,8 +340,6 @@ def test_watchdog_reports_a_restart_mid_call_but_not_a_respawn_between_calls():
 
 
 def test_a_call_answered_by_two_nodes_is_reported(probe):
-    import logging
-
     from coordinator.ros_transport import RosTransport
 
     class Msg:
@@ -348,11 +347,7 @@ def test_a_call_answered_by_two_nodes_is_reported(probe):
             self.data = data
             self._connection_header = {"callerid": node}
 
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    logging.getLogger("bmtree.coordinator").addHandler(handler)
-    try:
+    with log_records("bmtree.coordinator") as records:
         transport = RosTransport(liveness=0)
         delivered = []
         transport._deliver = delivered.append
@@ -362,8 +357,6 @@ def test_a_call_answered_by_two_nodes_is_reported(probe):
         on_result(Msg(text, "/bm_a"))
         assert records == []
         on_result(Msg(text, "/bm_b"))
-    finally:
-        logging.getLogger("bmtree.coordinator").removeHandler(handler)
     assert len(delivered) == 3
     assert len(records) == 1 and "answered by two nodes, /bm_a and /bm_b" in records[0].getMessage()
 

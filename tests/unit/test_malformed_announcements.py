@@ -10,6 +10,7 @@ import pytest
 
 from modules import discovery
 from modules.discovery import announcement
+from tests.conftest import log_records
 
 
 class _Master:
@@ -26,13 +27,8 @@ class _Master:
 @pytest.fixture
 def said(monkeypatch):
     monkeypatch.setattr(discovery, "_WARNED", {}, raising=False)
-    records = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = records.append
-    logger = logging.getLogger("bmtree.discovery")
-    logger.addHandler(handler)
-    yield records
-    logger.removeHandler(handler)
+    with log_records("bmtree.discovery", logging.WARNING) as records:
+        yield records
 
 
 def test_malformed_announcements_are_said_once_each_and_the_good_ones_kept(sim_defs, said):

@@ -12,6 +12,7 @@ import pytest
 from comm.messages import Event, FunctionResult
 from coordinator.runevents import RunObserver
 from coordinator.testing.kit import TreeTest
+from tests.conftest import log_records
 
 MALFORMED_ANSWER, REFUSED_EVENT = "malformed_answer", "refused_event"   # (coordinator.transport's)
 
@@ -83,13 +84,8 @@ def test_a_malformed_answer_fails_its_call_at_once_with_why_and_a_notice(tmp_pat
 
 @pytest.fixture
 def warnings():
-    records = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = records.append
-    logger = logging.getLogger("bmtree.coordinator")
-    logger.addHandler(handler)
-    yield records
-    logger.removeHandler(handler)
+    with log_records("bmtree.coordinator", logging.WARNING) as records:
+        yield records
 
 
 def test_a_malformed_answer_to_no_awaited_call_is_a_rate_limited_warning(warnings):
