@@ -88,7 +88,7 @@ def test_command_line_errors_exit_2_without_a_traceback(tmp_path, capsys):
 
 
 def _gripper_info():
-    """BM_info as the example C++ node publishes it (see basic_module.h publishInfo)."""
+    """BM_info as the example C++ node publishes it (see basic_module_calls.h publishInfo)."""
     return {"library": "bmtree", "protocol": 2, "functions": ["ping", "reach", "set_fingers", "squeeze"],
             "signatures": {
                 "ping": {"inparam_topics": [], "outparam_names": ["success"], "outparam_topics": ["/gripper/bool"]},

@@ -1,4 +1,4 @@
-"""bmtree-bridge's side of C++ events, without ROS: a BM_event payload (what basic_module.h's emit()
+"""bmtree-bridge's side of C++ events, without ROS: a BM_event payload (what basic_module_calls.h's emit()
 sends: per param its name, ROS type, md5sum and ros::serialization bytes in base64) read with genpy,
 checked against the definition, passed on as a bmtree Event, or dropped with a warning."""
 from __future__ import annotations
