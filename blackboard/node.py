@@ -21,7 +21,7 @@ from comm import TOPIC_BB_ANSWER, TOPIC_BB_REQUEST, TOPIC_CALL, TOPIC_CANCEL, TO
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES
 from comm.nodelife import StopSignals
-from comm.nodeopts import count, parse_node_args
+from comm.nodeopts import parse_node_args
 from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
 from comm.rpc import MASTER_TIMEOUT, master_answers, master_api
@@ -70,6 +70,8 @@ def _kicked_out(reason: str) -> None:
 
 
 def make_parser() -> argparse.ArgumentParser:
+    from coordinator.cliutil import count  # the type= of every command's options
+
     p = argparse.ArgumentParser(prog="bmtree-blackboard", description="Run the Blackboard node.")
     p.add_argument("--db", help="SQLite file (default $ROS_HOME/bmtree/blackboard.sqlite; ':memory:' allowed)")
     p.add_argument("--keep", type=count(), help="values kept per name (default %d)" % DEFAULT_KEEP)
@@ -82,7 +84,15 @@ def main(argv: Optional[List[str]] = None) -> int:
     import rospy
     from std_msgs.msg import String
 
-    args = parse_node_args(make_parser(), (argv if argv is not None else sys.argv)[1:], "blackboard")
+    parser = make_parser()
+    args = parse_node_args(parser, (argv if argv is not None else sys.argv)[1:], "blackboard")
+    if args.db is not None:  # given (or ~db): no empty name, no NUL (checked here: a ~db list says "expected a text")
+        from coordinator.cliutil import path_arg
+
+        try:
+            path_arg("an SQLite file")(args.db)
+        except argparse.ArgumentTypeError as exc:
+            parser.error("argument --db: %s" % exc)
     stop = StopSignals()  # a stop during start-up ends it cleanly too
     other = _running_blackboard()
     if other:

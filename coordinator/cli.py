@@ -8,16 +8,7 @@ from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
 from comm.messages import MIN_MAX_BYTES
-from comm.nodeopts import (
-    PORT,
-    count,
-    factor,
-    fill_from_params,
-    myargv,
-    node_params,
-    private_namespace,
-    seconds,
-)
+from comm.nodeopts import PORT, fill_from_params, myargv, node_params, private_namespace
 from coordinator import __version__
 from coordinator.cliutil import (
     EXIT_ENV,
@@ -25,9 +16,15 @@ from coordinator.cliutil import (
     EXIT_INVALID,
     EXIT_OK,
     PlainError,
+    bind_address,
+    count,
     definitions_from,
     err,
+    factor,
     master_up,
+    path_arg,
+    seconds,
+    text,
 )
 from coordinator.errors import EnvironmentProblem, InvalidInput, TreeErrors, UsageError
 from coordinator.runcmd import cmd_demo, cmd_run
@@ -261,7 +258,10 @@ def cmd_test(args: argparse.Namespace) -> int:
 
 def _runs_dir(args: argparse.Namespace) -> None:
     """``--dir`` given names a folder (a typo is no "no recorded runs", exit 0); the default one may not
-    exist yet (nothing recorded)."""
+    exist yet (nothing recorded). ``$BMTREE_MAX_LOG_MB``, read with the logs, is checked first."""
+    from coordinator.runlog import max_log_bytes
+
+    max_log_bytes()
     if args.dir is not None and not os.path.isdir(args.dir):
         raise UsageError("--dir %s: %s" % (args.dir, "not a folder" if os.path.exists(args.dir) else
                                             "no such folder (the default is $ROS_HOME/bmtree/runs)"))
@@ -293,14 +293,14 @@ def make_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     def with_modules(sp: argparse.ArgumentParser, more: str = "") -> None:
-        sp.add_argument("--modules", action="append", metavar="PATH",
+        sp.add_argument("--modules", action="append", metavar="PATH", type=path_arg("a definition file or folder"),
                         help="more module definitions, file or directory (repeatable; added to the simulated "
                              "robot's, the ROS packages' on $ROS_PACKAGE_PATH and $BMTREE_MODULE_PATH)" + more)
 
     def run_options(sp: argparse.ArgumentParser) -> None:
         with_modules(sp)
-        sp.add_argument("--world", help="world file for --sim (default: the shipped house)")
-        sp.add_argument("--ros-ip", default="", metavar="ADDR",
+        sp.add_argument("--world", type=path_arg("a world file"), help="world file for --sim (default: the shipped house)")
+        sp.add_argument("--ros-ip", type=text("an IPv4 address of this machine"), metavar="ADDR",
                         help="with --sim: the address the private graph listens on (default 127.0.0.1, loopback "
                              "only; give this machine's address to let other machines in: ROS 1 has no "
                              "authentication)")
@@ -316,7 +316,7 @@ def make_parser() -> argparse.ArgumentParser:
                              "a dead module's calls and waits fail (module_lost) about this long after it died "
                              "(0: off, calls wait their timeout)")
         sp.add_argument("-q", "--quiet", action="store_true", help="no live tree display")
-        sp.add_argument("--record", metavar="PATH", help="write the run log to PATH (default: a new file under "
+        sp.add_argument("--record", metavar="PATH", type=path_arg("a run log file"), help="write the run log to PATH (default: a new file under "
                                                          "$ROS_HOME/bmtree/runs/)")
         sp.add_argument("--no-record", action="store_true", help="write no run log")
         sp.add_argument("--keep-runs", type=count(), default=None, metavar="N",
@@ -326,33 +326,33 @@ def make_parser() -> argparse.ArgumentParser:
     run_options(d)
     d.set_defaults(func=cmd_demo, command_parser=d)
     r = sub.add_parser("run", help="run a tree against the live modules (or --sim)")
-    r.add_argument("tree")
+    r.add_argument("tree", type=path_arg("a tree file"))
     r.add_argument("--sim", action="store_true", help="bring up a private simulated robot for this run")
-    r.add_argument("--module", action="append", metavar="DEF.json=FILE.py:CLASS",
+    r.add_argument("--module", action="append", metavar="DEF.json=FILE.py:CLASS", type=text("DEF.json=FILE.py:CLASS"),
                    help="with --sim: start your module beside the simulated ones (repeatable; replaces a "
                         "simulated module of the same name)")
-    r.add_argument("--legacy", action="append", metavar="MODULE=/NODE",
+    r.add_argument("--legacy", action="append", metavar="MODULE=/NODE", type=text("MODULE=/NODE"),
                    help="the node of an original module whose node is not named /MODULE (repeatable)")
     r.add_argument("--control", action="store_true", help="let 'bmtree watch' and 'bmtree control' steer this run "
                    "(pause, step, breakpoints, forced outcomes, blackboard writes; ROS 1 has no authentication)")
     run_options(r)
     r.set_defaults(func=cmd_run, command_parser=r)
     c = sub.add_parser("check", help="validate trees without running them")
-    c.add_argument("trees", nargs="+")
+    c.add_argument("trees", nargs="+", type=path_arg("a tree file"))
     c.add_argument("--strict", action="store_true", help="warnings are errors (exit 2)")
     with_modules(c)
     c.set_defaults(func=cmd_check)
     sc = sub.add_parser("schema", help="the JSON Schema of tree files, or the language reference's kind tables")
     sc.add_argument("--markdown", action="store_true", help="the kind tables of trees/README.md instead")
-    sc.add_argument("--write", metavar="README", help="with --markdown: replace the tables in this file")
+    sc.add_argument("--write", metavar="README", type=path_arg("the language reference"), help="with --markdown: replace the tables in this file")
     sc.set_defaults(func=cmd_schema)
     rd = sub.add_parser("render", help="draw a tree as dot, svg or png")
-    rd.add_argument("tree")
-    rd.add_argument("-o", "--output", required=True)
+    rd.add_argument("tree", type=path_arg("a tree file"))
+    rd.add_argument("-o", "--output", required=True, type=path_arg("a .dot, .svg or .png file"))
     with_modules(rd)
     rd.set_defaults(func=cmd_render)
     m = sub.add_parser("modules", help="list module definitions, or the modules running now (--live)")
-    m.add_argument("paths", nargs="*")
+    m.add_argument("paths", nargs="*", type=path_arg("a definition file or folder"))
     m.add_argument("--live", action="store_true", help="the modules running now on $ROS_MASTER_URI")
     m.add_argument("--wait", type=seconds("do not wait"), default=2.0, help="how long to wait for the master with --live (s)")
     m.set_defaults(func=cmd_modules)
@@ -360,37 +360,37 @@ def make_parser() -> argparse.ArgumentParser:
     bsub = b.add_subparsers(dest="bb_command", metavar="ACTION")
     bsub.required = True
     dump = bsub.add_parser("dump", help="latest value of every name, or the history of one")
-    dump.add_argument("--db", help="store file (default $ROS_HOME/bmtree/blackboard.sqlite)")
-    dump.add_argument("--name", help="show the history of this name (or module/function/name)")
+    dump.add_argument("--db", type=path_arg("a Blackboard store"), help="store file (default $ROS_HOME/bmtree/blackboard.sqlite)")
+    dump.add_argument("--name", type=text("a name"), help="show the history of this name (or module/function/name)")
     dump.add_argument("--history", type=count(), default=20, help="how many values of --name")
     dump.set_defaults(func=cmd_blackboard)
     t = sub.add_parser("test", help="run YAML test scenarios against mocked modules",
                        epilog="The scenario file format: docs/scenarios.md (top level: tree, modules, scenarios; "
                               "expect: status, calls (or calls: {in_order: [...]}), blackboard, reason, duration, "
                               "cleanup).")
-    t.add_argument("scenarios", nargs="+", metavar="SCENARIO.yaml")
+    t.add_argument("scenarios", nargs="+", metavar="SCENARIO.yaml", type=path_arg("a scenario file"))
     t.add_argument("--coverage", action="store_true",
                    help="then report which nodes of the trees ran and which outcomes they reached")
     with_modules(t, ". Given, it wins: a scenario file's own top-level 'modules:' is then not loaded (only checked)")
     t.set_defaults(func=cmd_test)
     rs = sub.add_parser("runs", help="list recorded runs (newest first)")
-    rs.add_argument("--dir", help="where the run logs are (default $ROS_HOME/bmtree/runs)")
+    rs.add_argument("--dir", type=path_arg("a folder"), help="where the run logs are (default $ROS_HOME/bmtree/runs)")
     rs.add_argument("-n", "--limit", type=count(0, what="0: all"), default=0, help="only the newest N (0: all)")
     rs.set_defaults(func=cmd_runs)
     rp = sub.add_parser("replay", help="show a recorded run again, or turn it into a test scenario")
-    rp.add_argument("run", help="a run log file, 'last', its number in 'bmtree runs', or the start of its name")
-    rp.add_argument("--dir", help="where the run logs are (default $ROS_HOME/bmtree/runs)")
+    rp.add_argument("run", type=text("a run"), help="a run log file, 'last', its number in 'bmtree runs', or the start of its name")
+    rp.add_argument("--dir", type=path_arg("a folder"), help="where the run logs are (default $ROS_HOME/bmtree/runs)")
     how = rp.add_mutually_exclusive_group()
     how.add_argument("--at", type=seconds("the start"), metavar="SECONDS", help="the tree, blackboard and calls at that moment")
     how.add_argument("--step", action="store_true", help="tick by tick (Enter for the next one on a terminal)")
     how.add_argument("--failure", action="store_true", help="jump to the failure the run's reason names (for a run stopped "
                      "from outside: its last tick before the stop): where, why, the failing call's inputs, the "
                      "state after that tick")
-    how.add_argument("--scenario", metavar="OUT.yaml", help="write a 'bmtree test' scenario that replays this run")
+    how.add_argument("--scenario", metavar="OUT.yaml", type=path_arg("a scenario file to write"), help="write a 'bmtree test' scenario that replays this run")
     rp.add_argument("--speed", type=factor(), metavar="X", help="play at X times the recorded pace (on a terminal "
                                                              "redrawn in place, like the live display)")
     how.add_argument("--web", action="store_true", help="serve the run as a page with a timeline to scrub")
-    rp.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")
+    rp.add_argument("--bind", type=bind_address, default="127.0.0.1", help="address of the page with --web (default loopback)")
     rp.add_argument("--port", type=PORT, default=8765, help="port of the page with --web (0: any free one)")
     rp.set_defaults(func=cmd_replay)
     from coordinator.watch import add_control_parser, add_watch_parser

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import os
 import sys
@@ -10,15 +11,20 @@ from typing import Any, Dict, List, Optional, Set
 
 from comm.errors import did_you_mean
 from comm.nodelife import Interrupts, leave_graph, shut_rospy_down
+from comm.nodeopts import _shown
 from coordinator.cliutil import (
     EXIT_ENV,
     EXIT_FAILED,
     EXIT_INVALID,
     EXIT_OK,
     PlainError,
+    check_local_address,
+    count,
     definitions_from,
     err,
+    from_env,
     legacy_option,
+    ros_home_problem,
     set_values,
     wait_master,
 )
@@ -104,8 +110,8 @@ def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
         err(str(w))
     for key in sorted(given):
         if key not in tree.inputs:
-            raise UsageError("%s declares no input %r%s (its inputs: %s)" % (
-                path, key, did_you_mean(key, tree.inputs), ", ".join(sorted(tree.inputs)) or "none"))
+            raise UsageError("%s declares no input %s%s (its inputs: %s)" % (
+                path, _shown(key), did_you_mean(key, tree.inputs), ", ".join(sorted(tree.inputs)) or "none"))
     missing = sorted(tree.required_inputs - set(given))
     if missing:
         raise UsageError("%s needs the input%s %s: give them with --set KEY=VALUE" % (
@@ -115,23 +121,6 @@ def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
     misfits = set_value_errors(tree, given)
     if misfits:
         raise PlainError("\n".join("error: %s" % m for m in misfits))
-
-
-def _check_local_address(address: str) -> None:
-    """UsageError unless ``address`` is an IP address of this machine (the private graph listens there)."""
-    import ipaddress
-    import socket
-
-    try:
-        ip = ipaddress.ip_address(address)
-    except ValueError:
-        raise UsageError("--ros-ip %r is not an IP address (e.g. 192.168.1.10)" % address)
-    try:
-        with socket.socket(socket.AF_INET6 if ip.version == 6 else socket.AF_INET, socket.SOCK_STREAM) as sock:
-            sock.bind((address, 0))
-    except OSError as exc:
-        raise UsageError("--ros-ip %s is not an address of this machine (%s); `ip -brief address` lists them" % (
-            address, exc.strerror or exc))
 
 
 def _needs_live_definitions(exc: TreeErrors) -> bool:
@@ -230,6 +219,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from coordinator.runner import Display, NoticeLines, TreeRunner
 
     given = set_values(args.set)
+    legacy_option(getattr(args, "legacy", None), None)  # its form before anything waits (its module: below)
+    if args.keep_runs is None:
+        args.keep_runs = from_env("BMTREE_KEEP_RUNS", count())
+    if args.record and not args.no_record:
+        _check_record(args.record)
     defs = definitions_from(args.modules)
     user_modules = [_user_module(spec) for spec in (getattr(args, "module", None) or [])]
     if user_modules and not args.sim:
@@ -256,7 +250,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from modules.sim.world import DEFAULT_WORLD, World, WorldError
 
         if args.ros_ip:
-            _check_local_address(args.ros_ip)
+            check_local_address("--ros-ip", args.ros_ip)
 
         try:
             World.load(args.world or DEFAULT_WORLD, others=[fn.qualified for um in user_modules
@@ -264,6 +258,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         except WorldError as exc:
             raise PlainError("error: --world %s" % exc)
     files = plan_run_files(args.tree, args.record, args.no_record, args.keep_runs)
+    for folder in ([os.path.dirname(files.sim_dir)] if args.sim else []) + (
+            [os.path.dirname(files.log_path)] if files.log_path and not args.record else []):
+        problem = ros_home_problem(folder)
+        if problem is not None:
+            raise problem
     graph = None
     transport = None
     runner = None
@@ -445,6 +444,23 @@ def _leave_graph(transport: Any, master_gone: bool = False, stopped_at: Optional
         leave_graph(steps, err, master_down=master_gone, stopped_at=stopped_at)
 
 
+def _check_record(record: str) -> None:
+    """``--record PATH`` names a file in a folder that can be made and written in (else the run would go
+    on, and only its end would say that nothing was recorded)."""
+    folder = os.path.dirname(os.path.abspath(record))
+    if os.path.isdir(record):
+        raise UsageError("--record %s: a folder; give the name of a file (a run log) in it" % record)
+    try:
+        if os.path.lexists(folder) and not os.path.isdir(folder):
+            raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))
+        os.makedirs(folder, exist_ok=True)  # as the run log's writer would
+        why = "" if os.access(folder, os.W_OK | os.X_OK) else "Permission denied"
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+    if why:
+        raise UsageError("--record %s: cannot write in %s (%s)" % (record, folder, why))
+
+
 def _user_module(spec: str) -> Any:
     """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``) for ``run --sim --module``."""
     from coordinator.simgraph import UserModule
@@ -452,7 +468,7 @@ def _user_module(spec: str) -> Any:
 
     definition, sep, cls = spec.partition("=")
     if not sep or not definition or ":" not in cls:
-        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS, got %r" % spec)
+        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS, got %s" % _shown(spec))
     where = cls.rsplit(":", 1)[0]
     if where.endswith(".py"):
         if not os.path.isfile(where):

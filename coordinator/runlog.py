@@ -289,11 +289,14 @@ def last_alive(started: float, last_t: Any, mtime: Optional[float]) -> float:
 
 def max_log_bytes() -> int:
     """How large a run log may be to be read: MAX_LOG_BYTES, or ``$BMTREE_MAX_LOG_MB`` megabytes."""
-    env = os.environ.get("BMTREE_MAX_LOG_MB", "")
+    from coordinator.cliutil import count, from_env
+    from coordinator.errors import UsageError
+
     try:
-        return int(env) << 20 if env and int(env) > 0 else MAX_LOG_BYTES
-    except ValueError:
-        raise RunLogError("BMTREE_MAX_LOG_MB must be a whole number of megabytes, got %r" % env)
+        mb = from_env("BMTREE_MAX_LOG_MB", count(what="megabytes a run log may have to be read"))
+    except UsageError as exc:
+        raise RunLogError(str(exc))
+    return mb << 20 if mb else MAX_LOG_BYTES
 
 
 def _parse(raw: bytes) -> Tuple[Optional[Dict[str, Any]], str]:

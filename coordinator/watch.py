@@ -20,7 +20,8 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals, leave_graph
-from comm.nodeopts import PORT, seconds
+from comm.nodeopts import PORT
+from coordinator.cliutil import bind_address, seconds
 from coordinator.runevents import terminal_text
 from coordinator.runrecords import parse_record
 from coordinator.runstream import to_json
@@ -396,7 +397,8 @@ def add_watch_parser(sub: Any) -> None:
     w.add_argument("--namespace", default=STREAM_NS, help="the run stream's topics (default %(default)s)")
     w.add_argument("--wait", type=seconds("do not wait"), default=10.0, help="how long to wait for the master and a run (s)")
     w.add_argument("--web", action="store_true", help="serve a live page instead of the terminal view")
-    w.add_argument("--bind", default="127.0.0.1", help="address of the page with --web (default loopback)")
+    w.add_argument("--bind", type=bind_address, default="127.0.0.1",
+                   help="address of the page with --web (default loopback)")
     w.add_argument("--port", type=PORT, default=8765, help="port of the page with --web (0: any free one)")
     w.set_defaults(func=cmd_watch)
 

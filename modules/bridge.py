@@ -22,7 +22,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
-from comm.nodeopts import node_name, seconds
+from comm.nodeopts import node_name
 from modules.bridgegraph import CppNodeGraph
 from modules.bridgeoutput import CppCall as _Call
 from modules.bridgeoutput import CppOutputs
@@ -373,9 +373,12 @@ def make_bridge(definition: ModuleDefinition, **options: Any) -> CppBridge:
 
 
 def make_parser() -> argparse.ArgumentParser:
+    from coordinator.cliutil import path_arg, seconds  # the type= of every command's options
+
     p = argparse.ArgumentParser(prog="bmtree-bridge", description="Serve a C++ basic module (manual §4.3) as a "
                                 "bmtree module: wire protocol v2 outside, the original C++ protocol inside.")
-    p.add_argument("--definition", required=True, help="the C++ module's definition JSON")
+    p.add_argument("--definition", required=True, type=path_arg("the C++ module's definition"),
+                   help="the C++ module's definition JSON")
     p.add_argument("--node-name", type=node_name, help="ROS node name of the bridge (default <module>_bridge)")
     p.add_argument("--call-timeout", type=seconds("no limit"), default=30.0,
                    help="seconds a call may wait for the C++ node's BM_output, 0 = no limit (default 30)")
