@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 from typing import Any, List, Tuple
 
+from coordinator.bounds import finite_number, shown
 from coordinator.errors import TreeError
-from coordinator.nodes.base import finite_number, shown
 from coordinator.nodes.task import CLEANUP_KEYS, DEFAULT_CLEANUP_TIMEOUT, ENDINGS, TASK, task_node
 from coordinator.nodes.timeouts import long_seconds
 from coordinator.treeast import TreeFile, TreeNode

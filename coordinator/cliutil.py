@@ -9,6 +9,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from comm import nodeopts
 from comm.nodeopts import _shown
+from coordinator.bounds import MAX_COUNT, MAX_SECONDS
 from coordinator.errors import EnvironmentProblem, TreeErrors, UsageError
 from coordinator.yamlsrc import load_value
 from modules.definition import ModuleDefinition
@@ -20,11 +21,6 @@ __all__ = ["EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV", "PlainError", "
 
 EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_ENV = 0, 1, 2, 3
 
-#: the longest duration an option takes, a year: longer is a typo (and past about 292 years, a wait
-#: of Python's threads or clocks raises OverflowError; 1e300 s is no "for ever")
-MAX_SECONDS = 365 * 24 * 3600.0
-#: the largest count an option takes (SQLite takes no whole number past 2**63 - 1)
-MAX_COUNT = 10 ** 9
 
 
 def _most(parse: Callable[[Any], Any], most: float, expected: str, name: str) -> Callable[[Any], Any]:

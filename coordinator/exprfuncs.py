@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any, Dict, List, Tuple
 
-from coordinator.refs import RefError, kind_of, unwrap
+from coordinator.refs import MAX_NESTING, RefError, kind_of, unwrap
 
 __all__ = ["ExprError", "FUNCTIONS", "BRIEF", "brief", "MAX_TEXT", "check_text_size", "text_of", "described",
            "arithmetic", "apply_function", "compare", "VERB", "ORDER"]
@@ -167,9 +167,10 @@ def _at(seq: Any, i: Any) -> Any:
     return seq[int(n)]
 
 
-def text_of(v: Any) -> str:
+def text_of(v: Any, _depth: int = 0) -> str:
     """A value as a template or ``str()`` writes it (``3`` for 3.0, ``true``, ``null``; a list, a mapping
-    or a message in YAML's flow style: ``[kitchen, hall]``, ``{x: 1, y: 2.5, z: 0}``)."""
+    or a message in YAML's flow style: ``[kitchen, hall]``, ``{x: 1, y: 2.5, z: 0}``). A value nested
+    deeper than :data:`coordinator.refs.MAX_NESTING` levels is an ExprError (not a RecursionError)."""
     v = unwrap(v)
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -177,12 +178,15 @@ def text_of(v: Any) -> str:
         return "null"
     if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
         return str(int(v))
+    if isinstance(v, (list, tuple, dict)) or hasattr(v, "__slots__") and hasattr(v, "_type"):
+        if _depth >= MAX_NESTING:
+            raise ExprError("the value nests more than %d levels deep, too deep to write as text" % MAX_NESTING)
     if isinstance(v, (list, tuple)):   # YAML's flow style, as a tree writes one: [kitchen, hall]
-        return "[%s]" % ", ".join(text_of(x) for x in v)
+        return "[%s]" % ", ".join(text_of(x, _depth + 1) for x in v)
     if isinstance(v, dict):
-        return "{%s}" % ", ".join("%s: %s" % (k, text_of(x)) for k, x in v.items())
+        return "{%s}" % ", ".join("%s: %s" % (k, text_of(x, _depth + 1)) for k, x in v.items())
     if hasattr(v, "__slots__") and hasattr(v, "_type"):   # a message of several fields
-        return text_of({k: getattr(v, k) for k in v.__slots__})
+        return text_of({k: getattr(v, k) for k in v.__slots__}, _depth)
     return str(v)
 
 

@@ -11,11 +11,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
 from coordinator import parsehints
+from coordinator.bounds import shown
 from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_key_problems
 from coordinator.dataflow import check_flow, check_types
 from coordinator.errors import Pos, TreeError, TreeErrors
 from coordinator.nodes import REGISTRY
-from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option, shown
+from coordinator.nodes.base import NO_DEFAULT, PARAM_TYPES, TYPES, Option
 from coordinator.othernames import decorator_mapping, kind_hint, one_child, option_hint, top_key_hint
 from coordinator.parsehints import LEAF_OPTIONS, closest, misplaced, nearby, nest_hint, unquoted
 from coordinator.refs import RefError

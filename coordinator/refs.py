@@ -18,7 +18,8 @@ import genpy
 
 from comm.errors import InvalidInput, did_you_mean
 
-__all__ = ["Computed", "Ref", "RefError", "field_of", "kind_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap"]
+__all__ = ["Computed", "Ref", "RefError", "field_of", "kind_of", "parse_ref", "refs_in", "resolve", "scan_ref", "unwrap",
+           "check_size", "MAX_SIZE", "MAX_NESTING"]
 
 _NAME = re.compile(r"[^\W\d]\w*")
 _INDEX = re.compile(r"-?\d+")
@@ -201,12 +202,57 @@ def refs_in(value: Any) -> List[Ref]:
     return []
 
 
+MAX_SIZE = 2 << 20
+"""The most elements and characters a value built from references may hold: room for a text of the most
+characters an expression may make (1 MiB, as a call's whole payload) and as many elements besides."""
+MAX_NESTING = 100
+"""The most levels a value built from references may nest (``set: {xs: [$xs]}`` in a loop adds one per run)."""
+
+
 def resolve(value: Any, lookup: Callable[[str], Any]) -> Any:
-    """A literal with every Ref (and computed value) replaced by its value now."""
+    """A literal with every Ref (and computed value) replaced by its value now.
+
+    A list or a mapping that holds references is checked to be no larger than :data:`MAX_SIZE` and to
+    nest no deeper than :data:`MAX_NESTING` (RefError): ``set: {xs: [$xs, $xs]}`` in a loop doubles a value
+    at each run, and writing it as text, or into the run's log, would take all memory and time."""
+    out = _resolve(value, lookup)
+    if isinstance(value, (dict, list)) and refs_in(value):
+        check_size(out)
+    return out
+
+
+def _resolve(value: Any, lookup: Callable[[str], Any]) -> Any:
     if isinstance(value, (Ref, Computed)):
         return value.resolve(lookup)
     if isinstance(value, dict):
-        return {k: resolve(v, lookup) for k, v in value.items()}
+        return {k: _resolve(v, lookup) for k, v in value.items()}
     if isinstance(value, list):
-        return [resolve(v, lookup) for v in value]
+        return [_resolve(v, lookup) for v in value]
     return value
+
+
+def check_size(value: Any) -> None:
+    """RefError when ``value`` holds more than :data:`MAX_SIZE` elements and characters (a part held twice
+    counted twice, as writing it out would) or nests deeper than :data:`MAX_NESTING` levels; it stops
+    counting there, so a value that doubled in a loop is refused at once."""
+    size = 0
+    stack: List[Tuple[Any, int]] = [(value, 0)]
+    while stack:
+        v, depth = stack.pop()
+        size += 1
+        items: Any = ()
+        if isinstance(v, (str, bytes, bytearray)):
+            size += len(v)
+        elif isinstance(v, dict):
+            items = v.values()
+        elif isinstance(v, (list, tuple)):
+            items = v
+        elif isinstance(v, genpy.Message):
+            items = [getattr(v, name, None) for name in v.__slots__]
+        if items and depth >= MAX_NESTING:
+            raise RefError("the value would nest more than %d levels deep (a list or a mapping that holds "
+                           "itself, written again and again?)" % MAX_NESTING)
+        if size + len(items) > MAX_SIZE:
+            raise RefError("the value would hold more than %d elements and characters, more than a value may "
+                           "(a list or a mapping that holds itself twice doubles each time it is written)" % MAX_SIZE)
+        stack.extend((x, depth + 1) for x in items)

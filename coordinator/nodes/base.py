@@ -8,13 +8,13 @@ generated from these objects).
 from __future__ import annotations
 
 import abc
-import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Dict, FrozenSet, Iterable, List, Optional, Set, Tuple
 
 import py_trees
 
 from comm.errors import did_you_mean
+from coordinator.bounds import MAX_COUNT, beyond_bound, finite_number, shown
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.writtenkeys import NEVER, join, meet
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
@@ -26,11 +26,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from coordinator.yamlsrc import LMap
     from modules.definition import FunctionDefinition
 
-__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "finite_number",
-           "fixed", "join", "meet", "param_keys", "repeated_outputs", "run_param", "shown", "where"]
+__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "fixed", "join",
+           "meet", "param_keys", "repeated_outputs", "run_param", "where"]
 
 NO_DEFAULT = object()
-_MAX = sys.float_info.max
 _NOTHING: FrozenSet[str] = frozenset()
 
 
@@ -52,20 +51,6 @@ class ValueType:
     schema: Dict[str, Any]
     ok: Optional[Callable[[Any], bool]] = None   # None: parsed by the kind itself
     expect: str = ""
-
-
-def finite_number(v: Any) -> bool:
-    """A finite number, not a bool (``.inf`` seconds would make a bounded loop or wait endless); compared,
-    not converted: ``math.isfinite`` of a whole number beyond a float's range raises OverflowError."""
-    return v.__class__ is not bool and isinstance(v, (int, float)) and -_MAX <= v <= _MAX   # NaN: False
-
-
-def shown(v: Any) -> str:
-    """``repr(v)``, but a whole number beyond a float's range by its size (an error line, not 400 digits)."""
-    if v.__class__ is bool or not isinstance(v, int) or finite_number(v):
-        return repr(v)
-    digits = "%d digits" % len(str(abs(v))) if v.bit_length() < 14000 else "thousands of digits"  # str: <= 4300
-    return "a %swhole number of %s (numbers go up to 1.8e308)" % ("negative " if v < 0 else "", digits)
 
 
 _NODE = {"$ref": "#/definitions/node"}
@@ -117,9 +102,12 @@ def run_param(value: Any, lookup: Callable[[str], Any], type_name: str, label: s
         v = unwrap(resolve(value, lookup))
     except (KeyError, RefError) as exc:
         return None, "%s %r: %s" % (label, value, exc.args[0] if exc.args else exc)
-    if type_name == "count" and isinstance(v, float) and v.is_integer():
+    if type_name == "count" and isinstance(v, float) and v.is_integer() and abs(v) <= MAX_COUNT:
         v = int(v)
     t = TYPES[type_name]
+    too_big = beyond_bound(type_name, v)
+    if too_big:
+        return None, "%s %s is %s" % (label, value, too_big)
     if t.ok is not None and not t.ok(v):
         return None, "%s %s is %s, not %s" % (label, value, shown(v), t.expect)
     return v, ""
@@ -161,10 +149,12 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
     elif type_name == "list":
         found.append((0, "%s is %r, not a list" % (label, value)))
     else:   # a literal was checked when parsed: this is a constant expression, worked out then
-        if type_name == "count" and isinstance(value, float) and value.is_integer():
+        if type_name == "count" and isinstance(value, float) and value.is_integer() and abs(value) <= MAX_COUNT:
             value = int(value)   # as run_param takes it
         t = TYPES[type_name]
-        if t.ok is not None and not t.ok(value):
+        if beyond_bound(type_name, value):
+            found.append((0, "%s is %s" % (label, beyond_bound(type_name, value))))
+        elif t.ok is not None and not t.ok(value):
             found.append((0, "%s is %s, not %s" % (label, shown(value), t.expect)))
     if not found:
         return

@@ -8,6 +8,7 @@ from typing import Any, Dict, FrozenSet, Iterable, Iterator, List, Optional, Tup
 import py_trees
 from py_trees.common import Status
 
+from coordinator.bounds import beyond_bound
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import (
     NEVER,
@@ -171,7 +172,12 @@ CHILD = Option("child", "node", "the decorated node", required=True)
 
 def forever(p: Any, node: TreeNode, value: Any, at: Any) -> bool:
     """A negative count of ``retry``/``repeat`` (BehaviorTree.CPP's -1: forever), reported with why there is none."""
-    if node.kind not in ("retry", "repeat") or isinstance(value, bool) or not isinstance(value, int) or value >= 0:
+    if node.kind not in ("retry", "repeat") or isinstance(value, bool) or not isinstance(value, int):
+        return False
+    if beyond_bound("count", value):   # (also the check of a count, too large to be one)
+        p.err(at or node.value_pos, "count of %s is %s" % (node.kind, beyond_bound("count", value)))
+        return True
+    if value >= 0:
         return False
     runs = "attempts" if node.kind == "retry" else "runs"
     p.err(at or node.value_pos, "count of %s is %d, BehaviorTree.CPP's 'forever': every bmtree loop is bounded, so "

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from typing import Any, Dict
 
-from coordinator.nodes.base import TYPES, Option, finite_number, shown
+from coordinator.bounds import beyond_bound, finite_number, shown
+from coordinator.nodes.base import TYPES, Option
 from coordinator.treeast import TreeNode
 
 __all__ = ["LONG_SECONDS", "NO_TIMEOUT", "long_seconds", "timeout_option", "with_no_timeout"]
@@ -55,6 +56,9 @@ them (a warning), unless a whole number of half hours (1800, 3600: a limit for a
 def long_seconds(p: Any, value: Any, at: Any, label: str) -> None:
     """Warn about a duration written in milliseconds by habit: ``timeout: 3000`` is 50 minutes."""
     if not finite_number(value):
+        return
+    if beyond_bound("seconds", value):
+        p.err(at, "%s is %s" % (label, beyond_bound("seconds", value)))
         return
     if value < LONG_SECONDS or value % 1800 == 0:
         return

@@ -28,8 +28,8 @@ from typing import Any, Dict, List, Optional, Tuple
 import yaml
 
 from comm.errors import ProtocolError, did_you_mean
+from coordinator.bounds import finite_number, shown
 from coordinator.errors import Pos, TreeError, TreeErrors
-from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.mocks import (
     MockError,
     MockModule,

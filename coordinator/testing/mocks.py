@@ -19,8 +19,8 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
+from coordinator.bounds import finite_number, shown
 from coordinator.context import plain
-from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import legacy_times
 from modules.definition import FunctionDefinition, ModuleDefinition
 from modules.outcome import (

@@ -21,8 +21,8 @@ import yaml
 
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
+from coordinator.bounds import finite_number, shown
 from coordinator.errors import Pos
-from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import ExpectedCall, expected_message, want_form
 from coordinator.yamlsrc import LList, LMap, pos_of
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions

@@ -6,8 +6,8 @@ from typing import Any, Dict, List
 
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
+from coordinator.bounds import finite_number, shown
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import finite_number, shown
 from coordinator.testing.expected import legacy_times
 from coordinator.testing.mocks import (
     MockError,

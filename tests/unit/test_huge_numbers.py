@@ -8,9 +8,10 @@ import re
 
 import pytest
 
+from coordinator.bounds import finite_number, shown
 from coordinator.cli import main as bmtree
 from coordinator.errors import TreeErrors
-from coordinator.nodes.base import finite_number, run_param, shown
+from coordinator.nodes.base import run_param
 from coordinator.refs import parse_ref
 from coordinator.testing.mocknode import load_script
 from coordinator.testing.mocks import MockError, Mocks, outcome_from_dict
