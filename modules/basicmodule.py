@@ -74,7 +74,7 @@ class CallContext:
         for cb in callbacks:
             try:
                 cb()
-            except Exception:
+            except BaseException:  # noqa: B036 - it runs in the thread that takes cancels: that goes on
                 log.exception("cancel callback of %s failed", self.function)
         return True
 
@@ -107,6 +107,14 @@ class BasicModule:
 
     concurrent: Union[bool, Set[str]] = False
 
+    def __new__(cls, *args: Any, **kwargs: Any) -> BasicModule:
+        # what the runtime needs is set here, so that a class whose __init__ does not call
+        # super().__init__() still runs its calls (they failed, unanswered, with an AttributeError)
+        self = super().__new__(cls)
+        self._server = None
+        self._local = threading.local()
+        return self
+
     def __init__(self) -> None:
         self._server: Optional[ModuleServer] = None
         self._local = threading.local()
@@ -120,13 +128,18 @@ class BasicModule:
 
     @property
     def definition(self) -> ModuleDefinition:
-        assert self._server is not None, "module not bound to a server"
-        return self._server.definition
+        return self._bound("definition").definition
 
     def emit(self, event: str, **params: Any) -> None:
         """Publish an event of this module, checked against the definition's Events."""
-        assert self._server is not None, "module not bound to a server"
-        self._server.emit(event, params)
+        self._bound("emit(%r)" % (event,)).emit(event, params)
+
+    def _bound(self, what: str) -> ModuleServer:
+        server = self._server
+        if server is None:  # an assert would be gone under python -O, and say less
+            raise RuntimeError("%s of %s before its runtime is bound: use it in a function, in setup() or later, "
+                               "not in __init__" % (what, type(self).__name__))
+        return server
 
     def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
         """Hook run in the call's turn before the function: return an Outcome to answer with it

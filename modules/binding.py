@@ -14,6 +14,17 @@ from modules.definition import ModuleDefinition
 __all__ = ["signature_problems"]
 
 
+def _not_plain(method: Any) -> str:
+    """What kind of function ``method`` is when calling it does not run its body (else "")."""
+    if inspect.iscoroutinefunction(method):
+        return "an async def"
+    if inspect.isasyncgenfunction(method):
+        return "an async generator (async def with yield)"
+    if inspect.isgeneratorfunction(method):
+        return "a generator (it has a yield)"
+    return ""
+
+
 def signature_problems(definition: ModuleDefinition, impl: Any) -> List[str]:
     """One line per function whose method cannot take the function's inputs by name."""
     problems = []
@@ -22,6 +33,12 @@ def signature_problems(definition: ModuleDefinition, impl: Any) -> List[str]:
     for fn in definition.functions.values():
         method = getattr(impl, fn.name, None)
         if method is None or not callable(method):
+            continue
+        kind = _not_plain(method)
+        if kind:  # it would return a coroutine or a generator, never the outputs: every call would fail
+            problems.append("method %s.%s is %s: the runtime calls it in a worker thread and takes what it returns "
+                            "as the outputs of function %r of %s; write a plain def that returns them" % (
+                                cls, fn.name, kind, fn.name, where))
             continue
         try:
             sig = inspect.signature(method)

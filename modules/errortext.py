@@ -7,12 +7,15 @@ from __future__ import annotations
 import os
 import re
 import sysconfig
+import threading
+import time
 import traceback
-from typing import Any, Dict, Optional, Set
+from typing import Any, Callable, Dict, Hashable, List, Optional, Set
 
 from modules.basicmodule import BasicModule
 
-__all__ = ["MAX_ERROR_CHARS", "salvage_keys", "bounded", "author_files", "raised_text", "which_call"]
+__all__ = ["MAX_ERROR_CHARS", "SAY_EVERY", "LogLimit", "salvage_keys", "bounded", "wire_text", "said", "author_files",
+           "place_of", "raised_text", "which_call"]
 
 #: the longest ``error`` text the runtime sends (a message that long is cut, the place in the code kept)
 MAX_ERROR_CHARS = 2000
@@ -44,6 +47,59 @@ def bounded(text: str, limit: int = MAX_ERROR_CHARS) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
+def wire_text(text: str) -> str:
+    """``text`` as valid Unicode: a lone surrogate (``"\\udc80"``, from a file name or bytes decoded with
+    ``surrogateescape``) written as its escape, since a payload holding one does not decode at the
+    coordinator, and an answer that does not decode is no answer."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+def said(value: Any) -> str:
+    """``str(value)``, never raising: an author's exception (or reason) whose ``__str__`` raises,
+    even a BaseException, must not lose the call's answer."""
+    try:
+        text = value if isinstance(value, str) else str(value)
+        return text if isinstance(text, str) else "(its message cannot be shown)"
+    except BaseException:  # noqa: B036 - SystemExit from __str__ is the author's bug too
+        return "(its message cannot be shown)"
+
+
+#: seconds: a module's log says a repeated problem (the same exception at the same place, invalid
+#: outputs of one function, one kind of refusal) at most this often, the first at once
+SAY_EVERY = 10.0
+
+
+class LogLimit:
+    """Rate-limited log lines: the first of each kind at once, then at most one per ``every`` seconds,
+    which says how many of that kind went unsaid meanwhile (a tree that retries a broken function in a
+    tight loop must not flood the module's log with tracebacks)."""
+
+    def __init__(self, every: float = SAY_EVERY, clock: Callable[[], float] = time.monotonic):
+        self.every = every
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._said: Dict[Hashable, List[float]] = {}  # kind -> [when last said, how many unsaid since]
+
+    def due(self, kind: Hashable) -> Optional[str]:
+        """None when a line of ``kind`` is not to be said now (it is counted), else the text to add to it:
+        ``" (and 3 more like it in the last 10s)"``, or "" when none went unsaid."""
+        now = self.clock()
+        with self._lock:
+            last = self._said.get(kind)
+            if last is not None and now - last[0] < self.every:
+                last[1] += 1
+                return None
+            if len(self._said) >= 1000:  # many kinds (random function names in calls): forget the old ones
+                self._said.clear()
+            self._said[kind] = [now, 0]
+        n = int(last[1]) if last is not None else 0
+        return " (and %d more like it in the last %gs)" % (n, self.every) if n else ""
+
+
 def _ours(path: str) -> bool:
     path = os.path.abspath(path)
     return os.path.dirname(path) == _HERE or path.startswith(_OURS)
@@ -67,7 +123,7 @@ def author_files(impl: Any) -> Set[str]:
     return files
 
 
-def _place_of(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
+def place_of(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
     """``arm.py:10 in pick``: the innermost frame of the module author's code in ``exc``'s traceback.
 
     That is the line the author fixes: not the runtime's frames that called the method, and not
@@ -88,11 +144,8 @@ def raised_text(exc: BaseException, authors: Optional[Set[str]] = None) -> str:
     ``AssertionError at arm.py:10 in pick`` for an empty message; bounded in size, the place kept,
     so the tree's log says where to look without the module's terminal."""
     name = type(exc).__name__
-    try:
-        message = str(exc)
-    except Exception:  # a broken __str__ must not lose the answer
-        message = "(its message cannot be shown)"
-    place = _place_of(exc, authors)
+    message = said(exc)  # a broken __str__ must not lose the answer
+    place = place_of(exc, authors)
     message = bounded(message, MAX_ERROR_CHARS - len(name) - len(place) - 8)
     if not message:
         return "%s at %s" % (name, place) if place else name

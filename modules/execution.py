@@ -72,7 +72,7 @@ class WorkerThreads(Executor):
                 continue
             try:
                 fn(*args)
-            except Exception:
+            except BaseException:  # noqa: B036 - SystemExit from a callback must not end the thread
                 log.exception("a call's work raised")
             with self._lock:
                 self._idle += 1
@@ -126,8 +126,8 @@ class TimerThread:
                     if left <= 0:
                         _, _, fn = heapq.heappop(self._timers)
                         break
-                    self._cond.wait(left)
+                    self._cond.wait(min(left, threading.TIMEOUT_MAX))  # inf or 1e300 s: OverflowError
             try:
                 fn()
-            except Exception:
+            except BaseException:  # noqa: B036 - the one timer thread serves every cancel's grace
                 log.exception("a timer callback raised")

@@ -12,12 +12,12 @@ node, ``bm_other_name``, unless ``--node-name`` or ``__name:=`` names it).
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import logging
 import os
 import socket
 import sys
+import threading
+import time
 from typing import Any, Callable, Dict, List, Optional
 
 from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
@@ -33,11 +33,13 @@ from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
 from comm.rpc import MASTER_TIMEOUT, master_api
 from comm.startup import patiently
+from modules.classfile import load_class, where_raised
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
+from modules.errortext import raised_text, said
 from modules.runtime import BasicModule, BindingError, ModuleServer
 
-__all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "load_class", "make_parser", "main", "renamed_by_argument",
+__all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "make_parser", "main", "renamed_by_argument",
            "run_module", "serving_line"]
 
 log = logging.getLogger("bmtree.module")
@@ -234,7 +236,10 @@ class ModuleNode:
         self.server.callers = self.callers
         self.callers.start()
         self.inbox.subscribe()
-        self.impl.setup(self)
+        try:
+            self.impl.setup(self)
+        except BaseException as exc:  # noqa: B036 - SystemExit too: one line, exit 2, not a traceback
+            raise BindingError("%s.setup raised %s" % (type(self.impl).__name__, raised_text(exc)))
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
                            rospy.get_node_uri(), getattr(self.impl, "call_limit", None))
         patiently(lambda: rospy.set_param(self._param, ann))
@@ -255,7 +260,7 @@ class ModuleNode:
 
     def stop(self) -> None:
         self.unregister()
-        self.impl.shutdown()
+        _shut_down(self.impl)
 
     def unregister(self) -> None:
         """Leave the graph: the topics and this node's announcement (asks the master)."""
@@ -271,6 +276,44 @@ class ModuleNode:
                 rospy.delete_param(self._param)
         except Exception:  # the master may be gone already
             pass
+
+
+def _shut_down(impl: BasicModule) -> None:
+    """The author's ``shutdown()`` hook; what it raises is one line in the log, not a traceback that
+    hides the node's own last lines (nor another exit code)."""
+    try:
+        impl.shutdown()
+    except BaseException as exc:  # noqa: B036
+        log.error("%s.shutdown raised %s", type(impl).__name__, raised_text(exc))
+
+
+#: seconds a stopped module node waits for the threads its code started and did not make daemons
+THREADS_GRACE = 2.0
+
+
+def _leave_without_threads(code: int, grace: float = THREADS_GRACE) -> None:
+    """Exit with ``code`` once the module's own non-daemon threads have ended, or after ``grace`` seconds
+    without them: a thread that loops for ever (emitting events, polling a driver) held a stopped node
+    alive, and Ctrl-C, ``rosnode kill`` and roslaunch waited on it until they killed it."""
+    end = time.monotonic() + grace
+    left = []
+    for t in threading.enumerate():
+        if t is threading.current_thread() or t.daemon:
+            continue
+        t.join(max(0.0, end - time.monotonic()))
+        if t.is_alive():
+            left.append(t.name)
+    if not left:
+        return
+    sys.stderr.write("warning: the module's thread%s %s still ran %gs after the node stopped; left without %s "
+                     "(start %s with daemon=True, or end %s in shutdown())\n" % (
+                         "s" if len(left) > 1 else "", ", ".join(repr(n) for n in left), grace,
+                         "them" if len(left) > 1 else "it", "them" if len(left) > 1 else "it",
+                         "them" if len(left) > 1 else "it"))
+    sys.stderr.flush()
+    sys.stdout.flush()
+    logging.shutdown()
+    os._exit(code)
 
 
 def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:
@@ -325,67 +368,6 @@ def _uri_of(node: str) -> Optional[str]:
 
 class DuplicateModule(Exception):
     """Another live node already serves this module."""
-
-
-def load_class(spec: str) -> Callable[[], BasicModule]:
-    """``package.module:Class`` or ``path/to/file.py:Class``."""
-    if ":" not in spec:
-        raise ValueError("expected MODULE:CLASS or FILE.py:CLASS, got %r" % spec)
-    where, cls_name = spec.rsplit(":", 1)
-    if where.endswith(".py"):
-        mod_name = "bmtree_user_" + os.path.splitext(os.path.basename(where))[0]
-        sp = importlib.util.spec_from_file_location(mod_name, where)
-        if sp is None or sp.loader is None:
-            raise ValueError("cannot load %s" % where)
-        with open(where, "rb") as fh:
-            if b"\0" in fh.read():
-                raise ValueError("%s: not a Python source file (it contains NUL bytes)" % where)
-        module = importlib.util.module_from_spec(sp)
-        sys.modules[mod_name] = module
-        sp.loader.exec_module(module)
-    else:
-        module = _import_module(where, spec)
-    cls = getattr(module, cls_name, None)
-    if cls is None:
-        from comm.errors import did_you_mean
-
-        classes = sorted(n for n, v in vars(module).items() if isinstance(v, type) and not n.startswith("_"))
-        raise ValueError("%s has no class %r%s" % (where, cls_name, did_you_mean(cls_name, classes)
-                                                   or " (its classes: %s)" % (", ".join(classes) or "none")))
-    if not isinstance(cls, type) or not issubclass(cls, BasicModule):
-        raise ValueError("%s: %s is not a subclass of BasicModule (from modules.runtime import BasicModule; "
-                         "class %s(BasicModule): ...)" % (where, cls_name, cls_name))
-    return cls
-
-
-def _import_module(name: str, spec: str) -> Any:
-    """``import name`` for ``--class name:CLASS``; a module that is not on the path is a ValueError
-    that says how to give its file instead (the current directory is not searched: it is not on
-    the path of a node)."""
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        missing = exc.name or ""
-        if not missing or not (name == missing or name.startswith(missing + ".")):
-            raise  # the module was found, and something it imports was not: said where it imports it
-        cls_name = spec.rsplit(":", 1)[1]
-        path = os.path.join(*name.split(".")) + ".py"
-        if os.path.isfile(path):
-            hint = "give the file, --class %s:%s" % (path, cls_name)
-        else:
-            hint = ("MODULE must be importable (on PYTHONPATH, or installed); --class FILE.py:%s loads a file "
-                    "directly" % cls_name)
-        raise ValueError("%s: no Python module %r on the path (PYTHONPATH): %s" % (spec, name, hint))
-
-
-def _where(exc: BaseException, spec: str) -> str:
-    """``file:line`` of the deepest frame of the author's code in a traceback (else the class spec)."""
-    import traceback
-
-    here = os.path.dirname(os.path.abspath(__file__))
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith(here)
-              and "importlib" not in f.filename]
-    return "%s:%s" % (frames[-1].filename, frames[-1].lineno) if frames else spec
 
 
 def serving_line(definition: ModuleDefinition) -> str:
@@ -450,7 +432,7 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
         stop.wait()
     finally:
         stop.leave(node.unregister)  # bounded: a master that does not answer is left as it is
-        impl.shutdown()
+        _shut_down(impl)
     return 3 if node.kicked_out else 0
 
 
@@ -481,20 +463,25 @@ def main(argv: Optional[List[str]] = None) -> int:
         sys.stderr.write("%s:%s:%s: syntax error: %s\n" % (exc.filename, exc.lineno, exc.offset or 0, exc.msg))
         return 2
     except ImportError as exc:  # in the class file (file:line where it imports), or its module is not found
-        sys.stderr.write("error: %s: %s\n" % (_where(exc, args.cls), exc))
+        sys.stderr.write("error: %s: %s\n" % (where_raised(exc, args.cls), exc))
         return 2
     except (ValueError, OSError) as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    except Exception as exc:  # the class file raised while loading or in __init__
-        sys.stderr.write("error: %s: %s\n" % (_where(exc, args.cls), "%s: %s" % (type(exc).__name__, exc)))
+    except KeyboardInterrupt:  # Ctrl-C while the class file loads or its __init__ runs (a driver that hangs)
+        sys.stderr.write("stopped while loading %s\n" % args.cls)
+        return 130
+    except BaseException as exc:  # noqa: B036 - the class file raised while loading or in __init__ (sys.exit too)
+        sys.stderr.write("error: %s: %s: %s\n" % (where_raised(exc, args.cls), type(exc).__name__, said(exc)))
         return 2
     try:
         ModuleServer(definition, impl, lambda t: None, lambda t: None)
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    return run_module(definition, impl, args.node_name, max_bytes=args.max_bytes)
+    code = run_module(definition, impl, args.node_name, max_bytes=args.max_bytes)
+    _leave_without_threads(code)
+    return code
 
 
 if __name__ == "__main__":

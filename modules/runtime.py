@@ -11,6 +11,7 @@ texts are :mod:`modules.errortext`.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from typing import Any, Callable, Dict, List, Optional
 
@@ -24,12 +25,21 @@ from comm.messages import (
     FunctionResult,
     load_payload,
 )
+from modules.answers import Answers
 from modules.basicmodule import BasicModule, BindingError, CallContext, Failure, Rejected, public_methods
 from modules.binding import signature_problems
 from modules.definition import FunctionDefinition, ModuleDefinition
-from modules.errortext import author_files, bounded, raised_text, salvage_keys, which_call
+from modules.errortext import (
+    LogLimit,
+    author_files,
+    bounded,
+    said,
+    salvage_keys,
+    which_call,
+    wire_text,
+)
 from modules.execution import Executor, Scheduler, TimerThread, WorkerThreads
-from modules.outcome import Outcome, OutcomeKind
+from modules.outcome import MAX_DELAY, Outcome, OutcomeKind
 
 __all__ = ["BasicModule", "CallContext", "Failure", "Rejected", "ModuleServer", "BindingError"]
 
@@ -50,9 +60,6 @@ class _Call:
         self.answered = False
         self.late = False         # cancelled, and its code still ran when the grace was over
         self.sent = False         # its answer was handed to the publisher
-
-
-CANCELLED_TEXT = "cancelled by the coordinator"
 
 
 class ModuleServer:
@@ -101,6 +108,9 @@ class ModuleServer:
         #: function -> an injected fault (``take()``, ``outcome``): it answers instead of the function
         #: (the world's faults of a user's own module under ``bmtree run --sim``)
         self.faults: Dict[str, Any] = {}
+        #: the module's log says a repeated problem once, then at most every few seconds
+        self.log_limit = LogLimit()
+        self.answers = Answers(self)
         self._bind()
         self._authors = author_files(impl)  # where an exception's place is looked for first
         impl._server = self
@@ -116,8 +126,26 @@ class ModuleServer:
             problems.append("method %r of class %s is not a function of module %r (definition %s)" % (
                 m, type(self.impl).__name__, self.definition.name, self.definition.source or "?"))
         problems.extend(signature_problems(self.definition, self.impl))
+        problems.extend(self._concurrent_problems())
         if problems:
             raise BindingError("; ".join(problems))
+
+    def _concurrent_problems(self) -> List[str]:
+        """A ``concurrent`` that is neither a bool nor a set of this module's function names: a typo
+        there would make a function exclusive without a word, refused ``busy`` on the robot."""
+        from comm.errors import did_you_mean
+
+        c = self.impl.concurrent
+        cls = type(self.impl).__name__
+        if isinstance(c, bool):
+            return []
+        if not isinstance(c, (set, frozenset, list, tuple)) or not all(isinstance(n, str) for n in c):
+            return ["%s.concurrent must be True, False or a set of function names, got %s" % (
+                cls, bounded(said(repr(c)) if isinstance(c, str) else type(c).__name__, 80))]
+        return ["%s.concurrent names %r, which is not a function of module %r%s" % (
+            cls, n, self.definition.name, did_you_mean(n, self.definition.functions)
+            or " (functions: %s)" % (", ".join(self.definition.functions) or "none"))
+            for n in sorted(set(c) - set(self.definition.functions))]
 
     def _is_concurrent(self, fn: FunctionDefinition) -> bool:
         c = self.impl.concurrent
@@ -242,14 +270,14 @@ class ModuleServer:
         if not call.ctx.cancel():
             return False
         if queued:
-            self._finish(call, self._cancelled(call))
+            self._finish(call, self.answers.cancelled(call))
             return True
         with self._lock:
             running = call.running
         if running:  # its code may still stop the hardware: wait for it, but not forever
             self.scheduler.call_later(self.cancel_grace, lambda: self._grace_over(call))
         else:        # waiting on an outcome's delay, or hanging: nothing to stop
-            self._finish(call, self._cancelled(call))
+            self._finish(call, self.answers.cancelled(call))
         return True
 
     def _grace_over(self, call: _Call) -> None:
@@ -263,7 +291,7 @@ class ModuleServer:
                         which_call(call.ctx.call_id), call.fn.qualified, self.cancel_grace,
                         "%s stays busy until it does" % self.definition.name
                         if call.exclusive else "it goes on running")
-        self._finish(call, self._cancelled(call))
+        self._finish(call, self.answers.cancelled(call))
 
     # -- running ---------------------------------------------------------------------
     def _run(self, call: _Call, work: Optional[Callable[..., Any]]) -> None:
@@ -287,14 +315,16 @@ class ModuleServer:
                 if isinstance(out, Outcome):
                     outcome = out
                 elif not ctx.cancelled.is_set():  # a cancelled call's code may return early, without outputs
-                    result = self._outputs(call, out)
+                    result = self.answers.outputs(call, out)
             except Failure as exc:
-                result = self._result(call, CallStatus.FAILED, str(exc) or "failed")
+                result = self.answers.result(call, CallStatus.FAILED, said(exc) or "failed")
             except Rejected as exc:
-                result = self._result(call, CallStatus.REJECTED, str(exc) or "rejected")
-            except Exception as exc:
-                log.exception("%s raised (%s)", call.fn.qualified, which_call(ctx.call_id))
-                result = self._result(call, CallStatus.FAILED, raised_text(exc, self._authors))
+                result = self.answers.result(call, CallStatus.REJECTED, said(exc) or "rejected")
+            except BaseException as exc:  # noqa: B036 - SystemExit, KeyboardInterrupt, GeneratorExit raised by the
+                # author's code end this call, not the worker thread, and leave neither it unanswered nor the module held
+                if isinstance(exc, KeyboardInterrupt) and threading.current_thread() is threading.main_thread():
+                    raise  # Ctrl-C, on a simulated clock's thread (the test kit runs the module in-process)
+                result = self.answers.raised(call, exc)
             finally:
                 self.impl._local.ctx = None
         with self._lock:
@@ -304,36 +334,22 @@ class ModuleServer:
             log.info("the code of cancelled %s of %s has returned; %s is free again", which_call(ctx.call_id),
                      call.fn.qualified, self.definition.name)
         if ctx.cancelled.is_set():
-            self._finish(call, self._cancelled(call))
+            self._finish(call, self.answers.cancelled(call))
         elif outcome is not None:
             self._follow(call, outcome)
         else:
             assert result is not None
             self._finish(call, result)
 
-    def _outputs(self, call: _Call, out: Any) -> FunctionResult:
-        if isinstance(out, Failure):
-            raise out
-        if out is None:
-            out = {}
-        if not isinstance(out, dict):
-            return self._invalid_outputs(call, "returned %s, expected a dict of outputs" % type(out).__name__)
-        try:
-            return call.fn.build_result(out, call.ctx.call_id)
-        except ProtocolError as exc:
-            return self._invalid_outputs(call, str(exc))
-
-    def _invalid_outputs(self, call: _Call, problem: str) -> FunctionResult:
-        """Outputs that break the definition: the module author's bug, so logged here (with the call to
-        match the run log) as well as answered; the answer does not name the target again (the
-        coordinator says ``arm.pick failed: …`` already)."""
-        prefix = call.fn.qualified + ": "
-        problem = problem[len(prefix):] if problem.startswith(prefix) else problem
-        log.warning("%s: invalid outputs (%s): %s", call.fn.qualified, which_call(call.ctx.call_id), bounded(problem))
-        return self._result(call, CallStatus.FAILED, "invalid outputs: %s" % problem)
-
     def _follow(self, call: _Call, outcome: Outcome) -> None:
         """Carry out ``outcome`` on the module's clock."""
+        delay = outcome.delay
+        if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not -math.inf < delay <= MAX_DELAY:
+            # NaN, inf or 1e300 s would end the clock's thread that waits it out, or answer at once
+            shown = bounded(repr(delay), 40) if isinstance(delay, (int, float)) else "a %s" % type(delay).__name__
+            self._finish(call, self.answers.invalid(call, "its delay is %s, not a number of seconds up to %d (a day)"
+                                                     % (shown, MAX_DELAY), "invalid outcome"))
+            return
         if outcome.ignores_cancel:  # busy as if its code ran: a cancel answers after the grace, the module stays held
             with self._lock:
                 if call.answered:
@@ -359,19 +375,18 @@ class ModuleServer:
                      self.definition.name)
         if answered:  # cancelled meanwhile: an outcome that ignored the cancel frees the module only now
             if outcome.ignores_cancel:
-                self._finish(call, self._cancelled(call))
+                self._finish(call, self.answers.cancelled(call))
             return
         if kind == OutcomeKind.RESPOND:
             self._run(call, outcome.fn or getattr(self.impl, call.fn.name))
         elif kind == OutcomeKind.SUCCEED:
-            try:
-                self._finish(call, call.fn.build_result(outcome.outputs, call.ctx.call_id))
-            except ProtocolError as exc:
-                self._finish(call, self._invalid_outputs(call, str(exc)))
+            outputs = outcome.outputs
+            self._finish(call, self.answers.built(call, outputs) if isinstance(outputs, dict) else self.answers.invalid(
+                call, "its outputs are %s, expected a dict" % type(outputs).__name__, "invalid outcome"))
         elif kind == OutcomeKind.FAIL:
-            self._finish(call, self._result(call, CallStatus.FAILED, outcome.reason or "failed"))
+            self._finish(call, self.answers.result(call, CallStatus.FAILED, said(outcome.reason) or "failed"))
         elif kind == OutcomeKind.REJECT:
-            self._finish(call, self._result(call, CallStatus.REJECTED, outcome.reason or "rejected"))
+            self._finish(call, self.answers.result(call, CallStatus.REJECTED, said(outcome.reason) or "rejected"))
         # HANG: no answer until a cancel
 
     def in_flight(self) -> List[Any]:
@@ -405,29 +420,19 @@ class ModuleServer:
         if first:
             if self.callers is not None:
                 self.callers.call_done(call.ctx.call_id)
-            text = result.encode()
-            size = len(text) if text.isascii() else len(text.encode("utf-8"))
-            if size > self.max_bytes:  # the coordinator would drop it: the call would end as a timeout
-                log.error("%s: the answer to call %s is %d bytes, over the limit of %d; it fails instead",
-                          call.fn.qualified, call.ctx.call_id, size, self.max_bytes)
-                text = self._result(call, CallStatus.FAILED, "the outputs are %d bytes encoded, over the limit of %d "
-                                    "bytes (max_bytes) that a coordinator accepts" % (size, self.max_bytes)).encode()
-            self._publish_result(text)
+            self._publish_result(self.answers.wire(call, result))
             call.sent = True
             if self._sent_waited:
                 with self._sent:
                     self._sent.notify_all()
 
-    def _cancelled(self, call: _Call) -> FunctionResult:
-        return self._result(call, CallStatus.CANCELLED, CANCELLED_TEXT)
-
-    def _result(self, call: _Call, status: CallStatus, error: str) -> FunctionResult:
-        return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.definition.name, function=call.ctx.function,
-                              status=status, error=bounded(error))
-
     def _reject(self, call_id: Optional[str], function: Any, error: str) -> None:
-        error = bounded(error)
-        log.warning("rejected call %s of %s.%s: %s", call_id, self.definition.name, function, error)
+        error = wire_text(bounded(error))
+        known = function if isinstance(function, str) and function in self.definition.functions else None
+        more = self.log_limit.due(("rejected", known, error.split(":", 1)[0][:60]))
+        if more is not None:
+            log.warning("rejected call %s of %s.%s: %s%s", call_id, self.definition.name, bounded(said(function), 200),
+                        error, more)
         fname = function if isinstance(function, str) else None
         self._publish_result(FunctionResult(call_id=call_id, basic_mod=self.definition.name, function=fname,
                                             status=CallStatus.REJECTED, error=error).encode())

@@ -111,7 +111,7 @@ class Served:
 
 @pytest.fixture
 def arm(tmp_path):
-    from modules.node import load_class
+    from modules.classfile import load_class
 
     (tmp_path / "arm.py").write_text(ARM)
     impl = load_class(str(tmp_path / "arm.py") + ":Arm")()
@@ -284,3 +284,22 @@ def test_a_call_cancelled_already_is_not_reported_cancelled_when_its_caller_goes
                for rec in caplog.records)
     arm.server.impl._release.set()
     assert arm.wait(other).status == "cancelled"
+
+
+def test_where_an_init_raised_names_the_line_of_a_class_in_a_folder_below_bmtrees_modules(tmp_path, monkeypatch):
+    """Frames of bmtree's own modules/ are skipped to find the author's line; those of modules/example/ (a
+    shipped example a team copies and edits there) were skipped too, and the error named the class spec."""
+    import importlib.util
+
+    from modules import classfile
+
+    (tmp_path / "modules" / "example").mkdir(parents=True)
+    driver = tmp_path / "modules" / "example" / "drv.py"
+    driver.write_text("def start():\n    raise RuntimeError('no driver')\n")
+    spec = importlib.util.spec_from_file_location("bmtree_test_drv", str(driver))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(classfile, "__file__", str(tmp_path / "modules" / "classfile.py"))
+    with pytest.raises(RuntimeError) as info:
+        module.start()
+    assert classfile.where_raised(info.value, "drv.py:Drv") == "%s:2" % driver
