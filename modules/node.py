@@ -18,7 +18,7 @@ import socket
 import sys
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publisher
 from comm.address import warn_own_address
@@ -165,6 +165,9 @@ class ModuleNode:
         self.server: Optional[ModuleServer] = None
         self.inbox: Optional[CallInbox] = None
         self.callers: Optional[Watchdog] = None
+        #: what the class's ``setup()`` may raise to say a start-up problem itself (run_module's exit codes);
+        #: anything else it raises is the author's bug, said as a BindingError
+        self.start_failures: Tuple[type, ...] = (BindingError, DuplicateModule)
         self.event_publisher: Any = None
         self._param = ""
         self.instance = "%s:%d:%s" % (socket.gethostname(), os.getpid(), new_id()[:8])
@@ -238,6 +241,8 @@ class ModuleNode:
         self.inbox.subscribe()
         try:
             self.impl.setup(self)
+        except self.start_failures:   # said as they are (the bridge's C++ node missing: exit 3)
+            raise
         except BaseException as exc:  # noqa: B036 - SystemExit too: one line, exit 2, not a traceback
             raise BindingError("%s.setup raised %s" % (type(self.impl).__name__, raised_text(exc)))
         ann = announcement(rospy.get_name(), self.definition, self.instance, self.inbox.topics(),
@@ -420,6 +425,7 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
         return 0
     log_to_rosout()
     node = ModuleNode(definition, impl, max_bytes)
+    node.start_failures = tuple(codes)
     try:
         try:
             node.start()
