@@ -17,6 +17,7 @@ from blackboard.attribution import Attribution
 from blackboard.store import Store, name_problem, rows_of
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, BlackboardAnswer, BlackboardRequest, FunctionResult, load_payload
+from comm.saylimit import SayLimit
 
 __all__ = ["BlackboardService", "MAX_NAMES", "MAX_HISTORY"]
 
@@ -30,25 +31,6 @@ _RESULT, _REQUEST, _STOP = 0, 1, 2
 # ``max_bytes``: one that would not fit is answered by an error naming both sizes.
 MAX_NAMES = 256       # distinct names (duplicates are answered once)
 MAX_HISTORY = 1000    # values per name a history gives, when the store keeps every value (else what it keeps)
-
-
-class _Limited:
-    """A warning said at most once per ``period`` seconds, with how many were held back since: a sender
-    that repeats a bad result must not flood the log."""
-
-    def __init__(self, period: float = 10.0):
-        self.period = period
-        self._last: Optional[float] = None
-        self.held = 0
-
-    def warn(self, fmt: str, *args: Any) -> None:
-        now = time.monotonic()
-        if self._last is not None and now - self._last < self.period:
-            self.held += 1
-            return
-        more = " (and %d more like it since the last such warning)" % self.held if self.held else ""
-        self._last, self.held = now, 0
-        log.warning(fmt + "%s", *args, more)
 
 
 class BlackboardService:
@@ -84,7 +66,7 @@ class BlackboardService:
         self.attribution = attribution
         self.after_wait = after_wait
         self._deferred: List[Tuple[float, BlackboardRequest]] = []
-        self._bad_names = _Limited()  # values refused for their names
+        self._bad_names = SayLimit()  # values refused for their names
         self._recent: OrderedDict = OrderedDict()  # call ids committed lately
         # Items received but not yet handled, and the store's lock: a request arriving when
         # nothing is pending is answered at once in the caller's thread (one hand-off less),
@@ -242,8 +224,10 @@ class BlackboardService:
         bad = [i for i, name in enumerate(names) if name_problem(name)]
         if bad:  # refused alone: the result's other values, and the batch, are stored
             self.rejected += len(bad)
-            self._bad_names.warn("refused %d value(s) of a result of %s.%s (call %s): %s, %.60r", len(bad), module,
-                                 function, call_id, name_problem(names[bad[0]]), names[bad[0]])
+            more = self._bad_names.due("name")
+            if more is not None:
+                log.warning("refused %d value(s) of a result of %s.%s (call %s): %s, %.60r%s", len(bad), module,
+                            function, call_id, name_problem(names[bad[0]]), names[bad[0]], more)
             keep = [i for i in range(len(names)) if i not in set(bad)]
             names, rostypes, texts = ([seq[i] for i in keep] for seq in (names, rostypes, texts))
         rows.extend(rows_of(names, rostypes, texts, module, function, call_id, stamp))

@@ -12,7 +12,6 @@ import abc
 import contextlib
 import logging
 import threading
-import time
 import typing
 from collections import OrderedDict
 from typing import Any, Callable, ContextManager, Dict, Iterable, List, Mapping, Optional, Tuple
@@ -29,12 +28,13 @@ from comm.messages import (
     load_payload,
 )
 from comm.rostypes import rostype_of
+from comm.saylimit import SayLimit
 from coordinator.runevents import Notice
 from modules.definition import ModuleDefinition
 from modules.errortext import salvage_keys
 
-__all__ = ["Transport", "NullTransport", "Screen", "Refusals", "event_problem", "salvaged", "MALFORMED_ANSWER",
-           "REFUSED_EVENT", "SAY_EVERY"]
+__all__ = ["Transport", "NullTransport", "Screen", "event_problem", "salvaged", "MALFORMED_ANSWER",
+           "REFUSED_EVENT"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -97,37 +97,7 @@ MALFORMED_ANSWER = "malformed_answer"
 """The ``what`` of the notice of a malformed answer to a call the run awaits (the call fails with it)."""
 REFUSED_EVENT = "refused_event"
 """The ``what`` of the notice of an event of a module of the run that breaks its definition (refused)."""
-SAY_EVERY = 10.0  # seconds: refusals of one kind said at most this often (the first at once)
 _MAX_WHY = 1000   # characters of a refusal's reason kept in an answer's error and a notice
-
-
-class Refusals:
-    """Rate-limited saying of what is refused: the first of each kind at once, then at most one per
-    ``every`` seconds, saying how many of that kind went unsaid meanwhile (a node that sends garbage at
-    1 kHz must not flood the log, nor the run's notices)."""
-
-    def __init__(self, every: float = SAY_EVERY, clock: Callable[[], float] = time.monotonic):
-        self.every = every
-        self.clock = clock
-        self._lock = threading.Lock()
-        self._said: Dict[Any, List[float]] = {}  # kind -> [when last said, how many unsaid since]
-
-    def due(self, kind: Any) -> Optional[int]:
-        """None when a refusal of ``kind`` is not to be said now (counted), else how many went unsaid."""
-        now = self.clock()
-        with self._lock:
-            said = self._said.get(kind)
-            if said is not None and now - said[0] < self.every:
-                said[1] += 1
-                return None
-            if len(self._said) >= 1000:  # many kinds (random module names): forget the old ones
-                self._said.clear()
-            self._said[kind] = [now, 0]
-            return int(said[1]) if said is not None else 0
-
-
-def _unsaid(n: int) -> str:
-    return " (and %d more like it in the last %gs)" % (n, SAY_EVERY) if n else ""
 
 
 def _cut(text: str) -> str:
@@ -196,9 +166,9 @@ class Screen:
     module of the run, a ``refused_event`` notice. Nothing here raises."""
 
     def __init__(self, definitions: Optional[Mapping[str, ModuleDefinition]] = None,
-                 refusals: Optional[Refusals] = None):
+                 refusals: Optional[SayLimit] = None):
         self.definitions: Dict[str, ModuleDefinition] = dict(definitions or {})
-        self.refusals = refusals or Refusals()
+        self.refusals = refusals or SayLimit()
         self._awaited: typing.OrderedDict[str, Tuple[str, str]] = OrderedDict()  # call_id -> (module, function)
         self._lock = threading.Lock()
 
@@ -258,10 +228,10 @@ class Screen:
         with self._lock:
             call = self._awaited.pop(call_id, None) if call_id else None
         if call is None:
-            n = self.refusals.due(("result", node))
-            if n is not None:
+            more = self.refusals.due(("result", node))
+            if more is not None:
                 log.warning("ignored a malformed answer%s from %s: %s%s", " (call %s, not one this run awaits)"
-                            % call_id if call_id else "", _sender(node, None), why, _unsaid(n))
+                            % call_id if call_id else "", _sender(node, None), why, more)
             return []
         module, function = call
         error = "malformed answer from %s: %s" % (_sender(node, module), why)
@@ -293,10 +263,10 @@ class Screen:
         return [event]
 
     def _refused(self, module: Optional[str], name: Optional[str], node: Optional[str], why: str) -> List[Any]:
-        n = self.refusals.due(("event", module, name, node))
-        if n is None:
+        more = self.refusals.due(("event", module, name, node))
+        if more is None:
             return []
         what = "%s.%s" % (module, name) if module and name else "%s event" % module if module else "an event"
-        text = "refused %s from %s: %s%s" % (what, _sender(node, None if node else module), why, _unsaid(n))
+        text = "refused %s from %s: %s%s" % (what, _sender(node, None if node else module), why, more)
         log.warning("%s", text)
         return [Notice(REFUSED_EVENT, text)] if module in self.definitions else []

@@ -23,6 +23,7 @@ from comm import sync_publisher
 from comm.errors import ProtocolError
 from comm.messages import load_payload, new_id
 from comm.nodeopts import node_name
+from comm.saylimit import SayLimit
 from modules.bridgegraph import CppNodeGraph
 from modules.bridgeoutput import CppCall as _Call
 from modules.bridgeoutput import CppOutputs
@@ -86,7 +87,7 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._out_sub: Any = None
         self._info_sub: Any = None
         self._event_sub: Any = None
-        self._event_warnings: Dict[str, Tuple[float, int]] = {}  # a refused event's reason -> (said at, since)
+        self._event_warnings = SayLimit()  # a refused event's reason, said at most every 10 s
         self._infos: Dict[str, Dict[str, Any]] = {}  # the latest BM_info of each node that sent one
         self._String: Any = None
         self._self_name = ""

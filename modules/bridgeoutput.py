@@ -25,7 +25,6 @@ log = logging.getLogger("bmtree.bridge")
 
 #: a refused event's warning is repeated at most this often (s): a timer that emits a wrong event
 #: ten times a second must not flood the log
-_EVENT_WARN_EVERY = 10.0
 
 
 class CppCall:
@@ -117,18 +116,10 @@ class CppOutputs:
             log.error("could not pass on an event of %s (%s: %s)", sender, type(exc).__name__, exc)
 
     def _refused_event(self, sender: str, why: str) -> None:
-        """Say that an event was dropped; the same reason at most every ``_EVENT_WARN_EVERY`` seconds."""
-        now = time.monotonic()
-        key = "%s %s" % (sender, why)
-        with self._cond:
-            said = self._event_warnings.get(key)
-            if said is not None and now - said[0] < _EVENT_WARN_EVERY:
-                self._event_warnings[key] = (said[0], said[1] + 1)
-                return
-            if len(self._event_warnings) > 100:
-                self._event_warnings.clear()
-            self._event_warnings[key] = (now, 0)
-        more = " (and %d more like it since the last warning)" % said[1] if said and said[1] else ""
+        """Say that an event was dropped; the same reason at most every 10 s (:class:`comm.saylimit.SayLimit`)."""
+        more = self._event_warnings.due((sender, why))
+        if more is None:
+            return
         module = self.definition.name
         if sender == self.cpp_node:
             who = "the C++ node %s of module %r" % (sender, module)

@@ -7,14 +7,12 @@ from __future__ import annotations
 import os
 import re
 import sysconfig
-import threading
-import time
 import traceback
-from typing import Any, Callable, Dict, Hashable, List, Optional, Set
+from typing import Any, Dict, Optional, Set
 
 from modules.basicmodule import BasicModule
 
-__all__ = ["MAX_ERROR_CHARS", "SAY_EVERY", "LogLimit", "salvage_keys", "bounded", "wire_text", "said", "author_files",
+__all__ = ["MAX_ERROR_CHARS", "salvage_keys", "bounded", "wire_text", "said", "author_files",
            "place_of", "raised_text", "which_call"]
 
 #: the longest ``error`` text the runtime sends (a message that long is cut, the place in the code kept)
@@ -66,38 +64,6 @@ def said(value: Any) -> str:
         return text if isinstance(text, str) else "(its message cannot be shown)"
     except BaseException:  # noqa: B036 - SystemExit from __str__ is the author's bug too
         return "(its message cannot be shown)"
-
-
-#: seconds: a module's log says a repeated problem (the same exception at the same place, invalid
-#: outputs of one function, one kind of refusal) at most this often, the first at once
-SAY_EVERY = 10.0
-
-
-class LogLimit:
-    """Rate-limited log lines: the first of each kind at once, then at most one per ``every`` seconds,
-    which says how many of that kind went unsaid meanwhile (a tree that retries a broken function in a
-    tight loop must not flood the module's log with tracebacks)."""
-
-    def __init__(self, every: float = SAY_EVERY, clock: Callable[[], float] = time.monotonic):
-        self.every = every
-        self.clock = clock
-        self._lock = threading.Lock()
-        self._said: Dict[Hashable, List[float]] = {}  # kind -> [when last said, how many unsaid since]
-
-    def due(self, kind: Hashable) -> Optional[str]:
-        """None when a line of ``kind`` is not to be said now (it is counted), else the text to add to it:
-        ``" (and 3 more like it in the last 10s)"``, or "" when none went unsaid."""
-        now = self.clock()
-        with self._lock:
-            last = self._said.get(kind)
-            if last is not None and now - last[0] < self.every:
-                last[1] += 1
-                return None
-            if len(self._said) >= 1000:  # many kinds (random function names in calls): forget the old ones
-                self._said.clear()
-            self._said[kind] = [now, 0]
-        n = int(last[1]) if last is not None else 0
-        return " (and %d more like it in the last %gs)" % (n, self.every) if n else ""
 
 
 def _ours(path: str) -> bool:

@@ -25,12 +25,12 @@ from comm.messages import (
     FunctionResult,
     load_payload,
 )
+from comm.saylimit import SayLimit
 from modules.answers import Answers
 from modules.basicmodule import BasicModule, BindingError, CallContext, Failure, Rejected, public_methods
 from modules.binding import signature_problems
 from modules.definition import FunctionDefinition, ModuleDefinition
 from modules.errortext import (
-    LogLimit,
     author_files,
     bounded,
     said,
@@ -109,7 +109,7 @@ class ModuleServer:
         #: (the world's faults of a user's own module under ``bmtree run --sim``)
         self.faults: Dict[str, Any] = {}
         #: the module's log says a repeated problem once, then at most every few seconds
-        self.log_limit = LogLimit()
+        self.log_limit = SayLimit()
         self.answers = Answers(self)
         self._bind()
         self._authors = author_files(impl)  # where an exception's place is looked for first

@@ -101,13 +101,13 @@ def test_a_malformed_answer_to_no_awaited_call_is_a_rate_limited_warning(warning
 
 
 def test_refusals_say_the_first_at_once_then_one_per_period_with_the_count():
-    from coordinator.transport import Refusals
+    from comm.saylimit import SayLimit
 
     now = [0.0]
-    said = Refusals(every=10.0, clock=lambda: now[0])
-    assert [said.due("a"), said.due("a"), said.due("b"), said.due("a")] == [0, None, 0, None]
+    said = SayLimit(every=10.0, clock=lambda: now[0])
+    assert [said.due("a"), said.due("a"), said.due("b"), said.due("a")] == ["", None, "", None]
     now[0] = 10.5
-    assert [said.due("a"), said.due("a"), said.due("b")] == [2, None, 0]
+    assert [said.due("a"), said.due("a"), said.due("b")] == [" (and 2 more like it in the last 10s)", None, ""]
 
 
 class _Emit(RunObserver):

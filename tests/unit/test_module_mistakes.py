@@ -269,11 +269,11 @@ def test_an_async_or_generator_method_is_a_binding_error():
 
 
 def test_a_repeated_mistake_is_logged_once_then_at_most_every_few_seconds(module_log):
-    from modules.errortext import LogLimit
+    from comm.saylimit import SayLimit
 
     s = Served()
     now = [0.0]
-    s.server.log_limit = LogLimit(every=10.0, clock=lambda: now[0])
+    s.server.log_limit = SayLimit(every=10.0, clock=lambda: now[0])
     for _ in range(4):
         assert s.answer("exit").status == "failed"
         assert s.answer("none").status == "failed"
