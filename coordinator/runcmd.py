@@ -360,7 +360,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
                                       control=bool(getattr(args, "control", False)),
                                       modules=list(args.modules or []) + [um.definition_path for um in user_modules])
-            from coordinator.control import ros_controller
+            from coordinator.controlros import ros_controller
 
             steer = ros_controller(getattr(args, "control", False))
             quiet_notices = [NoticeLines()] if display is None and view is None else []

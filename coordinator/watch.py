@@ -285,7 +285,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         return False
 
     try:
-        from coordinator.control import ControlClient
+        from coordinator.controlros import ControlClient
 
         try:
             with joining(args.wait, "watch") as held:  # bounded: a master that stops answering now
@@ -408,7 +408,8 @@ def cmd_control(args: argparse.Namespace) -> int:
     import rospy
 
     from coordinator.cliutil import EXIT_ENV, EXIT_INVALID, EXIT_OK, err, master_up
-    from coordinator.control import ControlClient, parse_command
+    from coordinator.control import parse_command
+    from coordinator.controlros import ControlClient
 
     try:
         cmd = parse_command(args.words)

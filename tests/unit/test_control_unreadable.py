@@ -9,7 +9,7 @@ import json
 import pytest
 import rospy
 
-from coordinator import control
+from coordinator import control, controlros
 from tests.unit.test_control_malformed import TREE
 from tests.unit.test_control_stop import Timed, _run
 
@@ -44,7 +44,7 @@ def test_an_unreadable_request_is_refused_in_the_subscriber_thread_without_raisi
     monkeypatch.setattr(rospy, "Publisher", _Pub)
     monkeypatch.setattr(rospy, "Subscriber", _Sub)
     monkeypatch.setattr(rospy, "get_name", lambda: "/bmtree_run")
-    ctl = control.ros_controller(True)
+    ctl = controlros.ros_controller(True)
     for text in (DEEP, '{"id": "b-2", "command": ', "[1, 2]"):
         ctl.subscription.callback(_Msg(text))   # rospy's thread: nothing may raise here
     ctl.may_tick()   # the ticking thread answers them
@@ -54,6 +54,21 @@ def test_an_unreadable_request_is_refused_in_the_subscriber_thread_without_raisi
         ("b-2", False, "malformed command: the request cannot be read: payload is not valid JSON: Expecting value: "
                        "line 1 column 26 (char 25)"),
         (None, False, "malformed command: the request cannot be read: payload is not a JSON object (got list)")]
+
+
+def test_an_unreadable_request_for_another_run_is_left_to_it(monkeypatch):
+    """Its ``to``, read from its text, names another run's node: every run on the master answered it."""
+    monkeypatch.setattr(_Pub, "made", [])
+    monkeypatch.setattr(rospy, "Publisher", _Pub)
+    monkeypatch.setattr(rospy, "Subscriber", _Sub)
+    monkeypatch.setattr(rospy, "get_name", lambda: "/bmtree_run")
+    ctl = controlros.ros_controller(True)
+    for to in ("/bmtree_other", "/bmtree_run"):
+        ctl.subscription.callback(_Msg('{"id": "d-%s", "to": "%s", "command": "set", "value": %s' % (
+            to[-3:], to, "[" * 200)))
+    ctl.may_tick()
+    [pub] = _Pub.made
+    assert [r["id"] for r in pub.sent] == ["d-run"]
 
 
 def test_read_request_never_raises():
