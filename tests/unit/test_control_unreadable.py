@@ -9,7 +9,7 @@ import json
 import pytest
 import rospy
 
-from coordinator import control, controlros
+from coordinator import controlros
 from tests.unit.test_control_malformed import TREE
 from tests.unit.test_control_stop import Timed, _run
 
