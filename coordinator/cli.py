@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Optional, Set
 from comm.errors import did_you_mean
 from comm.messages import MIN_MAX_BYTES
 from comm.nodeopts import PORT, fill_from_params, myargv, node_params, private_namespace
+from comm.textfile import read_text
 from coordinator import __version__
 from coordinator.cliutil import (
     EXIT_ENV,
@@ -28,7 +29,6 @@ from coordinator.cliutil import (
 )
 from coordinator.errors import EnvironmentProblem, InvalidInput, TreeErrors, UsageError
 from coordinator.runcmd import cmd_demo, cmd_run
-from coordinator.yamlsrc import read_text
 from modules.definition import DefinitionError, ModuleDefinition, load_definitions
 
 __all__ = ["main", "make_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV"]

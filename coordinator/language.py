@@ -10,6 +10,7 @@ import os
 from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
+from comm.textfile import read_text, text_pos
 from coordinator import parsehints
 from coordinator.bounds import shown
 from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_key_problems
@@ -23,7 +24,7 @@ from coordinator.refs import RefError
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, top_of, used_modules, walk
 from coordinator.treewarnings import TreeErrorsWithWarnings, warnings
 from coordinator.values import literal, loose_dollars
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of, read_text, text_pos
+from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
 from modules.definition import ModuleDefinition
 
 __all__ = ["FORMAT", "Parser", "TreeErrorsWithWarnings", "load_tree", "used_modules", "walk", "warnings"]

@@ -1,19 +1,16 @@
 """YAML with positions: safe loading that remembers where every key and value came from."""
 from __future__ import annotations
 
-import errno
 import operator
-import os
 import re
-import stat
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
+from comm.textfile import MAX_BYTES, read_text, text_pos
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_file", "load_value", "load_yaml", "pos_of", "read_text",
-           "settle", "text_pos"]
+__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_file", "load_value", "load_yaml", "pos_of", "settle"]
 
 
 class OnDemandPos:
@@ -116,7 +113,6 @@ _Builder.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:
 
 MAX_NODES = 200000          # every scalar, container and alias expansion counts
 MAX_DEPTH = 400
-MAX_BYTES = 16 * 1024 * 1024   # a tree file; generous (a 1,000-node tree is ~50 KB)
 _STR = "tag:yaml.org,2002:str"
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 _MERGE = object()        # the '<<' key
@@ -338,15 +334,6 @@ def _build(loader: Any, file: str) -> Any:
     return value
 
 
-def text_pos(text: Any, index: int) -> Tuple[int, int]:
-    """Line and column (from 1, in characters) of ``text[index]``; for bytes, of the character at byte ``index``."""
-    nl = b"\n" if isinstance(text, bytes) else "\n"
-    start = text.rfind(nl, 0, index) + 1
-    head = text[start:index]
-    column = len(head.decode("utf-8", "replace") if isinstance(head, bytes) else head) + 1
-    return text.count(nl, 0, index) + 1, column
-
-
 def _unencodable(text: str, index: int) -> str:
     """What a lone surrogate in a text stands for: an undecodable byte (Python decodes command-line
     arguments with ``surrogateescape``), or itself."""
@@ -404,35 +391,6 @@ def _quoted_entry(row: str, colon: int) -> str:
 
 def _first_line(exc: Exception) -> str:
     return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-
-
-def read_text(path: str, limit: Optional[int] = None) -> str:
-    """A text file of at most ``limit`` bytes (MAX_BYTES), read no further than that (``/dev/zero`` or a
-    huge file must not fill the memory); devices are refused (a terminal would wait for input). Raises
-    OSError, and UnicodeDecodeError over the whole bytes (see :func:`text_pos`)."""
-    limit = MAX_BYTES if limit is None else limit
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO without a writer: no wait at open
-    except ValueError:   # os.open's own error for a NUL in the name (an include: "a\0b")
-        raise OSError(errno.EINVAL, "a file name cannot hold a NUL character") from None
-    with os.fdopen(fd, "rb") as fh:
-        mode = os.fstat(fd).st_mode
-        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) or stat.S_ISSOCK(mode):
-            raise OSError(errno.EINVAL, "not a regular file")
-        data = b""
-        if stat.S_ISFIFO(mode):   # a pipe (bash's <(...), a mkfifo) is read as a file while a writer has it open
-            try:
-                data = os.read(fd, limit + 1)
-                if not data:   # no writer (and nothing left in it): it would read as an empty file
-                    raise OSError(errno.ENODATA, "a pipe that no program writes to (start the writer first)")
-            except BlockingIOError:   # a writer that has not written yet: wait for it
-                pass
-        os.set_blocking(fd, True)
-        data += fh.read(limit + 1 - len(data))
-    if len(data) > limit:
-        raise OSError(errno.EFBIG, "larger than %d MiB" % (limit >> 20) if limit >= 1 << 20
-                      else "larger than %d bytes" % limit)
-    return data.decode("utf-8")
 
 
 def load_file(path: str) -> Any:

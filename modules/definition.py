@@ -334,7 +334,7 @@ def _no_duplicate_keys(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
 
 def load_definition(path: str) -> ModuleDefinition:
     """Load and validate one definition file."""
-    from coordinator.yamlsrc import read_text  # bounded; a device refused, a FIFO not waited on at open
+    from comm.textfile import read_text  # bounded; a device refused, a FIFO not waited on at open
 
     try:
         text = read_text(path, _MAX_FILE)

@@ -332,7 +332,7 @@ class World:
     @classmethod
     def load(cls, path: str = DEFAULT_WORLD, others: Any = ()) -> World:
         """The world in ``path``; WorldError names every problem, each at its ``file:line:column``.
-        The file is read bounded (:func:`coordinator.yamlsrc.read_text`: size, devices, FIFOs; then the
+        The file is read bounded (:func:`comm.textfile.read_text`: size, devices, FIFOs; then the
         safe YAML loader's depth and node limits). Each top-level key the file leaves out is the default
         house's (``DEFAULT_WORLD``), so a file of ``faults:`` alone is the default house with those faults
         (see ``from_dict``'s ``base``). ``others``: the ``module.function`` of the user's own modules its

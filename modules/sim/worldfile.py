@@ -88,7 +88,8 @@ def _position(container: Any, key: Any = WHOLE, on_key: bool = False) -> str:
 def default_data() -> Dict[str, Any]:
     """The default house's top-level keys, as its file writes them (plain data: a value a world takes
     from it is not written in that world's file, so no position points into it)."""
-    from coordinator.yamlsrc import load_value, read_text
+    from comm.textfile import read_text
+    from coordinator.yamlsrc import load_value
 
     data = load_value(read_text(DEFAULT_WORLD, MAX_WORLD_BYTES), DEFAULT_WORLD)
     return data if isinstance(data, dict) else {}
@@ -97,8 +98,9 @@ def default_data() -> Dict[str, Any]:
 def read_world(path: str) -> Any:
     """The YAML of the world file ``path``, with positions (bounded: size, depth, nodes; a device or a
     FIFO without a writer is refused, not waited on)."""
+    from comm.textfile import read_text, text_pos
     from coordinator.errors import TreeErrors
-    from coordinator.yamlsrc import load_yaml, read_text, text_pos
+    from coordinator.yamlsrc import load_yaml
 
     try:
         text = read_text(path, MAX_WORLD_BYTES)

@@ -14,8 +14,8 @@ import threading
 
 import pytest
 
+from comm.textfile import read_text
 from coordinator.cli import main as bmtree
-from coordinator.yamlsrc import read_text
 from tests.conftest import ROOT, TREES
 
 TREE = "format: 1\nname: t\nroot:\n  wait: 1\n"

@@ -6,9 +6,10 @@ import re
 import pytest
 import yaml
 
+from comm.textfile import read_text, text_pos
 from coordinator import yamlsrc
 from coordinator.errors import TreeErrors
-from coordinator.yamlsrc import MAX_NODES, load_value, load_yaml, read_text, text_pos
+from coordinator.yamlsrc import MAX_NODES, load_value, load_yaml
 
 TEXT = """
 base: &b {x: 1.0, y: -2, ok: yes, none: ~, when: 2024-01-02}
