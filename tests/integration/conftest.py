@@ -53,7 +53,9 @@ def start_sim_module(ros_graph, module, world=None, *params, node=None):
     return proc
 
 
-def wait_announced(*modules, timeout=15.0):
+def wait_announced(*modules, timeout=30.0):
+    """Until each of ``modules`` is announced: a bridge announces once its C++ node is connected, which it
+    waits for up to its --wait, 30 s (under a suite's load, with C++ builds beside it, a start took over 15)."""
     from modules.discovery import live_modules
 
     end = time.monotonic() + timeout
