@@ -22,7 +22,7 @@ import genpy
 
 from comm.errors import ProtocolError, did_you_mean
 
-__all__ = ["ValueMisfit", "misfit_text", "said_of", "type_words"]
+__all__ = ["whole_number_text", "ValueMisfit", "misfit_text", "said_of", "type_words"]
 
 _INT_RANGES = {"int8": (-1 << 7, (1 << 7) - 1), "uint8": (0, 255), "int16": (-1 << 15, (1 << 15) - 1),
                "uint16": (0, (1 << 16) - 1), "int32": (-1 << 31, (1 << 31) - 1), "uint32": (0, (1 << 32) - 1),
@@ -84,12 +84,18 @@ def type_words(t: str, scalar: bool = True) -> str:
     return "a mapping of fields %s" % ", ".join(cls.__slots__)
 
 
+def whole_number_text(value: int) -> str:
+    """A whole number said by its size, ``a negative whole number of 401 digits``: an error line, not the
+    digits (``str`` of one past 4,300 digits raises ValueError in Python 3.11)."""
+    digits = "%d digits" % len(str(abs(value))) if value.bit_length() < 14000 else "thousands of digits"
+    return "a %swhole number of %s" % ("negative " if value < 0 else "", digits)
+
+
 def _shown(value: Any) -> str:
     if isinstance(value, genpy.Message):
         return "a %s" % value._type
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 100:  # not 400 digits
-        return "a %swhole number of %s digits" % ("negative " if value < 0 else "", len(str(abs(value)))
-                                                   if value.bit_length() < 14000 else "thousands of")
+        return whole_number_text(value)
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 

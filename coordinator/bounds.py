@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+from comm.typewords import whole_number_text
+
 __all__ = ["MAX_COUNT", "MAX_SECONDS", "finite_number", "shown", "beyond_bound"]
 
 _MAX = sys.float_info.max
@@ -29,8 +31,7 @@ def shown(v: Any) -> str:
     """``repr(v)``, but a whole number beyond a float's range by its size (an error line, not 400 digits)."""
     if v.__class__ is bool or not isinstance(v, int) or finite_number(v):
         return repr(v)
-    digits = "%d digits" % len(str(abs(v))) if v.bit_length() < 14000 else "thousands of digits"  # str: <= 4300
-    return "a %swhole number of %s (numbers go up to 1.8e308)" % ("negative " if v < 0 else "", digits)
+    return "%s (numbers go up to 1.8e308)" % whole_number_text(v)
 
 
 def beyond_bound(type_name: str, v: Any) -> str:

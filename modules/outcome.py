@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, Optional
 
 from comm.errors import did_you_mean
 from comm.textenum import TextEnum
+from comm.typewords import whole_number_text
 
 __all__ = ["Outcome", "OutcomeKind", "OutcomeError", "succeed", "fail", "reject", "hang", "respond",
            "outcome_from_dict", "outcome_to_dict"]
@@ -104,8 +105,9 @@ def outcome_from_dict(raw: Any) -> Outcome:
     except (TypeError, ValueError, OverflowError):   # OverflowError: a whole number past 1.8e308
         delay = float("nan")
     if not 0 <= delay <= MAX_DELAY:  # NaN fails it; 1e300 s would end the timer thread that waits it out
-        shown = repr(written) if len(repr(written)) <= 40 else "a whole number of %d digits" % len(str(written)) \
-            if isinstance(written, int) else "a %s of %d characters" % (type(written).__name__, len(repr(written)))
+        shown = whole_number_text(written) if isinstance(written, int) and written.bit_length() > 100 else \
+            repr(written) if len(repr(written)) <= 40 else "a %s of %d characters" % (type(written).__name__,
+                                                                                     len(repr(written)))
         raise OutcomeError("delay must be a number of seconds from 0 to %d (a day), got %s" % (MAX_DELAY, shown))
     ignores = raw.get("ignores_cancel", False)
     if not isinstance(ignores, bool):

@@ -39,12 +39,18 @@ class _Msg:
 DEEP = '{"id": "deep-1", "command": "set", "key": "x", "value": %s}' % ("[" * 20000 + "]" * 20000)
 
 
-def test_an_unreadable_request_is_refused_in_the_subscriber_thread_without_raising(monkeypatch):
+@pytest.fixture
+def ros_ctl(monkeypatch):
+    """``bmtree run --control``'s controller of node /bmtree_run, on stand-ins of rospy's topics."""
     monkeypatch.setattr(_Pub, "made", [])
     monkeypatch.setattr(rospy, "Publisher", _Pub)
     monkeypatch.setattr(rospy, "Subscriber", _Sub)
     monkeypatch.setattr(rospy, "get_name", lambda: "/bmtree_run")
-    ctl = controlros.ros_controller(True)
+    return controlros.ros_controller(True)
+
+
+def test_an_unreadable_request_is_refused_in_the_subscriber_thread_without_raising(ros_ctl):
+    ctl = ros_ctl
     for text in (DEEP, '{"id": "b-2", "command": ', "[1, 2]"):
         ctl.subscription.callback(_Msg(text))   # rospy's thread: nothing may raise here
     ctl.may_tick()   # the ticking thread answers them
@@ -56,13 +62,9 @@ def test_an_unreadable_request_is_refused_in_the_subscriber_thread_without_raisi
         (None, False, "malformed command: the request cannot be read: payload is not a JSON object (got list)")]
 
 
-def test_an_unreadable_request_for_another_run_is_left_to_it(monkeypatch):
+def test_an_unreadable_request_for_another_run_is_left_to_it(ros_ctl):
     """Its ``to``, read from its text, names another run's node: every run on the master answered it."""
-    monkeypatch.setattr(_Pub, "made", [])
-    monkeypatch.setattr(rospy, "Publisher", _Pub)
-    monkeypatch.setattr(rospy, "Subscriber", _Sub)
-    monkeypatch.setattr(rospy, "get_name", lambda: "/bmtree_run")
-    ctl = controlros.ros_controller(True)
+    ctl = ros_ctl
     for to in ("/bmtree_other", "/bmtree_run"):
         ctl.subscription.callback(_Msg('{"id": "d-%s", "to": "%s", "command": "set", "value": %s' % (
             to[-3:], to, "[" * 200)))

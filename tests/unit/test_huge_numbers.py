@@ -111,3 +111,15 @@ def test_a_mock_nodes_script_and_the_kits_mocks_refuse_a_huge_time(tmp_path, sim
         mocks.event(HUGE, "vision.lostPerson", person="Ana")
     with pytest.raises(MockError, match="delay must be a number of seconds from 0 to 86400 \\(a day\\), got a whole number of 401 digits"):
         outcome_from_dict({"succeed": {}, "delay": HUGE})
+
+
+def test_a_whole_number_too_long_for_str_is_said_by_its_size_everywhere():
+    """Python 3.11's ``str`` refuses a whole number of more than 4,300 digits (ValueError): an outcome's
+    delay of 5,000 digits raised it while its error was being written."""
+    from comm.typewords import whole_number_text
+
+    huge = 10 ** 5000
+    with pytest.raises(MockError, match="got a whole number of thousands of digits$"):
+        outcome_from_dict({"succeed": {}, "delay": huge})
+    assert shown(-huge) == "a negative whole number of thousands of digits (numbers go up to 1.8e308)"
+    assert whole_number_text(-10 ** 400) == "a negative whole number of 401 digits"
