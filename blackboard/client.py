@@ -63,7 +63,8 @@ def silent_blackboards(silent: Dict[str, Tuple[str, str]], master_uri: Optional[
             out.append("the Blackboard node %s is registered but cannot be reached: %s" % (node, why))
             continue
         if failure == REFUSED:
-            why = "nothing listens at %s, so its process is gone (killed outright, its registration left behind)" % uri
+            why = ("nothing listens at %s, so its process is gone (killed outright, its registration left behind): "
+                   "start it again (bmtree-blackboard, or roslaunch bmtree blackboard.launch)" % uri)
         else:
             why = "%s at %s (is its process stuck?)" % (failure, uri)
         out.append("the Blackboard node %s is registered but does not answer from here: %s" % (node, why))

@@ -201,10 +201,16 @@ def own_address_problem(master_uri: Optional[str] = None, own: Optional[OwnAddre
 
     if not found:
         what = "ROS_HOSTNAME=%s" % own.host if own.variable == "ROS_HOSTNAME" else own.said()
+        if master_is_remote(master_uri):   # a loopback address would be no fix: name this machine's own
+            example = (suggest or suggested_address)(master_uri)
+            hint = "export ROS_IP=%s, this machine's address towards the master %s" % (
+                example, master_uri) if example else "the master %s is on another machine" % master_uri
+        else:
+            hint = "export ROS_IP=127.0.0.1 when every node runs here"
         return AddressProblem("unresolved", (
             "%s does not resolve, so other nodes cannot connect back to this process: set ROS_IP to "
-            "this machine's address on the ROS network (export ROS_IP=127.0.0.1 when every node runs "
-            "here) or ROS_HOSTNAME to a name the other machines resolve" % what), "%s, which does not resolve" % what)
+            "this machine's address on the ROS network (%s) or ROS_HOSTNAME to a name the other machines "
+            "resolve" % (what, hint)), "%s, which does not resolve" % what)
     shown = own.said() if own.host in found else "%s (%s%s)" % (
         own.said(), ", ".join(found), "" if own.variable else "; ROS_IP is not set")
     if all(is_loopback(a) for a in found):

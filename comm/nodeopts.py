@@ -204,6 +204,8 @@ def _as_option(action: argparse.Action, value: Any) -> Any:
     if isinstance(action, argparse._AppendAction):
         if isinstance(value, dict):  # e.g. ~set: {object: book}
             return ["%s=%s" % (k, v) for k, v in value.items()]
+        if value == "":   # none (a launch file sets the parameter always, '' when its argument is not given)
+            return []
         return [str(v) for v in value] if isinstance(value, list) else [str(value)]
     if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
         if not isinstance(value, bool) and value not in (0, 1):

@@ -10,7 +10,7 @@ import urllib.parse
 import xmlrpc.client
 from typing import Any, Mapping, Optional, Set, Tuple
 
-__all__ = ["proxy", "node_alive", "PidLine", "wait_closed", "MASTER_TIMEOUT", "master_api", "master_answers",
+__all__ = ["master_absence", "proxy", "node_alive", "PidLine", "wait_closed", "MASTER_TIMEOUT", "master_api", "master_answers",
            "MasterProxy"]
 
 #: seconds a question to the master may take: a master whose machine dropped off the network, or
@@ -64,6 +64,28 @@ def master_answers(timeout: float, master_uri: Optional[str] = None) -> bool:
         return code == 1
     except (OSError, http.client.HTTPException, xmlrpc.client.Error):
         return False
+
+
+def master_absence(master_uri: str, timeout: float = 2.0) -> str:
+    """Why nothing answered at ``master_uri``, for an operator: nothing listens on its port, its
+    host does not answer (the network, or a wrong address), its name does not resolve; '' when a
+    connection can be made (something listens there, but it did not answer as a master)."""
+    import socket
+    import urllib.parse
+
+    parsed = urllib.parse.urlparse(master_uri)
+    host, port = parsed.hostname or "localhost", parsed.port or 11311
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return ""
+    except socket.gaierror:
+        return "%s is no host name this machine can resolve (check ROS_MASTER_URI)" % host
+    except ConnectionRefusedError:
+        return "nothing listens on port %d of %s: no master runs there (start one: roscore), or ROS_MASTER_URI " \
+               "names the wrong port" % (port, host)
+    except OSError as exc:   # a timeout, no route to the host, the network down
+        return "%s does not answer (%s): is the robot's network up, and is ROS_MASTER_URI its address?" % (
+            host, "timed out" if isinstance(exc, socket.timeout) else exc.strerror or exc)
 
 
 class MasterProxy(xmlrpc.client.ServerProxy):

@@ -29,7 +29,7 @@ from coordinator.cliutil import (
 )
 from coordinator.errors import EnvironmentProblem, InvalidInput, TreeErrors, UsageError
 from coordinator.runcmd import cmd_demo, cmd_run
-from modules.definition import DefinitionError, ModuleDefinition, load_definitions
+from modules.definition import DefinitionError, ModuleDefinition, load_definition, load_definitions
 
 __all__ = ["main", "make_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_INVALID", "EXIT_ENV"]
 
@@ -41,6 +41,17 @@ def cmd_check(args: argparse.Namespace) -> int:
     defs = definitions_from(args.modules)
     problems = warned = 0
     for path in args.trees:
+        if _is_definition(path):   # a module's definition: checked as one (it is no tree)
+            try:
+                d = load_definition(path)
+            except DefinitionError as exc:
+                problems += 1
+                err(str(exc))
+                continue
+            print("%s: ok (the definition of module %s: %d function%s, %d event%s)" % (
+                path, d.name, len(d.functions), "" if len(d.functions) == 1 else "s", len(d.events),
+                "" if len(d.events) == 1 else "s"))
+            continue
         try:
             tree = load_tree(path, defs)
         except TreeErrors as exc:
@@ -57,6 +68,19 @@ def cmd_check(args: argparse.Namespace) -> int:
         else:
             print("%s: ok%s" % (path, " (%s)" % counted if n else ""))
     return EXIT_INVALID if problems or (args.strict and warned) else EXIT_OK
+
+
+def _is_definition(path: str) -> bool:
+    """A ``.json`` file whose top level has ``"Basic Module"``: a module definition, not a tree."""
+    import json
+
+    if not path.endswith(".json"):
+        return False
+    try:
+        data = json.loads(read_text(path))
+    except (OSError, ValueError, RecursionError):
+        return False   # the tree loader says what is wrong with it
+    return isinstance(data, dict) and "Basic Module" in data
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
@@ -307,7 +331,8 @@ def make_parser() -> argparse.ArgumentParser:
         sp.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a tree input (YAML value)")
         sp.add_argument("--call-timeout", type=seconds(), default=30.0, help="default timeout of a call (s)")
         sp.add_argument("--period", type=seconds(), default=0.25, help="longest time between ticks (s)")
-        sp.add_argument("--max-duration", type=seconds(), help="stop the task after this many seconds")
+        sp.add_argument("--max-duration", type=seconds("no limit"),
+                        help="stop the task after this many seconds (0: no limit, the default)")
         sp.add_argument("--wait", type=seconds("do not wait"), default=10.0,
                         help="how long to wait for the master and modules (s)")
         sp.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"), default=1 << 20, help="largest payload accepted (bytes)")
@@ -337,7 +362,7 @@ def make_parser() -> argparse.ArgumentParser:
                    "(pause, step, breakpoints, forced outcomes, blackboard writes; ROS 1 has no authentication)")
     run_options(r)
     r.set_defaults(func=cmd_run, command_parser=r)
-    c = sub.add_parser("check", help="validate trees without running them")
+    c = sub.add_parser("check", help="validate trees (and module definitions, .json) without running them")
     c.add_argument("trees", nargs="+", type=path_arg("a tree file"))
     c.add_argument("--strict", action="store_true", help="warnings are errors (exit 2)")
     with_modules(c)

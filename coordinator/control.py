@@ -292,9 +292,8 @@ class Controller(RunObserver):
         if not nodes:
             return False, missing
         if what == "clear":  # harmless on each node so named
-            for b in nodes:
-                self.breaks.pop(b, None)
-            return True, "no breakpoint on %r" % cmd.get("node")
+            had = [b for b in nodes if self.breaks.pop(b, None) is not None]
+            return True, ("breakpoint on %r cleared" if had else "no breakpoint on %r (none was set)") % cmd.get("node")
         nodes, refused = self._still_ticked(nodes, cmd.get("node"))
         if refused:
             return False, refused

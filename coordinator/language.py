@@ -24,7 +24,7 @@ from coordinator.refs import RefError
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, gc_paused, nodes_of, top_of, used_modules, walk
 from coordinator.treewarnings import TreeErrorsWithWarnings, warnings
 from coordinator.values import literal, loose_dollars
-from coordinator.yamlsrc import LList, LMap, load_yaml, pos_of
+from coordinator.yamlsrc import LList, LMap, bool_hint, load_yaml, pos_of
 from modules.definition import ModuleDefinition
 
 __all__ = ["FORMAT", "Parser", "TreeErrorsWithWarnings", "load_tree", "used_modules", "walk", "warnings"]
@@ -194,7 +194,7 @@ class Parser:
         self.inputs_raw[raw.pos.file] = raw   # where each default is, for the checks' errors
         for name, spec in raw.items():
             if not isinstance(name, str) or not name.isidentifier():
-                self.err(raw.key_pos[name], "input name %r is not an identifier" % (name,))
+                self.err(raw.key_pos[name], "input name %r is not an identifier%s" % (name, bool_hint(name)))
                 continue
             if spec is None:
                 spec = {}
@@ -375,7 +375,8 @@ class Parser:
             if type_name == "bool":
                 self.err(at, "%r must be true or false" % label)
             else:
-                self.err(at, "%s of %s must be %s, got %s" % (label, node.kind, t.expect, shown(value)))
+                self.err(at, "%s of %s must be %s, got %s%s" % (label, node.kind, t.expect, shown(value),
+                                                                bool_hint(value)))
             return None
         return value
 
@@ -450,9 +451,12 @@ class Parser:
         for name, key_ in value.items():
             if allowed is not None and name not in allowed:
                 self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, closest(name, allowed, what)))
+                if isinstance(key_, str) and key_.isidentifier():
+                    out[name] = key_   # its key still counts as written: no knock-on "no node writes" below
             elif not isinstance(key_, str) or not key_.isidentifier():
                 hint, out[name] = parsehints.key_fix(key_)   # "{obj_pos}": obj_pos meant (written: no knock-on error)
-                self.err(value.val_pos[name], "tree key %r is not an identifier%s" % (key_, hint))
+                self.err(value.val_pos[name], "tree key %r is not an identifier%s" % (
+                    key_, hint or bool_hint(key_)))
             else:
                 out[name] = key_
         return out
@@ -464,7 +468,7 @@ class Parser:
             return None
         for k in value:
             if not isinstance(k, str) or not k.isidentifier():
-                self.err(value.key_pos[k], "tree key %r is not an identifier" % (k,))
+                self.err(value.key_pos[k], "tree key %r is not an identifier%s" % (k, bool_hint(k)))
         return value
 
 

@@ -67,9 +67,7 @@ class _Preflight:
         self.first_ping: Dict[str, float] = {}
         self._diffs: Dict[str, Tuple[ModuleDefinition, List[str]]] = {}  # module -> (live definition, problems)
         # this process's own address, when the others cannot reach it: what a missing connection is then
-        self.own = own_address_problem()
-        self.unreachable = (": subscribers cannot reach this process at %s: set ROS_IP" % self.own.where
-                            if self.own is not None else "")
+        self.own = own_address_problem()   # said once, before the problems it causes
 
     def definition_problems(self, live: LiveModule) -> List[str]:
         """Computed once per announced definition, not once per look."""
@@ -97,8 +95,8 @@ class _Preflight:
             return []
         call_pub = tr._route(name)
         if live.uri not in results or not call_pub.impl.has_connection(live.node):
-            return ["module %r (node %s) is not connected to %s and %s yet%s" % (
-                name, live.node, call_pub.resolved_name, TOPIC_RESULT, self.unreachable)]
+            return ["module %r (node %s) is not connected to %s and %s yet" % (
+                name, live.node, call_pub.resolved_name, TOPIC_RESULT)]
         if name not in tr._routes and now - self.first_ping.setdefault(name, now) >= PING_PATIENCE:
             return []
         if now - self.pinged.get(name, -1e9) >= PING_EVERY:
@@ -149,7 +147,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             if name in announced:
                 found = state.announced_problems(announced[name], name in answered, now, results)
             elif name in originals:
-                found = _legacy_problems(tr, name, *originals[name], state.unreachable)
+                found = _legacy_problems(tr, name, *originals[name])
             elif name in given:
                 found = ["the node %s given for module %r (--legacy) is not running or does not listen on %s"
                          % (given[name], name, TOPIC_CALL)]
@@ -166,8 +164,7 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
         # modules' results under their call): it must hear the first call too
         for bb in blackboards:
             if not tr._shared("call").impl.has_connection(bb):
-                problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s%s" % (
-                    bb, TOPIC_CALL, state.unreachable)]
+                problems["~" + bb] = ["waiting for the Blackboard node %s to connect to %s" % (bb, TOPIC_CALL)]
         if not problems:
             tr.node_modules = {m.node: n for n, m in announced.items() if n in wanted}
             tr.node_modules.update({node: n for n, (node, _uri) in originals.items()})
@@ -175,16 +172,19 @@ def wait_ready(tr: RosTransport, modules: Iterable[str], timeout: float,
             return
         if notify is not None and start + NOTIFY_AFTER <= time.monotonic() <= end - NOTIFY_AFTER / 2:
             _explain(problems, announced)  # killed, or misaddressed, not slow
-            notify("waiting up to %.3g s more (--wait): %s ..." % (
-                max(0.0, end - time.monotonic()), "; ".join(p for name in sorted(problems) for p in problems[name])))
+            notify("waiting up to %.3g s more (--wait): %s%s ..." % (
+                max(0.0, end - time.monotonic()), "%s; so: " % state.own if state.own is not None else "",
+                "; ".join(p for name in sorted(problems) for p in problems[name])))
             notify = None
         if time.monotonic() >= end:
             _explain(problems, announced)
             hint = str(state.own or "")
             at = where or {}
-            raise EnvironmentProblem("; ".join(["%s: %s" % (at[name], p) if name in at else p
-                                                for name in sorted(problems) for p in problems[name]]
-                                               + ([hint] if hint else [])))
+            said = "; ".join("%s: %s" % (at[name], p) if name in at else p
+                             for name in sorted(problems) for p in problems[name])
+            # this process's own address first, once: it is why the others are not connected (it was said
+            # after each of them, a line of 1,500 characters for four modules)
+            raise EnvironmentProblem("%s; so: %s" % (hint, said) if hint else said)
         with tr._cond:
             tr._cond.wait(POLL)
 
@@ -235,11 +235,10 @@ def _dead(modules: List[LiveModule]) -> Dict[str, List[str]]:
     return out
 
 
-def _legacy_problems(tr: RosTransport, name: str, node: str, uri: str, unreachable: str = "") -> List[str]:
+def _legacy_problems(tr: RosTransport, name: str, node: str, uri: str) -> List[str]:
     if tr._shared("call").impl.has_connection(node) and tr._subs[0].impl.has_connection(uri):
         return []
-    return ["original module %r (node %s) is not connected to %s and %s yet%s" % (name, node, TOPIC_CALL,
-                                                                                 TOPIC_RESULT, unreachable)]
+    return ["original module %r (node %s) is not connected to %s and %s yet" % (name, node, TOPIC_CALL, TOPIC_RESULT)]
 
 
 def _system_state() -> Tuple[Any, Any]:

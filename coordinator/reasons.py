@@ -17,7 +17,7 @@ import py_trees
 from py_trees.common import Status
 
 from coordinator.nodes.decorators import Retry
-from coordinator.runevents import Change, RunObserver
+from coordinator.runevents import Change, RunObserver, include_label
 from coordinator.running import running_phrase
 
 __all__ = ["FailureExplainer", "FailureTrail", "Origin", "originates"]
@@ -172,6 +172,24 @@ class FailureExplainer(RunObserver):
                 text += " (%d of %d attempts)" % (gave[1], gave[2])
                 break
         return text
+
+    def failed_at(self, root: Any, under: bool = False) -> str:
+        """Where the failure :meth:`reason` names is written, ``FILE:LINE:COLUMN`` (an editor's jump
+        target), and the nearest include it is in with the values of its arguments
+        (``in search_room(room="kitchen")``); '' when none is known."""
+        o = self.root_cause_under(root) if under else self.root_cause()
+        node = getattr(o.behaviour, "bmtree_node", None) if o is not None else None
+        pos = getattr(node, "pos", None)
+        if o is None or pos is None:
+            return ""
+        inc = next((a for a in _ancestors(o.behaviour)
+                    if getattr(getattr(a, "bmtree_node", None), "kind", None) == "include"), None)
+        if inc is None:
+            return str(pos)
+        setter = inc.children[0] if inc.children else None
+        if setter is None or not setter.name.startswith("arguments of "):  # an include without args
+            return "%s in %s" % (pos, inc.name)
+        return "%s in %s" % (pos, include_label(inc.name, getattr(setter, "written", None)))
 
 
 def _where(b: Any) -> str:

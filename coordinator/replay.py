@@ -20,6 +20,7 @@ from coordinator.replaystate import Failure, Replay
 from coordinator.runevents import (
     CLEANUP_NOTICES,
     TerminalText,
+    cleanup_at,
     cleanup_said,
     control_line,
     status_word,
@@ -123,6 +124,8 @@ def _report(replay: Replay, out: TextIO) -> None:
                                                      end.get("ticks")))
         if end.get("reason") and end.get("status") != "SUCCESS":
             out.write("reason: %s\n" % end.get("reason"))
+            if end.get("at"):
+                out.write("at: %s\n" % end["at"])
     ended, _others = replay.failures()
     failing = replay.failing_call(ended)[0] if ended is not None else None
     _stop_tick, _what, label = _stop(replay)
@@ -133,7 +136,7 @@ def _report(replay: Replay, out: TextIO) -> None:
     for c in [c for c in replay.finished if c.get("node") not in replay.cleanup_ids] + [None] + cleanup:
         if c is None:
             said = cleanup_said((end or {}).get("cleanup"))
-            out.write(said + "\n" if said else "")
+            out.write("".join(line + "\n" for line in [said] + cleanup_at((end or {}).get("cleanup")) if said))
             continue
         status, error = label(c)
         out.write(call_line(float(c.get("started") or 0.0), c.get("target"), status, float(c.get("duration") or 0.0),
@@ -254,15 +257,15 @@ def _cleanup_failure(replay: Replay, out: TextIO, label: Callable[[Dict[str, Any
 
 
 def _test_command(log: RunLog, scenario: str) -> str:
-    """``bmtree test`` of ``scenario`` with the definition files the run was given, and a word
-    on the modules it knew only from the live graph (their definitions are in no file it had)."""
+    """``bmtree test`` of ``scenario`` (whose ``modules:`` names the definition files the run was given),
+    and a word on the modules it knew only from the live graph (their definitions are in no file it had)."""
     import shlex
 
     from modules.definition import DefinitionError
     from modules.search import default_definitions
 
     given = [m for m in log.tree.get("modules") or [] if isinstance(m, str) and os.path.exists(m)]
-    command = " ".join(["bmtree test"] + ["--modules %s" % shlex.quote(m) for m in given] + [shlex.quote(scenario)])
+    command = "bmtree test %s" % shlex.quote(scenario)
     try:
         known = set(default_definitions(given))
     except (DefinitionError, OSError) as exc:  # changed since the run: the test will say what is wrong

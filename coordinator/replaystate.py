@@ -16,7 +16,7 @@ import py_trees
 from py_trees.common import Status
 
 from coordinator.reasons import FailureTrail, originates
-from coordinator.runevents import IncludeArgs, Notice, RunObserver, control_line
+from coordinator.runevents import IncludeArgs, Notice, RunObserver, control_line, tree_drawing
 from coordinator.runlog import RunLog, RunLogError
 
 __all__ = ["Failure", "Replay"]
@@ -114,6 +114,7 @@ class Replay:
         self.events: List[Dict[str, Any]] = []
         self.control: List[Dict[str, Any]] = []  # the operator's commands (run --control), and breakpoints hit
         self.paused = False
+        self.paused_by: Optional[Dict[str, Any]] = None  # the control record that paused it (not a later refusal)
         self.notices: List[Dict[str, Any]] = []  # what happened to the ROS graph (the master went away...)
         self.index = 1
         self.t = 0.0
@@ -154,6 +155,8 @@ class Replay:
         elif kind == "control":
             self.control.append(rec)
             if "paused" in rec:
+                if rec["paused"] and not self.paused:
+                    self.paused_by = rec
                 self.paused = bool(rec["paused"])
             if display is not None:
                 display.on_control(rec, self.t)
@@ -342,17 +345,12 @@ class Replay:
     def snapshot(self, out: TextIO, stopped: str = "") -> None:
         """The tree (includes with the values their arguments had), the tree blackboard and the calls
         in flight now; ``stopped``: what then happened to those calls (the run was stopped)."""
-        names = {i: b.name for i, b in self.by_id.items()}
-        for i in self.args.values:
-            if i in self.by_id:
-                self.by_id[i].name = self._named(self.args, i)
-        try:
-            out.write(py_trees.display.unicode_tree(self.root, show_status=True) + "\n")
-        finally:
-            for i, name in names.items():
-                self.by_id[i].name = name
+        ids = {b: i for i, b in self.by_id.items()}
+        drawing = tree_drawing(self.root, lambda b, name: self._named(self.args, ids[b])
+                               if ids.get(b) in self.args.values else name) + "\n"
+        getattr(out, "write_drawing", out.write)(drawing)   # (a TerminalText would escape its colours)
         if self.paused:
-            out.write("paused by control (%s)\n" % control_line(self.control[-1]))
+            out.write("paused by control (%s)\n" % control_line(self.paused_by or self.control[-1]))
         out.write("tree blackboard:\n")
         for k in sorted(self.blackboard):
             out.write("  %s = %s\n" % (k, json.dumps(self.blackboard[k], ensure_ascii=False)))

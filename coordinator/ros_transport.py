@@ -47,6 +47,7 @@ from comm.messages import (
     DEFAULT_MAX_BYTES,
     BlackboardAnswer,
     BlackboardRequest,
+    CallStatus,
     CancelRequest,
     Event,
     FunctionCall,
@@ -110,6 +111,8 @@ class RosTransport(Transport):
         self._held: Dict[str, TopicSender] = {}  # topics with messages kept by hold()
         self._pings: Dict[str, str] = {}  # ping call_id -> module
         self._ponged: Set[str] = set()  # modules that answered a ping
+        #: module -> what its last ping's answer said beside "alive" (busy with a call cancelled long ago)
+        self.ping_notes: Dict[str, str] = {}
         self._cond = threading.Condition()
         self.screen = Screen()  # what arrives, checked against the definitions of the run's modules
 
@@ -197,6 +200,8 @@ class RosTransport(Transport):
             module = self._pings.get(result.call_id or "")
             if module is not None and module == result.basic_mod:
                 self._ponged.add(module)
+                if result.status == CallStatus.SUCCEEDED:
+                    self.ping_notes[module] = result.error
                 self._cond.notify_all()
         return True
 

@@ -211,6 +211,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if getattr(args, attr, None):
             setattr(args, attr, os.path.expanduser(getattr(args, attr)))
     args.modules = [os.path.expanduser(m) for m in args.modules] if args.modules else args.modules
+    if not args.max_duration:   # 0: no limit (run.launch sets it always)
+        args.max_duration = None
     from coordinator.builder import build_tree
     from coordinator.clock import RealClock
     from coordinator.context import RunContext
@@ -273,8 +275,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + args.wait  # for the master, the modules' announcements, the preflight
         if not args.sim:
             if not wait_master(args.wait):
-                err("error: no ROS master at %s after %g s (start one, or use --sim)" % (os.environ.get(
-                    "ROS_MASTER_URI", "http://localhost:11311/"), args.wait))
+                from comm.rpc import master_absence
+
+                uri = os.environ.get("ROS_MASTER_URI", "http://localhost:11311/")
+                err("error: no ROS master at %s after %g s: %s. Without a robot, bmtree run --sim brings up a "
+                    "simulated one" % (
+                    uri, args.wait, master_absence(uri) or "something listens there, but it does not answer as a "
+                                                           "ROS master"))
                 return EXIT_ENV
             guard = _start_guard(args.wait, interrupts)
             if tree is None:  # modules known only to the live graph
@@ -338,6 +345,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                 err("error: %s" % exc)
                 return EXIT_ENV
             stream_sink.settle()
+            for module, note in sorted(transport.ping_notes.items()):
+                if note and module in mods:
+                    err("warning: module %s: %s" % (module, note[:400]))
             import rosgraph
 
             from modules.discovery import announced_modules

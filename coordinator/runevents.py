@@ -15,13 +15,13 @@ import logging
 import re
 import sys
 from dataclasses import dataclass
-from typing import Any, Dict, Iterable, List, Optional, TextIO, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Optional, TextIO, Tuple
 
 import py_trees
 from py_trees.common import Status
 
-__all__ = ["terminal_text", "TerminalText", "Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
-           "halted_word", "cleanup_said",
+__all__ = ["terminal_text", "TerminalText", "tree_drawing", "Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
+           "halted_word", "cleanup_said", "cleanup_at",
            "CLEANUP_NOTICES", "IncludeArgs", "include_label"]
 
 log = logging.getLogger("bmtree.coordinator")
@@ -51,6 +51,21 @@ def terminal_text(text: Any, newlines: bool = True) -> str:
     return pattern.sub(_escaped, text) if pattern.search(text) else text
 
 
+def tree_drawing(root: Any, name: Optional[Callable[[Any, str], str]] = None) -> str:
+    """py_trees' drawing of ``root`` with statuses, each node's name (``name(b, b.name)``) and feedback
+    (a module's text) escaped first: the drawing's own colours reach the terminal (escaped after the
+    drawing, they showed as ``\x1b[32m✓\x1b[0m``)."""
+    shown = {b: (b.name, b.feedback_message) for b in root.iterate()}
+    try:
+        for b, (was, feedback) in shown.items():
+            b.name = terminal_text(name(b, was) if name is not None else was, newlines=False)
+            b.feedback_message = terminal_text(feedback, newlines=False)
+        return py_trees.display.unicode_tree(root, show_status=True)
+    finally:
+        for b, (was, feedback) in shown.items():
+            b.name, b.feedback_message = was, feedback
+
+
 class TerminalText:
     """A text stream that writes everything through :func:`terminal_text` (newlines kept)."""
 
@@ -59,6 +74,10 @@ class TerminalText:
 
     def write(self, text: str) -> int:
         return self.stream.write(terminal_text(text))
+
+    def write_drawing(self, text: str) -> int:
+        """A :func:`tree_drawing` as it is: its text is escaped already, its colours are its own."""
+        return self.stream.write(text)
 
     def flush(self) -> None:
         self.stream.flush()
@@ -216,6 +235,13 @@ def cleanup_said(said: Any) -> str:
     word = {"SUCCESS": "succeeded", "FAILURE": "FAILED"}.get(str(status), "cut short")
     why = ": %s" % said.get("reason") if said.get("reason") and status != "SUCCESS" else ""
     return "cleanup (root %s): %s in %.2f s%s" % (said.get("ended"), word, float(said.get("duration") or 0.0), why)
+
+
+def cleanup_at(said: Any) -> List[str]:
+    """The line under :func:`cleanup_said`'s of a failed cleanup: where its failure is written."""
+    if not isinstance(said, dict) or said.get("status") != "FAILURE" or not said.get("at"):
+        return []
+    return ["  at: %s" % said["at"]]
 
 
 _ARG = re.compile(r"(?:^|(?<=, ))([A-Za-z_][A-Za-z0-9_]*)=")
@@ -377,17 +403,9 @@ class Display(RunObserver):
 
     def _draw(self, now: float) -> None:
         self._drawn = now
-        names = {b: b.name for b in self._args.values}
-        try:  # includes with their arguments' values
-            for b in names:
-                b.name = self._args.name(b, b.name)
-            text = py_trees.display.unicode_tree(self.root, show_status=True)
-        finally:
-            for b, name in names.items():
-                b.name = name
+        text = tree_drawing(self.root, self._args.name)   # includes with their arguments' values
         if self._note:
-            text += "\n" + self._note
-        text = terminal_text(text)
+            text += "\n" + terminal_text(self._note)
         if self._lines:
             self.stream.write("\x1b[%dA\x1b[J" % self._lines)
         self.stream.write(text + "\n")

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
 from py_trees.common import Status
 
 from coordinator.context import CallRecord, late_answer_text
-from coordinator.runevents import status_word, terminal_text
+from coordinator.runevents import cleanup_at, status_word, terminal_text
 
 if TYPE_CHECKING:
     from coordinator.runner import RunResult
@@ -83,6 +83,8 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
                                                    result.ticks)]
     if result.reason and not result.succeeded:
         lines.append("reason: %s" % result.reason)
+        if result.failed_at:
+            lines.append("at: %s" % result.failed_at)
     lines.append("calls:")
     cleanup = {id(c) for c in result.cleanup_calls}
     cut = {id(c) for c in result.cleanup_cut_calls}
@@ -108,4 +110,5 @@ def cleanup_lines(result: RunResult) -> List[str]:
     said = {"SUCCESS": "succeeded", "FAILURE": "FAILED", "INVALID": "cut short"}[result.cleanup_status.value]
     took = " in %.2f s" % result.cleanup_duration if result.cleanup_duration is not None else ""
     why = ": %s" % result.cleanup_reason if result.cleanup_reason and result.cleanup_failed else ""
-    return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)]
+    return ["cleanup (root %s): %s%s%s" % (result.ended, said, took, why)] + cleanup_at(
+        {"status": result.cleanup_status.value, "at": result.cleanup_failed_at})

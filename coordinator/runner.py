@@ -70,6 +70,9 @@ class RunResult:
     cleanup_started: Optional[float] = None
     cleanup_duration: Optional[float] = None
     cleanup_cut_calls: List[CallRecord] = field(default_factory=list)  # those the cut of the cleanup halted
+    # where the failure the reason (cleanup_reason) names is written: ``FILE:LINE:COLUMN`` [``in INCLUDE``]
+    failed_at: str = ""
+    cleanup_failed_at: str = ""
 
     @property
     def succeeded(self) -> bool:
@@ -299,11 +302,16 @@ class TreeRunner:
         result = RunResult(status=status, duration=now - start, calls=list(ctx.calls),
                            blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
                            started=start, failed_call=failed_call, stopped_at=stopped_at)
+        if status == Status.FAILURE and stopped_at is None:
+            result.failed_at = self.explainer.failed_at(task.root if task is not None else self.root,
+                                                        under=task is not None)
         if task is not None:
             self._cleanup_said(task)
             under = set(task.cleanup.iterate())
             result.ended = task.ended
             result.cleanup_status, result.cleanup_reason = task.cleanup_status, task.cleanup_reason
+            if task.cleanup_status == Status.FAILURE:
+                result.cleanup_failed_at = self.explainer.failed_at(task.cleanup, under=True)
             result.cleanup_calls = [c for c in result.calls if c.owner in under]
             result.cleanup_started = task.cleanup_started
             result.cleanup_cut_calls = list(task.cut_calls)

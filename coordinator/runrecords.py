@@ -69,7 +69,7 @@ _KEYS = {  # type -> (key, check, required); None: every record. A key that is n
     "write": (("key", _text, True),),
     "recall": (("values", _list, False),),
     "end": (("status", _text, True), ("reason", _text, False), ("duration", _seconds, False), ("ticks", _count, False),
-            ("calls", _count, False), ("cleanup", _mapping, False)),
+            ("calls", _count, False), ("cleanup", _mapping, False), ("at", _text, False)),
     "snapshot": (("n", _count, False), ("tick_t", _seconds, False), ("ncalls", _count, False),
                  ("status", _mapping, False), ("feedback", _mapping, False), ("last", _mapping, False),
                  ("loops", _mapping, False), ("blackboard", _mapping, False), ("args", _mapping, False),
@@ -234,7 +234,7 @@ def record_problem(rec: Any, ids: Optional[Collection[int]] = None) -> Optional[
     if kind == "end" and rec.get("cleanup") is not None:
         said = rec["cleanup"]
         for key, check in (("ended", _text), ("status", _text), ("reason", _text), ("calls", _count),
-                           ("duration", _seconds)):
+                           ("duration", _seconds), ("at", _text)):
             if said.get(key) is not None and not check(said[key]):
                 return "'cleanup' of the end record: %r must be %s, got %s" % (key, _WHAT[check], _shown(said[key]))
     if kind == "snapshot":

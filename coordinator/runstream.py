@@ -294,11 +294,15 @@ class RunStream(RunObserver):
         record = {"v": VERSION, "type": "end", "run": self.run_id, "t": self._t(self._clock.now()),
                   "status": result.status.value, "reason": result.reason, "ticks": result.ticks,
                   "duration": round(result.duration, 6), "calls": len(result.calls)}
+        if getattr(result, "failed_at", ""):   # where the failure the reason names is written
+            record["at"] = result.failed_at
         if getattr(result, "ended", ""):   # a tree with cleanup: how root ended, how its cleanup did
             cleanup = getattr(result, "cleanup_status", None)
             record["cleanup"] = {"ended": result.ended, "status": cleanup.value if cleanup is not None else None,
                                  "reason": result.cleanup_reason, "calls": len(result.cleanup_calls),
                                  "duration": round(result.cleanup_duration or 0.0, 6)}
+            if getattr(result, "cleanup_failed_at", ""):
+                record["cleanup"]["at"] = result.cleanup_failed_at
         self._emit("end", record)
         self._open = False
         for s in self.sinks:

@@ -1,8 +1,9 @@
 """A recorded run as a ``bmtree test`` scenario: the field run becomes a regression test.
 
 Every module answers as it did (per function, in call order: outputs, failure or
-rejection text, and how long it took); a call that never got an answer (timed out,
-halted, still running at the end) hangs. The expectations are the recorded result and
+rejection text, and how long it took); a call whose module's node died (``module_lost``)
+dies as it did, with the same text, after the same time; a call that never got an answer
+(timed out, halted, still running at the end) hangs. The expectations are the recorded result and
 the calls in order with their inputs, so ``bmtree test`` reproduces the same path on
 simulated time, and a changed tree shows which calls changed.
 
@@ -76,6 +77,9 @@ def _outcome(end: Dict[str, Any], defs: Optional[Dict[str, Any]] = None) -> Dict
         out = {"fail": str(end.get("error") or "failed")}
     elif answer == "rejected":
         out = {"reject": str(end.get("error") or "rejected")}
+    elif answer is None and end.get("status") == "module_lost":  # its node died: the mock dies as it did
+        error, lost = str(end.get("error") or ""), "module %s lost: " % str(end.get("target")).split(".", 1)[0]
+        out = {"die": error[len(lost):] if error.startswith(lost) else error or True}
     else:  # no answer (timeout, halted) or the answer to a cancel
         return {"hang": True}
     if delay:

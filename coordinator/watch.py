@@ -16,7 +16,7 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, TextIO, Tuple, cast
 
 from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals, leave_graph
@@ -27,7 +27,7 @@ from coordinator.runrecords import parse_record
 from coordinator.runstream import to_json
 from coordinator.watchstate import SnapshotSink, WatchState
 from coordinator.watchterm import Keys, LiveView, key_reader, keys_help
-from coordinator.watchview import LinePrinter
+from coordinator.watchview import LinePrinter, TimeOrderedLines
 
 __all__ = ["RosWatcher", "LiveView", "cmd_watch", "run_view", "STREAM_NS", "WATCH_CHANNELS"]
 
@@ -261,7 +261,9 @@ def cmd_watch(args: argparse.Namespace) -> int:
     own = warn_own_address()  # "warning: ROS_IP=127.0.0.1 is a loopback address ..."
     state = WatchState(only=getattr(args, "run", None) or "")
     tty = sys.stdout.isatty() and not args.plain
-    printer = None if tty or args.web else LinePrinter(sys.stdout)
+    # records come on several topics: their lines go out in run-time order, a moment late
+    lines_out = None if tty or args.web else TimeOrderedLines(sys.stdout)
+    printer = None if lines_out is None else LinePrinter(cast(TextIO, lines_out))
     # Ctrl-C, kill, timeout or a closed terminal only raise a flag that the waits poll, and the
     # watch ends through the finally that unregisters it: an exception thrown into rospy while it
     # registers a subscriber would leave that subscriber on the master, which each later run waits for
@@ -329,10 +331,14 @@ def cmd_watch(args: argparse.Namespace) -> int:
             err(no_run_message(args.namespace, args.wait, state.only, state.others.summary(), str(own or "")))
             return EXIT_ENV
         while wait(lambda s: s.end is not None, 1e9):  # (False: a stop)
-            if printer is not None:  # the latched end can overtake the last ticks
-                wait(lambda s: s.end is None or s.tick >= int(s.end.get("ticks") or 0), END_TICKS_GRACE)
+            # the latched end can overtake the last ticks (another topic): the lines, the terminal's
+            # last screen and the page wait for them a moment
+            wait(lambda s: s.end is None or s.tick >= int(s.end.get("ticks") or 0), END_TICKS_GRACE)
+            if printer is not None:
                 with state.lock:
                     printer.finish()
+                if lines_out is not None and not args.follow:
+                    lines_out.close()   # the lines of the run, all of them, before anything else is said
             if not args.follow:
                 break
             run = state.run
@@ -352,6 +358,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
         return EXIT_OK
     finally:
         stop.set()
+        if lines_out is not None:
+            lines_out.close()
         if liveness is not None:
             liveness.stop()
         if view is not None:

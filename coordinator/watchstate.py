@@ -212,6 +212,7 @@ class WatchState:
                 self.paused = bool(rec["paused"])
         elif kind == "end":
             self.end = rec
+            self.paused = False   # an ended run is not paused (a breakpoint in its cleanup left it so)
             if rec.get("gone"):  # nobody stopped them: the modules may still be running them
                 self.pending = {k: dict(c, maybe_running=True) for k, c in self.pending.items()}
             else:
@@ -300,7 +301,8 @@ class WatchState:
                         calls_total=self.calls_total, others=self.others.summary(),
                         labels={str(i): self.name(i) for i in self.args.values if self.name(i) != self._node_name(i)},
                         pending_title=self.pending_title(),
-                        cleanup=cleanup_said((self.end or {}).get("cleanup")))
+                        cleanup=cleanup_said((self.end or {}).get("cleanup")),
+                        now=round(self.now(), 6))   # a page opened in a long call counts from here, not from t
             return snap
 
     def all_events(self) -> List[Dict[str, Any]]:

@@ -10,7 +10,7 @@ import re
 import textwrap
 from typing import Any, Dict, List, Optional
 
-from coordinator.runevents import cleanup_said, status_word, terminal_text
+from coordinator.runevents import cleanup_at, cleanup_said, status_word, terminal_text
 from coordinator.watchstate import WatchState
 
 __all__ = ["brief", "values_text", "cut", "share", "where_text", "pending_text", "call_text", "result_text",
@@ -164,8 +164,11 @@ def summary_lines(state: WatchState) -> List[str]:
             out.append(result_text(dict(end, reason="", cleanup=None)))
             if end.get("reason"):
                 out.append("reason: %s" % end["reason"])
+                if end.get("at"):
+                    out.append("at: %s" % end["at"])
             if cleanup_said(end.get("cleanup")):
                 out.append(cleanup_said(end.get("cleanup")))
+                out.extend(cleanup_at(end.get("cleanup")))
             for c in state.pending.values():
                 if c.get("maybe_running"):
                     where = where_text(state, c.get("node"))

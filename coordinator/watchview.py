@@ -10,7 +10,10 @@ writes one line per change instead.
 """
 from __future__ import annotations
 
+import heapq
 import json
+import re
+import threading
 import time
 from typing import Any, Dict, List, Optional, TextIO, Tuple
 
@@ -22,7 +25,7 @@ from coordinator.watchstate import WatchState
 from coordinator.watchtext import call_text, pending_text, result_text, values_text, wrap
 from coordinator.watchtext import cut as _cut
 
-__all__ = ["render", "tree_lines", "LinePrinter", "STYLE"]
+__all__ = ["render", "tree_lines", "LinePrinter", "TimeOrderedLines", "STYLE"]
 
 # "was SUCCESS" / "was FAILURE": the node's last outcome, faded, after py_trees reset it (WatchState.label);
 # INTERRUPTED: the top node of a tree with cleanup: after a Ctrl-C (the run's status)
@@ -340,3 +343,72 @@ def now_since(state: WatchState, anchor: List[float]) -> float:
     if not anchor or anchor[0] != state.t:
         anchor[:] = [state.t, mono]
     return anchor[0] + (mono - anchor[1]) if not state.end else state.t
+
+
+_STAMP = re.compile(r"^\[\s*(-?\d+(?:\.\d+)?)s\]")
+
+
+class TimeOrderedLines:
+    """A text stream that writes the lines of :class:`LinePrinter` in the order of their run time.
+
+    Over ROS the run stream's records come on several topics, ordered per topic only: a tick's
+    status changes could be printed after the calls that followed them (``[0.084s] cleanup …`` and then
+    ``[0.080s] SUCCESS look``). Each line waits ``window`` seconds for an earlier one that may still come,
+    then lines go out earliest first (a line without a time goes with the one before it).
+    :meth:`close` writes what is held.
+    """
+
+    def __init__(self, out: TextIO, window: float = 0.3):
+        self.out = out
+        self.window = window
+        self._partial = ""
+        self._held: List[Tuple[float, int, float, str]] = []   # (run time, arrival order, arrived, line)
+        self._seq = 0
+        self._last_t = float("-inf")
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pump, name="watch-lines", daemon=True)
+        self._thread.start()
+
+    def write(self, text: str) -> int:
+        with self._lock:
+            if self._stop.is_set():   # closed: a line that comes later (another topic's, after the end) goes at once
+                self.out.write(text)
+                self.out.flush()
+                return len(text)
+            self._partial += text
+            *lines, self._partial = self._partial.split("\n")
+            now = time.monotonic()
+            for line in lines:
+                m = _STAMP.match(line)
+                if m:
+                    self._last_t = float(m.group(1))
+                self._seq += 1
+                heapq.heappush(self._held, (self._last_t, self._seq, now, line))
+        return len(text)
+
+    def flush(self) -> None:
+        self._release(time.monotonic() - self.window)
+
+    def _release(self, arrived_by: float) -> None:
+        with self._lock:
+            lines = []
+            while self._held and self._held[0][2] <= arrived_by:
+                lines.append(heapq.heappop(self._held)[3])
+            if lines:
+                self.out.write("".join(line + "\n" for line in lines))
+                self.out.flush()
+
+    def _pump(self) -> None:
+        while not self._stop.wait(self.window / 3):
+            self.flush()
+
+    def close(self) -> None:
+        """Write every line held (the watch ends); later lines are written at once."""
+        with self._lock:
+            self._stop.set()
+            lines = [heapq.heappop(self._held)[3] for _ in range(len(self._held))]
+            self.out.write("".join(line + "\n" for line in lines) + self._partial)
+            self._partial = ""
+            self.out.flush()
+

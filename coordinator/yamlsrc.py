@@ -10,7 +10,15 @@ import yaml
 from comm.textfile import MAX_BYTES, read_text, text_pos
 from coordinator.errors import Pos, TreeError, TreeErrors
 
-__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "load_file", "load_value", "load_yaml", "pos_of", "settle"]
+__all__ = ["LMap", "LList", "OnDemandPos", "MAX_BYTES", "bool_hint", "load_file", "load_value", "load_yaml", "pos_of",
+           "settle"]
+
+
+def bool_hint(value: Any) -> str:
+    """For a name YAML read as true or false (an unquoted ``on``, ``yes``, ``off``, ``no``, YAML 1.1's
+    booleans): how to write it; '' for anything else."""
+    return ": YAML reads an unquoted on, off, yes or no as true or false; quote the name" if isinstance(
+        value, bool) else ""
 
 
 class OnDemandPos:

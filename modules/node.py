@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import socket
 import sys
 import threading
@@ -64,13 +65,15 @@ class CallInbox:
     def __init__(self, module: str, on_call: Callable[[str], None], on_cancel: Callable[[str], None],
                  publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096,
                  on_parsed: Optional[Callable[[Dict[str, Any], Optional[str]], None]] = None,
-                 heard: Optional[Callable[[Optional[str]], None]] = None):
+                 heard: Optional[Callable[[Optional[str]], None]] = None,
+                 ping_note: Optional[Callable[[], str]] = None):
         self.module = module
         self.heard = heard  # told the node each call came from (its answer waits for that node's connection)
         self.on_call = on_call
         self.on_parsed = on_parsed  # takes the parsed payload instead of on_call: parsed once, not twice
         self.on_cancel = on_cancel
         self.publish_result = publish_result
+        self.ping_note = ping_note  # what a ping's answer tells beside "alive" (a stuck call holding the module)
         self.max_bytes = max_bytes
         self.skipped = 0  # calls for other modules, refused without parsing
         self.duplicates = 0
@@ -96,8 +99,9 @@ class CallInbox:
             call_id = head.get("call_id") if isinstance(head.get("call_id"), str) else None
             if head.get("function") == PING_FUNCTION:
                 if call_id is not None:
+                    note = self.ping_note() if self.ping_note is not None else ""
                     self.publish_result(FunctionResult(call_id=call_id, basic_mod=self.module,
-                                                       function=PING_FUNCTION).encode())
+                                                       function=PING_FUNCTION, error=note).encode())
                 return
             if not self._seen.first(call_id):
                 self.duplicates += 1
@@ -231,9 +235,11 @@ class ModuleNode:
                                    publish_event=lambda text: ev_pub.publish(String(text)),
                                    max_bytes=self.max_bytes)
         self.server.faults = faults
+        self.server.on_death = _die
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
-                               on_parsed=self.server.handle_parsed, heard=res_pub.heard)
+                               on_parsed=self.server.handle_parsed, heard=res_pub.heard,
+                               ping_note=self.server.stuck_note)
         self.callers = Watchdog(self._orphaned, lambda node: node, _uri_of, period=CALLER_PERIOD, say=False,
                                 unregistered_lost=False)
         self.server.callers = self.callers
@@ -319,6 +325,14 @@ def _leave_without_threads(code: int, grace: float = THREADS_GRACE) -> None:
     sys.stdout.flush()
     logging.shutdown()
     os._exit(code)
+
+
+def _die(call_ids: List[str], reason: str) -> None:
+    """A ``die`` fault: the process ends as a crash does (SIGKILL: no clean unregistering), so the run
+    meets a module that died mid-call as on the robot."""
+    log.error("the node dies (an injected fault) with %d call(s) in flight: %s", len(call_ids), reason)
+    logging.shutdown()
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _faults(definition: ModuleDefinition, raw: Any) -> Dict[str, Any]:

@@ -16,7 +16,7 @@ from comm.errors import did_you_mean
 from comm.textenum import TextEnum
 from comm.typewords import whole_number_text
 
-__all__ = ["Outcome", "OutcomeKind", "OutcomeError", "succeed", "fail", "reject", "hang", "respond",
+__all__ = ["Outcome", "OutcomeKind", "OutcomeError", "succeed", "fail", "reject", "hang", "die", "respond",
            "outcome_from_dict", "outcome_to_dict"]
 
 
@@ -26,6 +26,7 @@ class OutcomeKind(TextEnum):
     REJECT = "reject"
     HANG = "hang"
     RESPOND = "respond"
+    DIE = "die"
 
 
 class OutcomeError(ValueError):
@@ -76,19 +77,26 @@ def hang() -> Outcome:
     return Outcome(OutcomeKind.HANG)
 
 
+def die(reason: str = "its process died (mock)", delay: float = 0.0) -> Outcome:
+    """The module's node dies during the call, after ``delay``: this call and every other one it has
+    in flight end ``module_lost`` (``module gripper lost: REASON``). A mock tells the run at once; a
+    node (a world's fault) kills its own process, and the run's watchdog finds it gone."""
+    return Outcome(OutcomeKind.DIE, reason=reason, delay=delay)
+
+
 def respond(fn: Callable[..., Any], delay: float = 0.0) -> Outcome:
     """After ``delay``, answer what ``fn(**inputs)`` gives: outputs, or an Outcome."""
     return Outcome(OutcomeKind.RESPOND, fn=fn, delay=delay)
 
 
-_WRITTEN = ("succeed", "fail", "reject", "hang")
+_WRITTEN = ("succeed", "fail", "reject", "hang", "die")
 _OPTIONS = ("delay", "ignores_cancel")
 #: The longest delay an outcome may have: a timer thread waits it out.
 MAX_DELAY = 86400
 
 
 def outcome_from_dict(raw: Any) -> Outcome:
-    """``{succeed: {outputs}}``, ``{fail: reason}``, ``{reject: reason}`` or ``{hang: true}``,
+    """``{succeed: {outputs}}``, ``{fail: reason}``, ``{reject: reason}``, ``{hang: true}`` or ``{die: reason}``,
     with an optional ``delay`` (seconds): the written form of scenarios, mock nodes and faults."""
     if not isinstance(raw, dict):
         raise OutcomeError("an outcome is a mapping such as {succeed: {...}} or {fail: reason}, got %r" % (raw,))
@@ -121,6 +129,9 @@ def outcome_from_dict(raw: Any) -> Outcome:
         out = fail(str(raw["fail"]), delay)
     elif kind == "reject":
         out = reject(str(raw["reject"]), delay)
+    elif kind == "die":
+        given = raw["die"]
+        out = die(str(given), delay) if given not in (True, None, "") else die(delay=delay)
     else:
         out = hang()
     out.ignores_cancel = ignores
@@ -133,7 +144,7 @@ def outcome_to_dict(outcome: Outcome) -> Dict[str, Any]:
     if kind == OutcomeKind.RESPOND:
         raise OutcomeError("a respond(...) outcome runs Python and cannot be written down")
     value: Any = {OutcomeKind.SUCCEED: dict(outcome.outputs), OutcomeKind.FAIL: outcome.reason,
-                  OutcomeKind.REJECT: outcome.reason, OutcomeKind.HANG: True}[kind]
+                  OutcomeKind.REJECT: outcome.reason, OutcomeKind.HANG: True, OutcomeKind.DIE: outcome.reason}[kind]
     out: Dict[str, Any] = {kind.value: value}
     if outcome.delay:
         out["delay"] = outcome.delay

@@ -49,7 +49,7 @@ log = logging.getLogger("bmtree.module")
 class _Call:
     """One accepted call and where it stands: its code running, answered, holding the module."""
 
-    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent")
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent", "cancelled_at")
 
     def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
         self.ctx = ctx
@@ -60,6 +60,7 @@ class _Call:
         self.answered = False
         self.late = False         # cancelled, and its code still ran when the grace was over
         self.sent = False         # its answer was handed to the publisher
+        self.cancelled_at: Optional[float] = None   # on the module's clock
 
 
 class ModuleServer:
@@ -105,6 +106,9 @@ class ModuleServer:
         #: a :class:`comm.liveness.Watchdog` over the callers (a node sets it): a call whose caller's
         #: process is gone is cancelled, not left running the hardware and holding the module
         self.callers: Optional[Any] = None
+        #: told ``(call_ids, reason)`` when a ``die`` outcome ends the module (a node kills its process;
+        #: the tests' in-process transport ends those calls ``module_lost``); None: the calls never answer
+        self.on_death: Optional[Callable[[List[str], str], None]] = None
         #: function -> an injected fault (``take()``, ``outcome``): it answers instead of the function
         #: (the world's faults of a user's own module under ``bmtree run --sim``)
         self.faults: Dict[str, Any] = {}
@@ -206,7 +210,8 @@ class ModuleServer:
         waits = False
         with self._lock:
             busy = self._exclusive if call.exclusive else None
-            if busy is not None and busy.ctx.cancelled.is_set() and self._waiting is None:
+            stuck = busy is not None and self._stuck(busy)
+            if busy is not None and busy.ctx.cancelled.is_set() and self._waiting is None and not stuck:
                 busy, waits, self._waiting = None, True, call  # its code is stopping: run this one next
             elif busy is not None and self._waiting is not None:
                 busy = self._waiting
@@ -216,7 +221,8 @@ class ModuleServer:
                 if call_id is not None:
                     self._calls[call_id] = call
         if busy is not None:
-            self._reject(call_id, fname, "busy with call %s (%s)" % (busy.ctx.call_id, busy.ctx.function))
+            self._reject(call_id, fname, self._stuck_text(busy) if stuck else "busy with call %s (%s)" % (
+                busy.ctx.call_id, busy.ctx.function))
             return
         if self.callers is not None and caller and call_id is not None:
             self.callers.call_sent(call_id, caller)
@@ -236,9 +242,29 @@ class ModuleServer:
                 del self._calls[call.ctx.call_id]
         if self.callers is not None:
             self.callers.call_done(call.ctx.call_id)
-        who = "%s (%s)" % (holder.ctx.call_id, holder.ctx.function) if holder is not None else "?"
-        self._reject(call.ctx.call_id, call.ctx.function, "busy with call %s: it was cancelled, but its code has not "
-                     "returned within %gs" % (who, self.cancel_grace))
+        self._reject(call.ctx.call_id, call.ctx.function, self._stuck_text(holder))
+
+    def stuck_note(self) -> str:
+        """Why calls to this module's non-concurrent functions are refused now ('' when they are not): a
+        ping's answer says it, so a run learns at start that an earlier run left the module stuck."""
+        with self._lock:
+            holder = self._exclusive
+            if holder is None or not self._stuck(holder):
+                return ""
+        return self._stuck_text(holder)
+
+    def _stuck(self, holder: _Call) -> bool:
+        """The holder was cancelled a grace ago or more and its code still runs: a new call need not wait."""
+        return holder.cancelled_at is not None and self.scheduler.now() - holder.cancelled_at >= self.cancel_grace
+
+    def _stuck_text(self, holder: Optional[_Call]) -> str:
+        """Why a call is refused while a cancelled call's code has not returned (perhaps one of an earlier run)."""
+        if holder is None:
+            return "busy: a cancelled call's code has not returned within %gs" % self.cancel_grace
+        ago = self.scheduler.now() - holder.cancelled_at if holder.cancelled_at is not None else self.cancel_grace
+        return ("busy with call %s (%s): it was cancelled %.1f s ago and its code has not returned; %s refuses "
+                "calls until it does, or until its node is restarted" % (
+                    holder.ctx.call_id, holder.ctx.function, ago, self.definition.name))
 
     def handle_cancel(self, text: Any) -> None:
         """Handle one ``/master/cancel`` payload; never raises."""
@@ -269,6 +295,7 @@ class ModuleServer:
                 call.running = False
         if not call.ctx.cancel():
             return False
+        call.cancelled_at = self.scheduler.now()
         if queued:
             self._finish(call, self.answers.cancelled(call))
             return True
@@ -387,7 +414,23 @@ class ModuleServer:
             self._finish(call, self.answers.result(call, CallStatus.FAILED, said(outcome.reason) or "failed"))
         elif kind == OutcomeKind.REJECT:
             self._finish(call, self.answers.result(call, CallStatus.REJECTED, said(outcome.reason) or "rejected"))
+        elif kind == OutcomeKind.DIE:
+            self.die(said(outcome.reason) or "its process died")
         # HANG: no answer until a cancel
+
+    def die(self, reason: str) -> None:
+        """The module dies with every call in flight: none is ever answered, code still running is
+        cancelled, the module is free, and :attr:`on_death` is told the calls' ids."""
+        with self._lock:
+            calls = list(self._calls.values())
+            for c in calls:
+                c.answered = True
+            self._calls.clear()
+            self._exclusive = self._waiting = None
+        for c in calls:
+            c.ctx.cancel()
+        if self.on_death is not None:
+            self.on_death([c.ctx.call_id for c in calls if c.ctx.call_id is not None], reason)
 
     def in_flight(self) -> List[Any]:
         """The calls accepted and not yet answered (or whose code still runs), for :meth:`answers_sent`."""

@@ -40,7 +40,7 @@ from coordinator.values import (
     templates_as_text,
     value_type_errors,
 )
-from coordinator.yamlsrc import pos_of
+from coordinator.yamlsrc import bool_hint, pos_of
 from modules.definition import FunctionDefinition
 
 __all__ = ["Call", "CallSpec", "KINDS", "NOT_SENT", "NO_TIMEOUT", "STATUS_TEXTS"]
@@ -476,6 +476,5 @@ def _read_as_bool(key: Any, params: Dict[str, Any]) -> str:
     if not isinstance(key, bool):
         return ""
     meant = [n for n in params if n.lower() in _BOOL_WORDS[key]]
-    return ": YAML reads an unquoted on, off, yes or no as true or false; quote the name%s" % (
-        " ('%s': …)" % meant[0] if len(meant) == 1 else "")
+    return bool_hint(key) + (" ('%s': …)" % meant[0] if len(meant) == 1 else "")
 

@@ -371,6 +371,8 @@ class WaitEventKind(NodeKind):
 
 # set --------------------------------------------------------------------------------------
 class SetKeys(Leaf):
+    written: Optional[Dict[str, Any]] = None  # the values of its last success
+
     def update(self) -> Status:
         try:
             values: Dict[str, Any] = resolve(self.node.spec, self.ctx.lookup)
@@ -378,6 +380,7 @@ class SetKeys(Leaf):
             return self._fail(str(exc.args[0] if exc.args else exc))
         for k, v in values.items():
             self.ctx.write(k, v)
+        self.written = values  # an include's arguments: a failure under it names them (search_room(room="kitchen"))
         return Status.SUCCESS
 
 
@@ -395,8 +398,9 @@ class SetKind(NodeKind):
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> Dict[str, Any]:
         m = p.keys(node, value, at, "tree key: value")
-        spec = SetSpec((k, p.literal_at(m, k, at)) for k in (m or {}))
-        spec.pos = {k: m.val_pos[k] for k in (m or {})}
+        keys = [k for k in (m or {}) if isinstance(k, str)]   # others are errors already (an unquoted on: true)
+        spec = SetSpec((k, p.literal_at(m, k, at)) for k in keys)
+        spec.pos = {k: m.val_pos[k] for k in keys}
         return spec
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:

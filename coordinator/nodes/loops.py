@@ -29,6 +29,7 @@ from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec, for
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at
+from coordinator.yamlsrc import bool_hint
 
 __all__ = ["DEFAULT_MAX", "ForEach", "ForEachSpec", "KINDS", "Repeat", "RepeatSpec", "expr_option"]
 
@@ -282,11 +283,12 @@ class ForEachKind(NodeKind):
             p.err(at, "for_each takes a list: [a, b], a $reference or a $( … ) expression, got %r" % (value,))
         key = raw.get("as")
         if "as" in raw and (not isinstance(key, str) or not key.isidentifier()):
-            p.err(raw.val_pos["as"], "'as' must be a tree key (an identifier), got %r" % (key,))
+            p.err(raw.val_pos["as"], "'as' must be a tree key (an identifier), got %r%s" % (key, bool_hint(key)))
             key = None
         index = raw.get("index")
         if "index" in raw and (not isinstance(index, str) or not index.isidentifier() or index == key):
-            p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier) other than 'as', got %r" % (index,))
+            p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier) other than 'as', got %r%s" % (
+                index, bool_hint(index)))
             index = None
         spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all", _GO_ON), limit,
                            raw.val_pos["max"] if "max" in raw else None, index or "")

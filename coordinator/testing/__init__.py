@@ -11,6 +11,7 @@ from coordinator.testing.mocks import (
     Mocks,
     Outcome,
     OutcomeKind,
+    die,
     fail,
     hang,
     reject,
@@ -19,4 +20,5 @@ from coordinator.testing.mocks import (
 )
 
 __all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "MockModule", "Mocks", "Outcome",
-           "OutcomeKind", "TickLimitError", "TreeRun", "TreeTest", "fail", "hang", "reject", "respond", "succeed"]
+           "OutcomeKind", "TickLimitError", "TreeRun", "TreeTest", "die", "fail", "hang", "reject", "respond",
+           "succeed"]

@@ -7,6 +7,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from blackboard.service import BlackboardService
 from blackboard.store import Store
+from comm.liveness import ModuleLost
 from comm.messages import (
     BlackboardAnswer,
     BlackboardRequest,
@@ -41,6 +42,8 @@ class InProcessTransport(Transport):
             name: ModuleServer(definition, mock_module(mocks, name), self._on_result, self._on_event,
                                executor=executor, scheduler=clock)
             for name, definition in mocks.definitions.items()}
+        for name, server in self.servers.items():
+            server.on_death = lambda ids, reason, name=name: self._died(name, ids, reason)
         if mocks.stored_values:
             self._seed(clock.now())
 
@@ -76,6 +79,12 @@ class InProcessTransport(Transport):
             impl = server.impl
             assert isinstance(impl, MockModule)
             impl._start_events()
+
+    def _died(self, module: str, call_ids: List[str], reason: str) -> None:
+        """A ``die`` outcome: the run learns it as from the ROS transport's watchdog (the mock is ready
+        again for the calls that follow, as a respawned node would be)."""
+        self.screen.ended(call_ids)
+        self._deliver(ModuleLost(module, "/%s" % module, reason, list(call_ids)))
 
     def _on_event(self, text: str) -> None:
         for item in self.screen.event(text):   # as over ROS: one that breaks its definition is refused

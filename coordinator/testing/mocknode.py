@@ -56,7 +56,7 @@ A function left out succeeds at once with zero/empty outputs. A mistake is repor
 SCRIPT:LINE:COLUMN: message, exit 2."""
 _SCRIPT_KEYS = ("module", "functions", "events")
 _EVENT_KEYS = ("at", "event", "params")
-_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
+_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "die", "delay")
 
 
 def scripted_module(definition: ModuleDefinition, script: Dict[str, Any]) -> MockModule:

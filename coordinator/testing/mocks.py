@@ -27,6 +27,7 @@ from modules.outcome import (
     Outcome,
     OutcomeError,
     OutcomeKind,
+    die,
     fail,
     hang,
     reject,
@@ -40,7 +41,7 @@ from modules.runtime import BasicModule
 __all__ = ["MockError", "StoredNameError", "FunctionMock", "Mocks", "MockModule", "mock_module",
            "StoredEntry", "stored_value",
            # the outcome type (modules.outcome), re-exported for test authors
-           "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "reject", "respond",
+           "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "die", "reject", "respond",
            "outcome_from_dict", "outcome_to_dict"]
 
 OUTCOME_KINDS = tuple(k.value for k in OutcomeKind if k != OutcomeKind.RESPOND)  # the written ones
@@ -206,6 +207,11 @@ class FunctionMock:
 
     def hang(self) -> FunctionMock:
         return self.script(hang())
+
+    def die(self, reason: str = "its process died (mock)", delay: float = 0.0) -> FunctionMock:
+        """The module's node dies during the call: it and the module's other calls in flight end
+        ``module_lost`` (``module gripper lost: REASON``); the calls after it are answered again."""
+        return self.script(die(reason, delay))
 
     def respond(self, fn: Callable[..., Any], delay: float = 0.0) -> FunctionMock:
         return self.script(respond(fn, delay))

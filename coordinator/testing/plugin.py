@@ -20,6 +20,7 @@ from typing import Any, Callable, Iterator, List
 
 import pytest
 
+from coordinator.errors import UsageError
 from coordinator.testing.kit import Coverage, TreeTest
 
 __all__ = ["bmtree_tree", "ros_master", "ros_graph", "ros_probe"]
@@ -36,11 +37,33 @@ def pytest_addoption(parser: Any) -> None:
                        "relative to the ini file; '#' starts a comment")
 
 
+def _ini_folder(config: Any) -> str:
+    return os.path.dirname(str(config.inipath)) if getattr(config, "inipath", None) else str(config.rootpath)
+
+
+def tree_path(path: str, config: Any, test_file: str) -> str:
+    """Where ``bmtree_tree``'s ``path`` is: as given (absolute, or from the working directory), else
+    beside the ini file (as ``bmtree_modules``), else beside the test file; so a test finds its tree
+    wherever pytest was started. UsageError naming every place tried when it is in none."""
+    if os.path.isabs(path) or os.path.exists(path):
+        return path
+    tried = [os.path.abspath(path)]
+    for folder in (_ini_folder(config), os.path.dirname(os.path.abspath(test_file))):
+        candidate = os.path.normpath(os.path.join(folder, path))
+        if os.path.exists(candidate):
+            return candidate
+        if candidate not in tried:
+            tried.append(candidate)
+    raise UsageError("bmtree_tree(%r): no such file; tried %s (a relative path is taken from the working "
+                     "directory, then from the ini file's folder, then from the test file's)" % (
+                         path, ", ".join(tried)))
+
+
 def configured_modules(config: Any) -> List[str]:
     """The ini key ``bmtree_modules``: paths separated by spaces or lines, relative to the ini file.
     A ``#`` comment ends a line (pytest's own ``pathlist`` would take each word of an end-of-line
     comment for a file, and every test would fail)."""
-    base = os.path.dirname(str(config.inipath)) if getattr(config, "inipath", None) else str(config.rootpath)
+    base = _ini_folder(config)
     paths = []
     for line in config.getini("bmtree_modules"):
         for word in line.split():
@@ -81,7 +104,11 @@ def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
         __tracebackhide__ = True
         given = configured + [os.path.abspath(m) for m in kwargs.get("modules") or ()]
         kwargs["modules"] = list(dict.fromkeys(given))  # a file given both ways is loaded once
-        return TreeTest(path, coverage=cov, **kwargs)
+        try:
+            found = tree_path(path, request.config, str(getattr(request.node, "path", None) or request.node.fspath))
+        except UsageError as exc:
+            raise exc.with_traceback(None)
+        return TreeTest(found, coverage=cov, **kwargs)
 
     return make
 

@@ -256,8 +256,9 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
     expect = s.expect
     want_status = str(expect.get("status", "success")).upper()
     if run.status.value != want_status:
+        at = " at %s" % run.result.failed_at if run.result.failed_at else ""
         problems.append("status %s, expected %s%s" % (run.status.value, want_status,
-                                                      " (%s)" % run.reason if run.reason else ""))
+                                                      " (%s)%s" % (run.reason, at) if run.reason else ""))
         if stopped:
             problems.append("the run reached the scenario's max_duration (%g s of simulated time); raise it if "
                             "the tree needs longer" % limits["max_duration"])

@@ -25,7 +25,7 @@ from modules.definition import ModuleDefinition
 __all__ = ["Problems", "check_keys", "check_outputs", "check_reason", "count", "event", "mapping", "number", "script", "stored"]
 
 _EVENT_KEYS = ("at", "event", "params", "after", "nth")
-_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "delay")
+_OUTCOME_KEYS = ("succeed", "fail", "reject", "hang", "die", "delay")
 
 
 class Problems:
@@ -186,13 +186,16 @@ def _legacy_outputs(fn: Any, raw: Any) -> Any:
 
 
 def check_reason(raw: Any, where: Pos, out: Problems) -> None:
-    """``fail``/``reject`` take the reason as text, ``hang`` takes ``true``."""
+    """``fail``/``reject`` take the reason as text, ``hang`` takes ``true``, ``die`` either."""
     for kind in ("fail", "reject"):
         if kind in raw and not isinstance(raw[kind], str):
             out.add(pos_of(raw, kind, where), "%s takes the reason as text (%s: blocked by a chair), got %r" % (
                 kind, kind, raw[kind]))
     if "hang" in raw and raw["hang"] is not True:
         out.add(pos_of(raw, "hang", where), "hang takes true, got %r" % (raw["hang"],))
+    if "die" in raw and raw["die"] is not True and not isinstance(raw["die"], str):
+        out.add(pos_of(raw, "die", where), "die takes the reason as text (die: its process is gone), or true, "
+                "got %r" % (raw["die"],))
 
 
 def check_outputs(fn: Any, raw: Any, out: Problems) -> None:

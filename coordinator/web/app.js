@@ -229,6 +229,15 @@ function wall(epoch, withDate) {
   return withDate ? d.getFullYear() + "-" + pad2(d.getMonth() + 1) + "-" + pad2(d.getDate()) + " " + time : time;
 }
 
+// a control command as the terminal says it (runevents.control_line): "force 'grasp' FAILURE", then who
+// sent it and the answer, "refused: …" when the run refused it
+function controlWords(c) {
+  const args = c.args && typeof c.args === "object" ? c.args : {};
+  return [String(c.command || "?")].concat(Object.keys(args).map((k) => k === "node" || k === "key"
+    ? "'" + String(args[k]) + "'" : typeof args[k] === "string" ? args[k] : js(args[k]))).join(" ");
+}
+const controlAnswer = (c) => "by " + (c.by || "?") + ": " + (c.ok === false ? "refused: " : "") + (c.answer || "");
+
 function noticeClass(e) {
   const what = String(e.what || "");
   return "notice" + (/_down$/.test(what) || what === "cleanup_failed" ? " down" : /_back$/.test(what) ? " back" : "");
@@ -278,7 +287,12 @@ function draw(s) {
   $("alert").hidden = !down;
   $("alert").textContent = down;
   drawTree(s);
-  if (s.t !== anchor[0]) anchor = [s.t, Date.now()];
+  // the watch's "now" (the last record's time moved on by its clock): a page opened during a long call
+  // counted from that record's time, as if the call had only just started
+  if (typeof s.now === "number") {
+    if (s !== anchored) anchor = [s.now, Date.now()]; // each answer of the watch: its own now
+  } else if (s.t !== anchor[0]) anchor = [s.t, Date.now()];
+  anchored = s;
   drawPending(s);
   const why = s.nodes.filter((n) => failedLabel(label(s, n.id)) && s.feedback[String(n.id)])
     .sort((a, b) => (b.id === culprit) - (a.id === culprit));
@@ -287,7 +301,8 @@ function draw(s) {
   rows("blackboard", Object.keys(s.blackboard).sort(), (k) => [k, js(s.blackboard[k])], ["key", "val"]);
   const ev = s.events.map((e) => e.type === "notice" ? [e.t, [[sec(e.t), noticeOf(e), e.text], noticeClass(e)]]
     : [e.t, [sec(e.t), e.module + "." + e.event, js(e.params)]])
-    .concat(s.control.map((c) => [c.t, [sec(c.t), "control " + c.command + " " + js(c.args || {}), c.answer]]));
+    .concat(s.control.map((c) => [c.t, [[sec(c.t), "control " + controlWords(c), controlAnswer(c)],
+      c.ok === false ? "failed" : ""]]));
   ev.sort((a, b) => a[0] - b[0]);
   rows("events", ev.slice(-30), (e) => e[1], ["num", "key", "val"]);
   const total = Math.max(Number(s.calls_total) || 0, s.calls.length);
@@ -313,10 +328,11 @@ function draw(s) {
 }
 
 let anchor = [null, 0];
+let anchored = null;
 function drawPending(s) {
   // the run's time moves on between records, and while it is paused (its calls run on): count it on
   // here, as the terminal does (not in a replay or after the end)
-  const now = mode === "replay" || s.end || gone ? s.t : s.t + (Date.now() - anchor[1]) / 1000;
+  const now = mode === "replay" || s.end || gone ? s.t : anchor[0] + (Date.now() - anchor[1]) / 1000;
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
   $("pendingh").textContent = s.pending_title || "pending calls"; // during a cleanup: its calls
   // answered while the run was paused (its leaf takes it at the next tick), or of a run that is gone

@@ -18,7 +18,7 @@ from modules.sim import DEFAULT_WORLD, SIM_CLASSES, World, WorldError, definitio
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m modules.sim", description="Run a simulated basic module.")
     p.add_argument("module", nargs="?", choices=sorted(SIM_CLASSES))
-    p.add_argument("--world", default=DEFAULT_WORLD, help="world YAML (default: the shipped house)")
+    p.add_argument("--world", default=DEFAULT_WORLD, help="world YAML (default, or '': the shipped house)")
     return p
 
 
@@ -29,7 +29,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         parser.error("which module? one of %s (or the private parameter ~module)" % ", ".join(sorted(SIM_CLASSES)))
     try:
         # a launch file passes ~/ as written; faults of the user's own modules are theirs to apply
-        world = World.load(os.path.expanduser(args.world), others=True)
+        # (sim.launch always sets ~world, '' for the default: a value left on the master by an earlier
+        # launch with world:= would be taken otherwise)
+        world = World.load(os.path.expanduser(args.world or DEFAULT_WORLD), others=True)
     except WorldError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2

@@ -88,8 +88,8 @@ class Battery(SimModule):
         """As a node: the distance and the place from the parameters navigation sets before it answers."""
         if self._rospy is None:
             return
-        odometer = self._rospy.get_param(ODOMETER_PARAM, 0.0)
-        at = self._rospy.get_param(AT_PARAM, None)
+        odometer = self._shared(ODOMETER_PARAM, 0.0)
+        at = self._shared(AT_PARAM, None)
         with self.state.lock:
             self.state.odometer = max(self.state.odometer, _metres(odometer) or 0.0)
             if at is not None:

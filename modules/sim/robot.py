@@ -19,6 +19,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
+from comm.saylimit import SayLimit
 from modules.outcome import Outcome
 from modules.runtime import BasicModule, Failure
 from modules.sim.world import Fault, ScheduledEvent, World
@@ -69,10 +70,35 @@ class SimModule(BasicModule):
         self.state = state or RobotState(self.world.start, x, y)
         self.faults: Dict[str, Fault] = {}
         self._rospy: Any = None  # set in setup(): the room then comes from the parameter server
+        self._say = SayLimit()    # a master away is said once, then at most every few seconds
         prefix = self.module_name + "."
         for key, fault in self.world.faults.items():
             if key.startswith(prefix):
                 self.faults[key[len(prefix):]] = fault
+
+    def _share(self, *params: Any) -> None:
+        """Set ``(name, value)`` pairs on the parameter server, where the other simulated modules read the
+        robot's state. With the master away (a rehearsed master fault) the call goes on with this
+        process's own state, as a real robot's drivers would; the next write after it is back shares it."""
+        try:
+            for name, value in params:
+                self._rospy.set_param(name, value)
+        except OSError as exc:
+            self._master_away(exc)
+
+    def _shared(self, name: str, default: Any) -> Any:
+        """A parameter another simulated module set; ``default`` with the master away."""
+        try:
+            return self._rospy.get_param(name, default)
+        except OSError as exc:
+            self._master_away(exc)
+            return default
+
+    def _master_away(self, exc: OSError) -> None:
+        more = self._say.due("master away")
+        if more is not None:
+            log.warning("the ROS master does not answer (%s): the simulated robot's state is not shared with the "
+                        "other simulated modules until it does%s", exc, more)
 
     def before_call(self, function: str, inputs: Dict[str, Any]) -> Optional[Outcome]:
         """An injected fault's outcome replaces the function's answer (the runtime carries it out)."""
@@ -111,7 +137,7 @@ class SimModule(BasicModule):
 
     def _here(self) -> str:
         if self._rospy is not None and not isinstance(self, Navigation):
-            loc = self.world.locate(str(self._rospy.get_param(ROOM_PARAM, "")))
+            loc = self.world.locate(str(self._shared(ROOM_PARAM, "")))
             if loc:
                 with self.state.lock:
                     self.state.room, self.state.x, self.state.y = loc
@@ -171,8 +197,7 @@ class Navigation(SimModule):
             if self._rospy is not None:  # before the answer, so the battery's next reading counts it
                 with self.state.lock:
                     odometer, at = self.state.odometer, self.state.at
-                self._rospy.set_param(ODOMETER_PARAM, odometer)
-                self._rospy.set_param(AT_PARAM, at)
+                self._share((ODOMETER_PARAM, odometer), (AT_PARAM, at))
 
     def _where(self) -> Dict[str, Any]:
         with self.state.lock:
@@ -189,8 +214,7 @@ class Navigation(SimModule):
         with self.state.lock:
             self.state.room, self.state.at = room, place.data
         if self._rospy is not None:  # before the answer, so the next call sees it
-            self._rospy.set_param(ROOM_PARAM, room)
-            self._rospy.set_param(AT_PARAM, place.data)
+            self._share((ROOM_PARAM, room), (AT_PARAM, place.data))
         self.emit("arrived", place=place.data)
         return dict(self._where(), success=True)
 

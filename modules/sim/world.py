@@ -84,8 +84,8 @@ class Fault:
     """An outcome that replaces a function's own answer, for ``times`` calls (None: all).
 
     Written ``{fail: reason}``, ``{reject: reason}``, ``{hang: true}``, ``{crash: text}`` (the
-    function raises) or ``{delay: s}`` alone (the function answers, ``s`` seconds late); ``delay``
-    also delays the others. It is the testing kit's outcome type, carried out by the runtime.
+    function raises), ``{die: reason}`` (the node's process is killed mid-call) or ``{delay: s}``
+    alone (the function answers, ``s`` seconds late); ``delay`` also delays the others. It is the testing kit's outcome type, carried out by the runtime.
     """
 
     outcome: Outcome
@@ -121,12 +121,12 @@ class Fault:
         if delay is None:
             problems.add("faults.%s.delay must be a number of seconds from 0 to %d (a day), got %s" % (
                 key, MAX_SECONDS, shown(raw.get("delay"))), raw, "delay")
-        for k in ("fail", "reject", "crash"):
+        for k in ("fail", "reject", "crash", "die"):
             if k in raw and not is_text(raw[k]):
                 problems.add("faults.%s.%s must be a text (the reason), got %s" % (key, k, shown(raw[k])), raw, k)
         if len(problems.lines) > before or delay is None:
             return None
-        spec = {k: v for k, v in raw.items() if k != "times" and not (k in ("hang", "crash") and v is False)}
+        spec = {k: v for k, v in raw.items() if k != "times" and not (k in ("hang", "crash", "die") and v is False)}
         later = " after %g s" % delay if delay else ""
         if "crash" in spec:
             if len(spec) > (2 if "delay" in spec else 1):
@@ -168,7 +168,7 @@ class Fault:
         return True
 
 
-_FAULT_KEYS = ("fail", "reject", "crash", "hang", "delay", "times")
+_FAULT_KEYS = ("fail", "reject", "crash", "hang", "die", "delay", "times")
 
 
 def describe_faults(module: str, faults: Dict[str, Fault]) -> str:

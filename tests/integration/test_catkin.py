@@ -165,6 +165,13 @@ def test_roslaunch_sim_modules_and_trees(shell, workspace):
     out = shell.run("roslaunch bmtree run.launch tree:=%s set:=object=apple call_timeout:=20" % (
         workspace / "src" / "bmtree" / "trees" / "find_apple.yaml"))
     assert "find_apple: SUCCESS" in out.stdout, out.stdout[-3000:] + out.stderr[-3000:]
+    # a launch's option is not left on the master for the next one (the node's name does not change):
+    # after max_duration:=0.05, a launch without it ran with the 0.05 s limit and was cut short
+    apple = workspace / "src" / "bmtree" / "trees" / "find_apple.yaml"
+    out = shell.run("roslaunch bmtree run.launch tree:=%s max_duration:=0.05" % apple)
+    assert "reason: stopped after 0.05 s" in out.stdout, out.stdout[-3000:] + out.stderr[-3000:]
+    out = shell.run("roslaunch bmtree run.launch tree:=%s" % apple)
+    assert "find_apple: SUCCESS" in out.stdout, out.stdout[-3000:] + out.stderr[-3000:]
     assert launch.poll() is None
 
     # a module whose method raises: the traceback reaches the module's screen and /rosout

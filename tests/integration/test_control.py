@@ -159,6 +159,13 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
         driver.get(url)
         wait_until(driver, lambda d: d.find_element("id", "controls").is_displayed())
         wait_until(driver, lambda d: d.find_element("id", "paused").is_displayed())
+        # the events panel says the commands as the terminal does (it showed {"node":"done",…} JSON, and a
+        # refusal looked like a success)
+        events = text(driver, "events")
+        assert "control force 'done' FAILURE" in events and "refused: text holds str" in events, events
+        refused = driver.execute_script("return [...document.querySelectorAll('#events tr.failed')]"
+                                        ".map(r => r.textContent).join('|')")
+        assert "control set 'text' 5" in refused and "force" not in refused, refused
         driver.find_element("id", "resume").click()
         wait_until(driver, lambda d: text(d, "answer") == "ok: resumed")
         wait_until(driver, lambda d: not d.find_element("id", "paused").is_displayed())

@@ -88,7 +88,7 @@ class Author : public bmtree::BasicModule {
     return std::make_tuple(spun);
   }
 
-  std::tuple<std_msgs::Bool> ok() {
+  std::tuple<std_msgs::Bool> ok() const {  // a const method (a getter)
     std_msgs::Bool b;
     b.data = true;
     return std::make_tuple(b);
@@ -98,6 +98,7 @@ class Author : public bmtree::BasicModule {
     if (kind.data == "runtime") throw std::runtime_error("below the table");
     if (kind.data == "range") throw std::out_of_range("joint 7 of 6");
     if (kind.data == "int") throw 42;
+    if (kind.data == "latin1") throw std::runtime_error(std::string("driver: \xDC") + "berlast am Greifer");
     throw bmtree::Failure("asked to fail");
   }
 
@@ -411,11 +412,13 @@ def test_an_exception_is_logged_and_answered_with_its_type(author, author_json, 
     _, log, _ = author
     lines = _run_tree(tmp_path, author_json, "".join(
         "    - force_success:\n        call: author.throws\n        inputs: {kind: %s}\n" % kind
-        for kind in ("runtime", "range", "int")) + "    - call: author.nothing\n")
+        for kind in ("runtime", "range", "int", "latin1")) + "    - call: author.nothing\n")
     assert "failed" in lines[0] and "std::runtime_error: below the table" in lines[0], lines
     assert "std::out_of_range: joint 7 of 6" in lines[1], lines
     assert "int: an exception that is not a std::exception" in lines[2], lines
-    assert "succeeded" in lines[3], lines  # a function with no outputs (std::tuple<>)
+    # a Latin-1 what() (a vendor's driver): before, nlohmann's dump() threw out of the callback, the node died
+    assert "std::runtime_error: driver: \ufffdberlast am Greifer" in lines[3], lines
+    assert "succeeded" in lines[4], lines  # a function with no outputs (std::tuple<>); the node lives
     text = log.text()
     assert re.search(r"ERROR.*bmtree: throws \(call \w+\) threw std::runtime_error: below the table", text), text
     assert re.search(r"ERROR.*bmtree: throws \(call \w+\) threw int, which is not a std::exception", text), text
@@ -536,6 +539,19 @@ def test_the_header_is_clean_under_strict_warnings(tmp_path):
                           "-isystem", "/usr/include/xmlrpcpp", str(source)], capture_output=True, text=True,
                          timeout=300)
     assert out.returncode == 0, out.stderr[-4000:]
+
+
+def test_output_names_written_as_a_list_are_counted_when_the_module_is_compiled(tmp_path):
+    """provide("x", &C::f, {"reached"}) for a function of two outputs compiled, and the node stopped at
+    start on the robot; the braced list's length is now checked by the compiler."""
+    source = tmp_path / "names.cpp"
+    source.write_text(AUTHOR_CPP.replace('provide("ok", &Author::ok, {"success"});',
+                                         'provide("ok", &Author::ok, {"success", "extra"});'))
+    out = subprocess.run(["g++", "-std=c++14", "-fsyntax-only", "-I", os.path.join(CPP, "include"),
+                          "-isystem", "/usr/include/xmlrpcpp", str(source)], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode != 0 and "bmtree provide(): give one output name per element of the std::tuple the " \
+        "function returns" in out.stderr, out.stderr[-3000:]
 
 
 def test_the_installed_package_exports_cxx14_system_headers_and_no_paths_of_this_machine(author_exe, tmp_path):

@@ -38,3 +38,22 @@ def test_a_world_of_faults_alone_runs_in_the_default_house(tmp_path):
     assert [(c[2], c[3]) for c in calls] == [("navigation.go_to", "succeeded"), ("gripper.close", "failed"),
                                              ("gripper.close", "succeeded")], out.stdout
     assert "jammed" in calls[1], out.stdout
+
+
+def test_a_die_fault_kills_the_module_process_mid_call_and_the_run_finds_it_lost(tmp_path):
+    """``die``: the node's process is killed while the call runs (SIGKILL, as a crash: it stays registered);
+    the run's watchdog finds it gone and ends the call module_lost long before its timeout."""
+    world = tmp_path / "power.yaml"
+    world.write_text("faults: {navigation.go_to: {die: power cut, delay: 0.3}}\n")
+    tree = tmp_path / "go.yaml"
+    tree.write_text("format: 1\nroot:\n  call: navigation.go_to\n  inputs: {place: kitchen}\n  timeout: 60\n")
+    env = dict(os.environ, ROS_HOME=str(tmp_path / "home"))
+    out = subprocess.run(bmtree_cmd("run", "--sim", "--world", str(world), "-q", str(tree)),
+                         capture_output=True, text=True, timeout=120, env=env, stdin=subprocess.DEVNULL)
+    assert out.returncode == 1, out.stdout + out.stderr
+    [call] = [line.split() for line in out.stdout.split("calls:")[1].splitlines() if ".go_to" in line]
+    assert call[2:4] == ["navigation.go_to", "module_lost"] and float(call[4].rstrip("s")) < 30, out.stdout
+    assert "reason: navigation.go_to module_lost: module navigation lost: " in out.stdout, out.stdout
+    logs = [os.path.join(d, f) for d, _, fs in os.walk(str(tmp_path / "home")) for f in fs if "navigation" in f]
+    assert any("the node dies (an injected fault) with 1 call(s) in flight: power cut" in open(p).read()
+               for p in logs), logs

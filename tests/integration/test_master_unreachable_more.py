@@ -129,7 +129,8 @@ def test_a_registered_blackboard_node_that_does_not_answer_is_named_not_missing(
     assert live == [] and silent == {"/blackboard": (nothing_there, REFUSED)}
     assert silent_blackboards(silent, uri) == (
         "the Blackboard node /blackboard is registered but does not answer from here: nothing listens at %s, so its "
-        "process is gone (killed outright, its registration left behind)" % nothing_there)
+        "process is gone (killed outright, its registration left behind): start it again (bmtree-blackboard, or "
+        "roslaunch bmtree blackboard.launch)" % nothing_there)
     far = "http://192.0.2.7:40000/"  # TEST-NET: not this machine's
     assert silent_blackboards({"/blackboard": (far, "timed out")}, "http://192.0.2.1:11311/") == (
         "the Blackboard node /blackboard is registered but cannot be reached: node /blackboard registered "

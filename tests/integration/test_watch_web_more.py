@@ -230,3 +230,24 @@ def test_a_page_opened_after_the_run_ended_still_gets_its_end(driver, tmp_path):
         if web is not None:
             stop(web)
         run.close()
+
+
+def test_a_page_opened_during_a_long_call_counts_it_from_its_start(driver, tmp_path):
+    """The page counted the run's time from its last record when it was opened: a call running for 5 s
+    showed 0.0 s of its 30 (the terminal said 5); the watch's own "now" comes with the state."""
+    import re
+
+    run = SimRun(tmp_path, tree=GO, world=slow_world(tmp_path, speed=0.2))
+    web = None
+    try:
+        web, out, url = start_web("watch", "--web", "--wait", "60", env=run.env)
+        run.out.wait_for("RUNNING   go to the kitchen")
+        time.sleep(5.0)
+        driver.get(url)
+        wait_until(driver, lambda d: "navigation.go_to" in text(d, "pending"))
+        shown = re.search(r"navigation\.go_to([\d.]+)s / 30s", text(driver, "pending"))
+        assert shown and float(shown.group(1)) >= 4.5, text(driver, "pending")
+    finally:
+        if web is not None:
+            stop(web)
+        run.close()

@@ -69,3 +69,21 @@ def test_a_module_host_with_a_loopback_ros_ip_is_named(hosts):
     said = open(speech.log_path).read()
     assert "warning: ROS_IP=127.0.0.1 is a loopback address" in said, said
     assert "set ROS_IP=<an address of this machine on the robot's network, e.g. %s>" % ADDR["modules"] in said, said
+
+
+def test_the_coordinators_own_loopback_ros_ip_is_said_once_before_what_it_causes(hosts):
+    """bmtree run on a machine with ROS_IP=127.0.0.1 and the master on another: every module waited for
+    carried ': subscribers cannot reach this process at … set ROS_IP', and the whole hint came again at
+    the end (a line of 1,500 characters for four modules); the hint now comes once, first."""
+    import shutil
+
+    hosts.ros_ip["coord"] = "127.0.0.1"
+    hosts.start("master", shutil.which("rosmaster"), "--core", "-p", "11311", "-w", "3")
+    hosts.start("modules", sys.executable, "-m", "modules.sim", "speech")
+    out = hosts.run("coord", *bmtree("run", "-q", "--wait", "4", os.path.join(DATA, "say_hello.yaml")), timeout=60)
+    assert out.returncode == 3, out.stdout + out.stderr
+    error = next((line for line in out.stderr.splitlines() if line.startswith("error: ")), out.stderr)
+    assert error.startswith("error: ROS_IP=127.0.0.1 is a loopback address while the ROS master %s is not" % URI), error
+    assert "; so: %s:4:9: module 'speech' (node /bm_speech) is not connected to" % os.path.relpath(
+        os.path.join(DATA, "say_hello.yaml")) in error, error
+    assert error.count("ROS_IP") == error[:error.index("; so: ")].count("ROS_IP"), error   # said once, first

@@ -65,8 +65,8 @@ def test_a_failing_cleanup_does_not_change_a_success(go):
     assert run.succeeded and run.reason == "" and run.cleanup_status == "FAILURE"
     lines = summary_lines(run.result, "go")
     assert "cleanup (root succeeded): FAILED in 0.00 s: cleanup: navigation.where_am_i failed: lost" in lines
-    assert lines.index("cleanup (root succeeded): FAILED in 0.00 s: cleanup: navigation.where_am_i failed: lost") \
-        == len(lines) - 3   # its calls under it
+    at = lines.index("cleanup (root succeeded): FAILED in 0.00 s: cleanup: navigation.where_am_i failed: lost") + 1
+    assert lines[at].startswith("  at: ") and at == len(lines) - 3   # where its failure is; its calls under it
 
 
 def test_cleanup_runs_after_a_stop_by_max_duration(go):
@@ -173,7 +173,8 @@ def test_the_run_log_replay_and_failure_show_the_cleanup(go, tmp_path):
     log = read_log(log_path)
     assert log.end["reason"] == "navigation.go_to failed: blocked"
     assert log.end["cleanup"] == {"ended": "failed", "status": "FAILURE", "calls": 2, "duration": 0.0,
-                                  "reason": "cleanup: navigation.where_am_i failed: lost"}
+                                  "reason": "cleanup: navigation.where_am_i failed: lost",
+                                  "at": "%s:%d:7" % (go.path, TREE.splitlines().index("    - call: navigation.where_am_i") + 1)}
     kinds = [(n["kind"], n["name"], n["parent"]) for n in log.tree["nodes"]]
     assert kinds[0] == ("with_cleanup", "go", None) and ("sequence", "cleanup", 0) in kinds
     notices = [r["text"] for r in log.of_type("notice")]
@@ -191,7 +192,8 @@ def test_the_run_log_replay_and_failure_show_the_cleanup(go, tmp_path):
     lines = report.getvalue().splitlines()
     at = lines.index("cleanup (root failed): FAILED in 0.00 s: cleanup: navigation.where_am_i failed: lost")
     assert lines[at - 1].split()[2:4] == ["navigation.go_to", "failed"]
-    assert lines[at + 2].split()[2:4] == ["navigation.where_am_i", "failed"]
+    assert lines[at + 1] == "  at: %s" % log.end["cleanup"]["at"]
+    assert lines[at + 3].split()[2:4] == ["navigation.where_am_i", "failed"]
     failure = io.StringIO()
     _jump_to_failure(Replay(read_log(log_path)), failure)
     assert failure.getvalue().splitlines()[0].endswith("navigation.go_to failed: blocked")   # root's, not the cleanup's

@@ -45,7 +45,7 @@ def test_a_master_uri_that_is_not_an_address_is_an_environment_error(monkeypatch
 @pytest.mark.parametrize("argv, says", [
     (["run", "--period", "0"], "argument --period: expected a finite number of seconds greater than 0, got '0'"),
     (["run", "--call-timeout", "-1"], "argument --call-timeout: expected a finite number of seconds greater than 0"),
-    (["run", "--max-duration", "nan"], "argument --max-duration: expected a finite number of seconds greater than 0"),
+    (["run", "--max-duration", "nan"], "argument --max-duration: expected a finite number of seconds of 0 or more (0: no limit)"),
     (["run", "--liveness", "-1"], "argument --liveness: expected a finite number of seconds of 0 or more (0: off)"),
     (["run", "--wait", "soon"], "argument --wait: expected a number of seconds, got 'soon'"),
     (["run", "--max-bytes", "0"], "argument --max-bytes: expected a whole number of at least 1024 (a ping's answer"),

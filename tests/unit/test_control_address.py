@@ -98,7 +98,9 @@ def test_clear_takes_a_shared_name_or_an_id():
     a, b = Node("x"), Node("x")
     control.root = Node("top", [a, b])
     control.breaks = {a: True, b: True}
-    assert control._apply({"command": "clear", "node": "x@2"}) == (True, "no breakpoint on 'x@2'")
+    # it said "no breakpoint on 'x@2'" when it had just cleared one
+    assert control._apply({"command": "clear", "node": "x@2"}) == (True, "breakpoint on 'x@2' cleared")
     assert list(control.breaks) == [a]
-    assert control._apply({"command": "clear", "node": "x"}) == (True, "no breakpoint on 'x'")
+    assert control._apply({"command": "clear", "node": "x"}) == (True, "breakpoint on 'x' cleared")
     assert control.breaks == {}
+    assert control._apply({"command": "clear", "node": "x"}) == (True, "no breakpoint on 'x' (none was set)")

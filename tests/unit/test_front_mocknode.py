@@ -57,7 +57,7 @@ def test_every_mistake_of_a_script_is_said_where_it_is(tmp_path, monkeypatch, ca
     assert code == 2
     assert err.splitlines() == [
         "m.yaml:2:1: unknown key 'funtions' (did you mean 'functions'?)",
-        "m.yaml:5:7: go_to: an outcome has one of succeed, fail, reject, hang (and optionally delay, ignores_cancel), got fial: "
+        "m.yaml:5:7: go_to: an outcome has one of succeed, fail, reject, hang, die (and optionally delay, ignores_cancel), got fial: "
         "'fial' is no key of an outcome (did you mean 'fail'?)",
         "m.yaml:6:17: navigation.go_to has no output 'rom' (did you mean 'room'?)",
         "m.yaml:7:3: module 'navigation' has no function 'goto' (did you mean 'go_to'?)",

@@ -151,3 +151,21 @@ def test_a_number_compared_with_text_is_an_error_with_the_fix(tmp_path, capsys, 
         return
     assert status == 2
     assert lines == ["t.yaml:9:%d: %s" % (col, said)]
+
+
+def test_check_takes_a_module_definition_as_one_and_says_its_problems_at_their_json_path(tmp_path, capsys):
+    """A new author checks their gripper.json with bmtree check: it was read as a tree (missing 'root',
+    unknown top-level key 'Basic Module', …)."""
+    import os
+
+    from tests.conftest import DATA
+
+    good = os.path.join(DATA, "gripper", "gripper.json")
+    assert bmtree(["check", good]) == 0
+    assert capsys.readouterr().out == "%s: ok (the definition of module gripper: 2 functions, 0 events)\n" % good
+    bad = tmp_path / "arm.json"
+    bad.write_text(json.dumps({"Basic Module": "arm", "Brief Description": "x", "Hardware Required": [],
+                                "Functions": [{"Name": "open", "Exec-condition": "", "Description": "d",
+                                               "Input-params": []}]}))
+    assert bmtree(["check", str(bad)]) == 2
+    assert capsys.readouterr().err == "%s: Functions[0]: 'Output-params' is missing\n" % bad

@@ -133,3 +133,36 @@ def test_a_missing_tree_input_fails_where_the_test_is_made_saying_how(pytester):
     result.stdout.fnmatch_lines(["*UsageError: *search_room.yaml: tree input 'room' must be given: "
                                  "bmtree_tree(path, inputs={'room': ...})*"])
     assert "kit.py" not in result.stdout.str()
+
+
+PATHS_TEST = '''
+def test_from_the_ini_folder(bmtree_tree):
+    assert bmtree_tree("trees/go.yaml").run().succeeded
+
+def test_beside_the_test(bmtree_tree):
+    assert bmtree_tree("beside.yaml").run().succeeded
+
+def test_nowhere(bmtree_tree):
+    bmtree_tree("trees/nowhere.yaml")
+'''
+
+
+def test_a_tree_path_is_found_wherever_pytest_is_started(pytester, monkeypatch):
+    """From the working directory, else the ini file's folder (as bmtree_modules), else the test's: started
+    in another folder, the test found no tree (cannot read trees/go.yaml: No such file or directory)."""
+    tree = "format: 1\nroot:\n  call: speech.say\n  inputs: {text: hi}\n"
+    pytester.makeini("[pytest]\n")
+    (pytester.path / "trees").mkdir()
+    (pytester.path / "trees" / "go.yaml").write_text(tree)
+    tests = pytester.path / "tests"
+    tests.mkdir()
+    (tests / "beside.yaml").write_text(tree)
+    (tests / "test_paths.py").write_text(PATHS_TEST)
+    elsewhere = pytester.path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    result = pytester.runpytest("-p", "no:cacheprovider", str(tests))
+    result.assert_outcomes(passed=2, failed=1)
+    out = " ".join(result.stdout.str().split())
+    assert ("UsageError: bmtree_tree('trees/nowhere.yaml'): no such file; tried %s, %s, %s" % (
+        elsewhere / "trees/nowhere.yaml", pytester.path / "trees/nowhere.yaml", tests / "trees/nowhere.yaml")) in out, out

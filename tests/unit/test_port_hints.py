@@ -244,13 +244,12 @@ root:
     - retry: {attempts: 2, child: {call: speech.listen, inputs: {seconds: 3}, outputs: {text: heard}}}
     - check: 'heard == "yes"'
 """)
-    assert lines == [   # the count and the child as they would be without the mapping; 'heard' is written
+    assert lines == [   # the count and the child as they would be without the mapping; 'heard' is written,
+                        # and so is 'answer' (from an output not named right: said once, not again where read)
         "t.yaml:4:14: retry takes its count as its value and its options beside it, not in a mapping: "
         "{retry: three, child: …} (in block form, child: on a line of its own below retry:, at its indentation)",
         "t.yaml:4:25: count of retry must be an integer >= 1, got 'three'",
-        "t.yaml:4:93: speech.listen has no output 'txt' (did you mean 'text'?)",
-        "t.yaml:5:15: reads 'answer', which no node writes and no input declares (write it first, with a call's "
-        "'outputs:' or a 'set', or declare it under 'inputs:')",
+        "t.yaml:4:93: speech.listen has no output 'txt' (did you mean 'text'?)",   # and no knock-on: 'answer'
         "t.yaml:6:14: retry takes its count as its value and its options beside it, not in a mapping: "
         "{retry: 2, child: …} (in block form, child: on a line of its own below retry:, at its indentation)"]
 
@@ -294,3 +293,33 @@ def test_a_for_each_policy_to_go_on_past_failures_is_told_the_idiom(tmp_path, ca
         "t.yaml:5:11: policy must be 'all' or 'one' (to go on to the next element when one fails, as SMACH's "
         "Iterator with a 'continue' outcome: put the child in force_success, and keep what failed with its call's "
         "status: KEY)"]
+
+
+BOOL_SAID = ": YAML reads an unquoted on, off, yes or no as true or false; quote the name"
+
+
+@pytest.mark.parametrize("tree,said", [
+    ("root:\n  set: {on: true}\n", "t.yaml:3:9: tree key True is not an identifier" + BOOL_SAID),
+    ("root:\n  set: {5: 1}\n", "t.yaml:3:9: tree key 5 is not an identifier"),
+    ("inputs:\n  yes: {default: 1}\nroot:\n  wait: 1\n", "t.yaml:3:3: input name True is not an identifier" + BOOL_SAID),
+    ("root:\n  call: speech.say\n  inputs: {text: hi}\n  status: on\n",
+     "t.yaml:5:11: status of call must be a tree key, got True" + BOOL_SAID),
+    ("root:\n  for_each: [1]\n  as: off\n  child: {wait: 1}\n",
+     "t.yaml:4:7: 'as' must be a tree key (an identifier), got False" + BOOL_SAID),
+    ("root:\n  recall: {no: room}\n", "t.yaml:3:12: tree key False is not an identifier" + BOOL_SAID),
+])
+def test_a_name_yaml_read_as_true_or_false_is_a_positioned_error_that_says_to_quote_it(tmp_path, capsys, tree, said):
+    """A ``set:`` of ``on: true`` raised TypeError out of ``check``, ``run`` and ``test`` (exit 1, the code of a
+    failed task); the other places gave no hint."""
+    path = tmp_path / "t.yaml"
+    path.write_text("format: 1\n" + tree)
+    assert bmtree(["check", str(path)]) == 2
+    assert capsys.readouterr().err.replace(str(path), "t.yaml").splitlines()[0] == said
+
+
+
+def test_an_output_name_not_of_the_function_is_said_once_not_again_where_its_key_is_read(tmp_path, capsys):
+    status, lines = check(tmp_path, capsys, "format: 1\nroot:\n  sequence:\n"
+                                            "    - call: speech.listen\n      inputs: {seconds: 3}\n"
+                                            "      outputs: {txt: heard}\n    - check: 'heard == \"yes\"'\n")
+    assert status == 2 and lines == ["t.yaml:6:17: speech.listen has no output 'txt' (did you mean 'text'?)"]

@@ -618,7 +618,7 @@ def test_an_interrupted_run_becomes_a_scenario_that_passes_and_replay_says_how_t
     out_path = str(tmp_path / "interrupted.yaml")
     assert cmd_replay(_args(run=log, scenario=out_path)) == 0
     said = capsys.readouterr().out
-    assert "(run it with: bmtree test --modules %s %s)" % (defs_dir, out_path) in said, said
+    assert "(run it with: bmtree test %s)" % out_path in said, said   # its modules: are in the file
     text = open(out_path).read()
     assert "was interrupted (interrupted while 'go to the kitchen' was running)" in text and "hang: true" in text, text
     scenario = yaml.safe_load(text)["scenarios"][0]
@@ -701,6 +701,9 @@ def test_a_paused_run_times_its_calls_by_their_answers_and_replay_shows_the_cont
     tree = load_tree(GO, sim_defs)
     control = Controller(True)
     clock.call_later(0.5, lambda: control.submit({"command": "pause", "by": "/tester"}))
+    # a refused command while paused: --at named it as what paused the run
+    clock.call_later(2.0, lambda: control.submit({"command": "force", "by": "/other", "args": {"node": "nowhere",
+                                                                                             "outcome": "SUCCESS"}}))
     clock.call_later(10.0, lambda: control.submit({"command": "resume", "by": "/tester"}))
     live = io.StringIO()
     log = str(tmp_path / "run.jsonl")
@@ -719,7 +722,8 @@ def test_a_paused_run_times_its_calls_by_their_answers_and_replay_shows_the_cont
     assert "control:\n  +  0.500s  pause by /tester: paused" in out and "+ 10.000s  resume by /tester: resumed" in out
     assert "CONTROL   pause by /tester" in out   # the replayed display shows it where the live one did
     assert cmd_replay(_args(run=log, at=5.0)) == 0
-    assert "paused by control (pause by /tester: paused" in capsys.readouterr().out
+    at = capsys.readouterr().out
+    assert "paused by control (pause by /tester: paused" in at and "paused by control (force" not in at, at
 
 
 def test_a_quiet_run_keeps_touching_its_log_and_a_killed_run_lists_how_long_it_lived(tmp_path, monkeypatch):

@@ -73,7 +73,17 @@ def test_run_without_a_master_says_so_at_once_and_how_long_it_waits(no_master, c
     assert main(["run", "--wait", "0.3", FIND_APPLE]) == 3
     err = capsys.readouterr().err.splitlines()
     assert err[0] == "no ROS master at %s yet; waiting up to 0.3 s (--wait) ..." % NO_MASTER
-    assert err[-1] == "error: no ROS master at %s after 0.3 s (start one, or use --sim)" % NO_MASTER
+    # why, for an operator on a robot ("use --sim" alone was no advice there)
+    assert err[-1] == ("error: no ROS master at %s after 0.3 s: nothing listens on port 9 of 127.0.0.1: no master runs "
+                       "there (start one: roscore), or ROS_MASTER_URI names the wrong port. Without a robot, bmtree run "
+                       "--sim brings up a simulated one" % NO_MASTER)
+
+
+def test_a_master_host_whose_name_does_not_resolve_is_said_so(capsys, monkeypatch):
+    from comm.rpc import master_absence
+
+    assert master_absence("http://nosuchhost.invalid:11311/") == (
+        "nosuchhost.invalid is no host name this machine can resolve (check ROS_MASTER_URI)")
 
 
 def _scenario(tmp_path, body):

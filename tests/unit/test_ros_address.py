@@ -112,6 +112,11 @@ def test_a_name_that_does_not_resolve_keeps_its_message():
     assert problem is not None and problem.kind == "unresolved"
     assert "this machine's name 'robot.invalid' does not resolve" in problem.text
     assert "ROS_IP" in problem.text and "ROS_HOSTNAME" in problem.text
+    # the master on another machine: this machine's own address, not loopback (it suggested 127.0.0.1 there)
+    assert "(export ROS_IP=10.77.0.2, this machine's address towards the master %s)" % REMOTE_MASTER in problem.text
+    assert "127.0.0.1" not in problem.text
+    here = own_address_problem(LOCAL_MASTER, OwnAddress("robot.invalid", ""), suggest)
+    assert here is not None and "(export ROS_IP=127.0.0.1 when every node runs here)" in here.text
 
 
 def test_without_an_example_the_fix_is_still_said():

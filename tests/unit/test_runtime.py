@@ -217,21 +217,17 @@ def test_the_readme_module_example_binds_and_serves(tmp_path):
     import runpy
 
     from modules.definition import parse_definition
-    from tests.conftest import ROOT
+    from tests.conftest import DATA, ROOT
 
     with open(os.path.join(ROOT, "README.md")) as fh:
         section = fh.read().split("## Writing a basic module", 1)[1]
     code = section.split("```python", 1)[1].split("```", 1)[0]
     (tmp_path / "gripper.py").write_text(code)
     Gripper = runpy.run_path(str(tmp_path / "gripper.py"))["Gripper"]
-    param = lambda n, t: {"Name": n, "Data-type": t, "Description": ""}  # noqa: E731
-    definition = parse_definition(json.loads(json.dumps({
-        "Basic Module": "gripper", "Brief Description": "", "Hardware Required": [],
-        "Functions": [
-            {"Name": "open", "Exec-condition": "", "Description": "", "Input-params": [
-                param("width", "std_msgs/Float64")], "Output-params": [param("success", "std_msgs/Bool")]},
-            {"Name": "close", "Exec-condition": "", "Description": "", "Input-params": [],
-             "Output-params": [param("success", "std_msgs/Bool"), param("holding", "std_msgs/Bool")]}]})))
+    written = json.loads(section.split("```json", 1)[1].split("```", 1)[0])   # the README's gripper.json
+    with open(os.path.join(DATA, "gripper", "gripper.json")) as fh:
+        assert written == json.load(fh)   # the one the tests use
+    definition = parse_definition(written)
     s = Served(definition, Gripper())
     assert s.result(s.call("open", width=0.2)).error == "the gripper opens 10 cm at most"
     assert s.result(s.call("open", width=0.05)).status == "succeeded"

@@ -34,7 +34,9 @@ def test_failing_expectations_are_explained(tmp_path, capsys):
                  % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 1
     out = capsys.readouterr().out
-    assert "FAIL" in out and "status FAILURE, expected SUCCESS" in out
+    assert "FAIL" in out and "status FAILURE, expected SUCCESS (look for the object: vision.find_object failed: " \
+        "blind) at %s:19:9 in search_room(room=\"bedroom\", object=\"apple\")\n" % os.path.join(
+            os.path.relpath(TREES), "search_room.yaml") in out, out
     assert "input place is 'living_room', expected 'attic'" in out and "0 passed, 1 failed" in out
 
 
@@ -366,9 +368,9 @@ def test_misspelt_outcome_keys_get_a_suggestion_at_the_key(tmp_path, capsys):
                  "      vision.find_object: {succeed: {success: true}, dealy: 2}\n" % os.path.join(TREES, "find_apple.yaml"))
     assert bmtree(["test", str(f)]) == 2
     err = capsys.readouterr().err
-    assert "%s:4:26: an outcome has one of succeed, fail, reject, hang (and optionally delay, ignores_cancel), got fial: 'fial' is " \
+    assert "%s:4:26: an outcome has one of succeed, fail, reject, hang, die (and optionally delay, ignores_cancel), got fial: 'fial' is " \
            "no key of an outcome (did you mean 'fail'?)" % f in err
-    assert "%s:5:54: an outcome has one of succeed, fail, reject, hang (and optionally delay, ignores_cancel), got succeed, dealy: " \
+    assert "%s:5:54: an outcome has one of succeed, fail, reject, hang, die (and optionally delay, ignores_cancel), got succeed, dealy: " \
            "'dealy' is no key of an outcome (did you mean 'delay'?)" % f in err
 
 

@@ -3,6 +3,7 @@ the world's scheduled ``events``, and trees/README.md's "Reacting while an actio
 against the simulated modules' real runtime (worker threads, wall clock) in process."""
 from __future__ import annotations
 
+import logging
 import re
 import time
 
@@ -195,3 +196,31 @@ def test_the_polled_pattern_halts_the_drive_once_the_level_read_is_low(tmp_path,
     assert transport.impls["navigation"].state.room == "entrance"
     result, _ = run_on_sim(tmp_path, sim_defs, POLL, world(speed=8.0))
     assert result.succeeded, result.reason
+
+
+class _MasterGone:
+    """rospy's parameter calls with the ROS master away (killed, its machine unreachable)."""
+
+    def set_param(self, name, value):
+        raise ConnectionRefusedError(111, "the ROS master did not answer")
+
+    def get_param(self, name, default=None):
+        raise ConnectionRefusedError(111, "the ROS master did not answer")
+
+
+def test_the_simulated_robot_drives_on_while_the_master_is_away(sim_defs):
+    """Rehearsing a master fault on the simulator: navigation shares the robot's state through the parameter
+    server, and every go_to failed with ConnectionRefusedError (robot.py in _drive), as if the module
+    were broken; it goes on with its own state, as a robot's drivers would, and says so in its log."""
+    from tests.conftest import log_records
+
+    w = world(speed=100.0)
+    nav, bat = served(sim_defs, w)
+    nav.server.impl._rospy = bat.server.impl._rospy = _MasterGone()
+    with log_records("bmtree.module", logging.WARNING) as said:
+        assert nav.result(nav.call("go_to", place="kitchen")).status == "succeeded"
+        assert nav.result(nav.call("go_to", place="living_room")).status == "succeeded"
+        assert bat.result(bat.call("level")).status == "succeeded"
+    away = [r.getMessage() for r in said if "the ROS master does not answer" in r.getMessage()]
+    # once per module (navigation wrote four times, the battery read twice), not once per write
+    assert len(away) == 2 and "not shared with the other simulated modules until it does" in away[0], away

@@ -88,7 +88,7 @@ def test_a_scenario_says_it_of_a_call_built_while_the_tree_runs(tmp_path, capsys
                          "    expect: {status: success}\n" % written)
     assert bmtree(["test", "--modules", arm, str(scenarios)]) == 1
     out = capsys.readouterr().out
-    assert "(arm.move: cannot build the call: input %r %s)\n" % (name, said) in out
+    assert "(arm.move: cannot build the call: input %r %s) at %s:5:3\n" % (name, said, tmp_path / "t.yaml") in out
 
 
 class _Arm(BasicModule):

@@ -363,3 +363,45 @@ def test_a_call_answered_while_paused_shows_as_answered(sim_defs):
     line = next(line for line in seen[0].split("\n") if "navigation.go_to" in line)
     assert "answered (succeeded) at %.2fs, taken at next tick" % answers[0]["t"] in line, seen[0]
     assert "/ 30s" not in line
+
+
+def test_plain_lines_go_out_in_run_time_order_though_their_records_came_on_several_topics():
+    """Over ROS a tick's record can come after the calls that followed it (another topic): the plain
+    watch printed ``[0.084s] cleanup …`` before ``[0.080s] SUCCESS look``. Lines now wait a moment for
+    earlier ones; what is held when the watch ends is written then."""
+    import time as _time
+
+    from coordinator.watchview import TimeOrderedLines
+
+    out = io.StringIO()
+    lines = TimeOrderedLines(out, window=0.2)
+    lines.write("run r1: fetch (19 nodes)\n")
+    lines.write("[  0.079s] succeeded vision.find_object\n[  0.084s] cleanup   the cleanup failed\n")
+    lines.write("[  0.080s] SUCCESS   look\n[  0.081s] write     ended = \"failed\"\n")
+    assert out.getvalue() == ""                      # held for the window
+    deadline = _time.monotonic() + 10
+    while out.getvalue().count("\n") < 5 and _time.monotonic() < deadline:
+        _time.sleep(0.05)                            # released by its own thread once the window is over
+    assert out.getvalue().splitlines() == [
+        "run r1: fetch (19 nodes)", "[  0.079s] succeeded vision.find_object", "[  0.080s] SUCCESS   look",
+        "[  0.081s] write     ended = \"failed\"", "[  0.084s] cleanup   the cleanup failed"]
+    lines.write("[  0.098s] end       FAILURE\n")
+    lines.close()
+    assert out.getvalue().splitlines()[-1] == "[  0.098s] end       FAILURE"
+    # a record that comes after the end (another topic's) is written at once, never held for good
+    lines.write("[  0.097s] call      speech.say {}\n")
+    assert out.getvalue().splitlines()[-1] == "[  0.097s] call      speech.say {}"
+
+
+def test_an_ended_run_is_not_shown_paused():
+    """A breakpoint in a cleanup paused the run and it ended so: the header said PAUSED after the end."""
+    from coordinator.watchstate import WatchState
+
+    s = WatchState()
+    s.apply({"v": 1, "type": "tree", "run": "r1", "t": 0.0, "name": "t", "nodes": [{"id": 0, "parent": None, "kind": "wait",
+                                                                           "shape": "leaf", "name": "w"}]})
+    s.apply({"type": "control", "run": "r1", "t": 1.0, "command": "pause", "ok": True, "answer": "paused",
+             "paused": True})
+    assert s.paused
+    s.apply({"type": "end", "run": "r1", "t": 12.0, "status": "SUCCESS", "reason": "", "ticks": 3})
+    assert not s.paused and not s.view()["paused"]

@@ -91,7 +91,7 @@ def test_long_inputs_are_cut_on_the_failing_calls_line(sim_defs, tmp_path):
     tree = tmp_path / "long.yaml"
     tree.write_text("format: 1\nroot:\n  call: speech.say\n  inputs: {text: %s}\n" % ("x" * 300))
     log_path, run = recorded(str(tree), sim_defs, tmp_path, lambda m: m["speech.say"].fail("muted"))
-    [line] = [line for line in summary_lines(run.result, "long") if "inputs" in line]
+    [line] = [line for line in summary_lines(run.result, "long") if line.startswith("  +") and "inputs" in line]
     assert line.endswith("…") and len(line.split("inputs ", 1)[1]) == 60
 
 
@@ -233,3 +233,61 @@ def test_the_reason_names_the_nearest_named_node_not_a_bare_kind(sim_defs, tmp_p
     assert run.status == Status.FAILURE
     said = "navigation.go_to failed: blocked"
     assert run.reason == ("take a message to the kitchen: " + said if named else said)
+
+
+def test_the_summary_says_where_the_failure_is_written_and_which_include_it_was_in(sim_defs, tmp_path):
+    """``reason:`` says what failed; ``at:`` says where it is written (an editor's FILE:LINE:COLUMN) and, in
+    a subtree, with which arguments it was included: the fourth room's look failed, not the first's."""
+    _log, run = _camera_down(sim_defs, tmp_path)
+    lines = summary_lines(run.result, "find_apple")
+    at = lines[lines.index("reason: " + run.reason) + 1]
+    assert at.startswith("at: ") and at.endswith('search_room.yaml:19:9 in search_room(room="bedroom", object="apple")'), lines
+    assert run.result.failed_at == at[len("at: "):]
+
+
+def test_a_failed_cleanup_says_where_its_failure_is_written_and_a_success_says_nothing(sim_defs, tmp_path):
+    from tests.unit.test_cleanup_runs import TREE
+
+    path = tmp_path / "go.yaml"
+    path.write_text(TREE)
+    line = TREE.splitlines().index("    - call: navigation.where_am_i") + 1
+    t = TreeTest(str(path), definitions=sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    t.mocks["navigation.where_am_i"].fail("lost")
+    lines = summary_lines(t.run().result, "go")
+    cleanup = next(i for i, x in enumerate(lines) if x.startswith("cleanup (root failed): FAILED"))
+    assert lines[cleanup + 1] == "  at: %s:%d:7" % (path, line), lines
+    go = [x for x in lines if x.startswith("at: ")]
+    assert len(go) == 1 and go[0].startswith("at: %s:" % path), lines
+    t = TreeTest(str(path), definitions=sim_defs)
+    t.mocks["navigation.go_to"].succeed(room="kitchen")
+    assert not [x for x in summary_lines(t.run().result, "go") if "at: " in x]
+
+
+def test_replay_and_watch_say_where_the_failure_and_the_cleanups_are_written(sim_defs, tmp_path):
+    """The run log's end record keeps ``at``: the replay's report and the watch's last lines say it as the
+    run's summary did, for root's failure and for the cleanup's."""
+    from coordinator.watchstate import WatchState
+    from coordinator.watchtext import summary_lines as watch_lines
+    from tests.unit.test_cleanup_runs import TREE
+
+    def watched(log_path):
+        state = WatchState()
+        for rec in read_log(log_path).records:
+            state.apply(rec)
+        return watch_lines(state)
+
+    log_path, run = _camera_down(sim_defs, tmp_path)
+    at = "at: " + run.result.failed_at
+    assert run.result.failed_at and at in _summary(log_path).splitlines() and at in watched(log_path)
+    path = tmp_path / "go.yaml"
+    path.write_text(TREE)
+    (tmp_path / "go").mkdir()
+    log_path, run = recorded(str(path), sim_defs, tmp_path / "go", lambda m: (m["navigation.go_to"].succeed(room="kitchen"),
+                                                                       m["navigation.where_am_i"].fail("lost")))
+    line = TREE.splitlines().index("    - call: navigation.where_am_i") + 1
+    for lines in (_summary(log_path).splitlines(), watched(log_path)):
+        cleanup = [i for i, x in enumerate(lines) if x.startswith("cleanup (root succeeded): FAILED")]
+        assert len(cleanup) == 1, lines
+        assert lines[cleanup[0] + 1] == "  at: %s:%d:7" % (path, line), lines
+        assert not [x for x in lines if x.startswith("at: ")], lines  # root succeeded: nothing of its own

@@ -6,8 +6,10 @@
 #include <std_msgs/Float64.h>
 #include <std_msgs/String.h>
 
+#include <array>
 #include <chrono>
 #include <cstring>
+#include <string>
 #include <thread>
 #include <tuple>
 
@@ -17,7 +19,10 @@ class Oddities : public bmtree::BasicModule {
     provide("vendor", &Oddities::vendor, {"success"});
     provide("ok", &Oddities::ok, {"success"});
     provide("stubborn", &Oddities::stubborn, {"slept"});
-    if (bad_names) provide("two", &Oddities::two, {"success"});  // two outputs, one name: a mistake
+    // two outputs, one name: a mistake that only shows when the node starts when the names are a
+    // std::array (given as {"success"} it is a compile error)
+    const std::array<std::string, 2> one_name = {{"success"}};
+    if (bad_names) provide("two", &Oddities::two, one_name);
   }
 
   std::tuple<std_msgs::Bool> vendor() {

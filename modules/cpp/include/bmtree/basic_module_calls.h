@@ -34,6 +34,19 @@
 #include "event_param.h"
 
 namespace bmtree {
+namespace detail {
+
+/// The JSON text of `j`. A string of it that is not UTF-8 (a Latin-1 message of a vendor's driver
+/// in an exception's what()) has those bytes replaced by U+FFFD: nlohmann's dump() would throw
+/// out of the callback and end the node.
+inline std::string jsonText(const nlohmann::json& j) {
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+}  // namespace detail
+}  // namespace bmtree
+
+namespace bmtree {
 
 /// Reads its private parameters, makes its topics (the cancel side's on the cancel thread's queue),
 /// starts its threads and publishes BM_info.
@@ -90,7 +103,7 @@ inline bool BasicModule::emit(const std::string& event, const std::vector<EventP
     j["params"].push_back({{"name", p.name_}, {"type", p.type_}, {"md5sum", p.md5sum_}, {"data", p.data_}});
   }
   std_msgs::String msg;
-  msg.data = j.dump();
+  msg.data = detail::jsonText(j);
   if (msg.data.size() > kMaxPayload) {
     ROS_ERROR("bmtree: emit(\"%s\"): the event is %zu bytes, over the %zu the bridge takes; nothing sent",
               event.c_str(), msg.data.size(), kMaxPayload);
@@ -117,7 +130,7 @@ inline void BasicModule::publishInfo() {
   info["functions"] = names;
   info["signatures"] = signatures;  // a bridge checks its definition against them at start
   std_msgs::String msg;
-  msg.data = info.dump();
+  msg.data = detail::jsonText(info);
   info_pub_.publish(msg);
 }
 
@@ -236,8 +249,8 @@ inline void BasicModule::execute(const Ready& ready) {
     reply = failure("rejected", "module " + module_ + " has no function " + call.function);
   } else if (call.topics != ready.function.input_topics) {
     reply = failure("rejected", "function " + call.function + " takes its inputs on " +
-                                    nlohmann::json(ready.function.input_topics).dump() + ", not " +
-                                    nlohmann::json(call.topics).dump());
+                                    detail::jsonText(ready.function.input_topics) + ", not " +
+                                    detail::jsonText(call.topics));
   } else if (!ready.missing.empty() && !call.call_id.empty()) {
     // never run a function (a motion) on the previous call's values or on zero messages
     const std::string error = inputsNamed(call, ready.missing) + " did not arrive within input_wait (" +
@@ -282,7 +295,7 @@ inline void BasicModule::execute(const Ready& ready) {
   }
   if (!call.call_id.empty()) reply["call_id"] = call.call_id;  // a new bridge tells old answers apart
   std_msgs::String out;
-  out.data = reply.dump();
+  out.data = detail::jsonText(reply);
   out_pub_.publish(out);
 }
 

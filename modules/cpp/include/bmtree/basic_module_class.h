@@ -102,30 +102,39 @@ class BasicModule {
   void provide(const std::string& name, std::tuple<Out...> (C::*fn)(const In&...),
                const std::array<std::string, sizeof...(Out)>& output_names) {
     C* self = static_cast<C*>(this);
-    std::vector<std::string> names(output_names.begin(), output_names.end());
-    for (const auto& n : names) {  // {"width"} for two outputs compiles: the missing name is ""
-      if (n.empty()) {
-        throw std::logic_error("provide(\"" + name + "\"): the function returns " + std::to_string(sizeof...(Out)) +
-                               " outputs, so it needs " + std::to_string(sizeof...(Out)) +
-                               " non-empty output names");
-      }
-    }
-    std::lock_guard<std::mutex> lock(state_mutex_);
-    Function f;
-    f.input_topics = {topicFor<In>()...};
-    std::vector<std::string> output_topics = {topicFor<Out>()...};
-    f.output_names = names;
-    f.output_topics = output_topics;
-    f.run = [this, self, fn, names, output_topics](const std::vector<std::size_t>& occurrence) {
-      std::tuple<Out...> out = invoke(self, fn, occurrence, std::index_sequence_for<In...>());
-      publishAll(out, std::index_sequence_for<Out...>());
-      nlohmann::json reply;
-      reply["outparam_names"] = names;
-      reply["outparam_topics"] = output_topics;
-      return reply;
-    };
-    functions_[name] = std::move(f);
-    publishInfo();
+    add(name, std::vector<std::string>(output_names.begin(), output_names.end()), Types<Out...>(), Types<In...>(),
+        [self, fn](const In&... in) { return (self->*fn)(in...); });
+  }
+
+  /// The same for a `const` method (a getter such as `status() const`).
+  template <class C, class... Out, class... In>
+  void provide(const std::string& name, std::tuple<Out...> (C::*fn)(const In&...) const,
+               const std::array<std::string, sizeof...(Out)>& output_names) {
+    const C* self = static_cast<const C*>(this);
+    add(name, std::vector<std::string>(output_names.begin(), output_names.end()), Types<Out...>(), Types<In...>(),
+        [self, fn](const In&... in) { return (self->*fn)(in...); });
+  }
+
+  /// The names written as a list of texts, `{"final_pos", "distance"}` (what overload resolution picks
+  /// for them): a name too few or too many is a compile error, not an error when the node starts.
+  template <class C, class... Out, class... In, std::size_t K>
+  void provide(const std::string& name, std::tuple<Out...> (C::*fn)(const In&...),
+               const char* const (&output_names)[K]) {
+    static_assert(K == sizeof...(Out), "bmtree provide(): give one output name per element of the std::tuple "
+                                       "the function returns");
+    C* self = static_cast<C*>(this);
+    add(name, std::vector<std::string>(output_names, output_names + K), Types<Out...>(), Types<In...>(),
+        [self, fn](const In&... in) { return (self->*fn)(in...); });
+  }
+
+  template <class C, class... Out, class... In, std::size_t K>
+  void provide(const std::string& name, std::tuple<Out...> (C::*fn)(const In&...) const,
+               const char* const (&output_names)[K]) {
+    static_assert(K == sizeof...(Out), "bmtree provide(): give one output name per element of the std::tuple "
+                                       "the function returns");
+    const C* self = static_cast<const C*>(this);
+    add(name, std::vector<std::string>(output_names, output_names + K), Types<Out...>(), Types<In...>(),
+        [self, fn](const In&... in) { return (self->*fn)(in...); });
   }
 
  private:
@@ -180,11 +189,41 @@ class BasicModule {
     return static_cast<detail::Channel<M>&>(*channels_.at(dataTopic(module_, detail::datatypeOf<M>())));
   }
 
-  template <class C, class... Out, class... In, std::size_t... I>
-  std::tuple<Out...> invoke(C* self, std::tuple<Out...> (C::*fn)(const In&...),
-                            const std::vector<std::size_t>& occurrence, std::index_sequence<I...>) {
+  template <class... T>
+  struct Types {};
+
+  template <class... Out, class... In, class Fn>
+  void add(const std::string& name, const std::vector<std::string>& names, Types<Out...>, Types<In...>, Fn fn) {
+    for (const auto& n : names) {  // {"width"} for two outputs compiles: the missing name is ""
+      if (n.empty()) {
+        throw std::logic_error("provide(\"" + name + "\"): the function returns " + std::to_string(sizeof...(Out)) +
+                               " outputs, so it needs " + std::to_string(sizeof...(Out)) +
+                               " non-empty output names");
+      }
+    }
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    Function f;
+    f.input_topics = {topicFor<In>()...};
+    std::vector<std::string> output_topics = {topicFor<Out>()...};
+    f.output_names = names;
+    f.output_topics = output_topics;
+    f.run = [this, fn, names, output_topics](const std::vector<std::size_t>& occurrence) {
+      std::tuple<Out...> out = invoke<In...>(fn, occurrence, std::index_sequence_for<In...>());
+      publishAll(out, std::index_sequence_for<Out...>());
+      nlohmann::json reply;
+      reply["outparam_names"] = names;
+      reply["outparam_topics"] = output_topics;
+      return reply;
+    };
+    functions_[name] = std::move(f);
+    publishInfo();
+  }
+
+  template <class... In, class Fn, std::size_t... I>
+  auto invoke(const Fn& fn, const std::vector<std::size_t>& occurrence, std::index_sequence<I...>)
+      -> decltype(fn(std::declval<const In&>()...)) {
     (void)occurrence;  // unused when the function has no inputs
-    return (self->*fn)(channel<In>().selected(occurrence[I])...);
+    return fn(channel<In>().selected(occurrence[I])...);
   }
 
   template <class... Out, std::size_t... I>
