@@ -47,6 +47,7 @@ REPLY = "/bmtree/run/control_reply"
 COMMANDS = {"pause": [], "resume": [], "step": [], "stop": [], "break": ["node"], "clear": ["node"],
             "force": ["node", "outcome"], "set": ["key", "value"]}
 MAX_REQUEST = 64 * 1024
+MAX_STEERED = 100  # forced outcomes and writes a run keeps for its result (the run log has every command)
 
 
 def parse_command(words: List[str]) -> Dict[str, Any]:
@@ -98,6 +99,9 @@ class Controller(RunObserver):
         self.root: Any = None
         self.breaks: Dict[Any, bool] = {}
         self.force: Dict[Any, Status] = {}
+        self._forced_by: Dict[Any, str] = {}
+        #: what control changed in the run, as it took effect: (clock time, text); the run's result says it
+        self.steered: List[Tuple[float, str]] = []
         self._held: Dict[Any, bool] = {}
         self._wrapped: Dict[Any, bool] = {}
         self._flying: Dict[str, Any] = {}  # call_id -> CallRecord of the calls in flight
@@ -128,6 +132,10 @@ class Controller(RunObserver):
         the runner stops root with it (as ``--max-duration`` does), once."""
         why, self._stop = self._stop, ""
         return why
+
+    def _steered(self, text: str) -> None:
+        if len(self.steered) < MAX_STEERED:
+            self.steered.append((self.ctx.clock.now() if self.ctx is not None else 0.0, text))
 
     def unpause(self, why: str) -> None:
         """A run stopped from outside (Ctrl-C) while paused: the pause ends (said to the viewers), or its
@@ -169,6 +177,8 @@ class Controller(RunObserver):
             log.warning("control command refused: %s: %s", type(exc).__name__, exc)
             self._answer(_plain(cmd), False, "malformed command: %s: %s" % (type(exc).__name__, str(exc)[:200]))
             return
+        if ok and cmd.get("command") == "set":
+            self._steered("blackboard %s%s" % (answer, _by(cmd.get("by"))))
         self._answer(cmd, ok, answer)
 
     def _tell_answers(self) -> None:
@@ -309,6 +319,7 @@ class Controller(RunObserver):
             return False, "an outcome is SUCCESS or FAILURE, not %r" % cmd.get("outcome")
         self._wrap(b)
         self.force[b] = Status(outcome)
+        self._forced_by[b] = _by(cmd.get("by"))
         return True, "%r will end in %s the next time it is ticked" % (self._label(b), outcome)
 
     def _task(self) -> Any:
@@ -399,6 +410,7 @@ class Controller(RunObserver):
                 self._held[b] = False
                 b.status = outcome
                 b.feedback_message = "forced to %s by control" % outcome.value
+                self._steered("%r forced to %s%s" % (self._label(b), outcome.value, self._forced_by.pop(b, "")))
                 yield b
                 return
             if self._held.get(b):
@@ -450,3 +462,8 @@ def _plain(cmd: Any) -> Dict[str, Any]:
         return {"command": "?"}
     return {k: str(cmd[k])[:80] for k in ("id", "command", "by", "to") if k in cmd}
 
+
+
+def _by(who: Any) -> str:
+    """`` by /bmtree_ctl_1`` (who sent a command), or '' when it does not say."""
+    return " by %s" % who if who and who != "?" else ""

@@ -24,6 +24,7 @@ from coordinator.runevents import (
     cleanup_said,
     control_line,
     status_word,
+    steered_lines,
     terminal_text,
 )
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log, writer_alive
@@ -126,6 +127,7 @@ def _report(replay: Replay, out: TextIO) -> None:
             out.write("reason: %s\n" % end.get("reason"))
             if end.get("at"):
                 out.write("at: %s\n" % end["at"])
+        out.write("".join(line + "\n" for line in steered_lines(end.get("steered"))))
     ended, _others = replay.failures()
     failing = replay.failing_call(ended)[0] if ended is not None else None
     _stop_tick, _what, label = _stop(replay)

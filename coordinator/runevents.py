@@ -21,7 +21,7 @@ import py_trees
 from py_trees.common import Status
 
 __all__ = ["terminal_text", "TerminalText", "tree_drawing", "Display", "NoticeLines", "include_setters", "RunObserver", "StatusWatcher", "Change", "Notice", "notify", "control_line", "status_word", "stop_status",
-           "halted_word", "cleanup_said", "cleanup_at",
+           "halted_word", "cleanup_said", "cleanup_at", "steered_lines",
            "CLEANUP_NOTICES", "IncludeArgs", "include_label"]
 
 log = logging.getLogger("bmtree.coordinator")
@@ -235,6 +235,13 @@ def cleanup_said(said: Any) -> str:
     word = {"SUCCESS": "succeeded", "FAILURE": "FAILED"}.get(str(status), "cut short")
     why = ": %s" % said.get("reason") if said.get("reason") and status != "SUCCESS" else ""
     return "cleanup (root %s): %s in %.2f s%s" % (said.get("ended"), word, float(said.get("duration") or 0.0), why)
+
+
+def steered_lines(steered: Any) -> List[str]:
+    """What ``bmtree control`` changed in a run, under its result: a result it steered is not the tree's own."""
+    texts = [str(s) for s in steered] if isinstance(steered, list) else []
+    return ["steered: %s" % s for s in texts[:5]] + (
+        ["steered: … and %d more (the run log has every control command)" % (len(texts) - 5)] if len(texts) > 5 else [])
 
 
 def cleanup_at(said: Any) -> List[str]:

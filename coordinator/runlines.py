@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
 from py_trees.common import Status
 
 from coordinator.context import CallRecord, late_answer_text
-from coordinator.runevents import cleanup_at, status_word, terminal_text
+from coordinator.runevents import cleanup_at, status_word, steered_lines, terminal_text
 
 if TYPE_CHECKING:
     from coordinator.runner import RunResult
@@ -85,6 +85,7 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
         lines.append("reason: %s" % result.reason)
         if result.failed_at:
             lines.append("at: %s" % result.failed_at)
+    lines.extend(steered_lines(result.steered))
     lines.append("calls:")
     cleanup = {id(c) for c in result.cleanup_calls}
     cut = {id(c) for c in result.cleanup_cut_calls}

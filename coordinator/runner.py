@@ -73,6 +73,8 @@ class RunResult:
     # where the failure the reason (cleanup_reason) names is written: ``FILE:LINE:COLUMN`` [``in INCLUDE``]
     failed_at: str = ""
     cleanup_failed_at: str = ""
+    #: what ``bmtree control`` changed (forced outcomes, blackboard writes): ``3.10s 'grasp' forced to SUCCESS``
+    steered: List[str] = field(default_factory=list)
 
     @property
     def succeeded(self) -> bool:
@@ -302,6 +304,7 @@ class TreeRunner:
         result = RunResult(status=status, duration=now - start, calls=list(ctx.calls),
                            blackboard=dict(ctx.blackboard), ticks=self.ticks, reason=reason, history=self.history,
                            started=start, failed_call=failed_call, stopped_at=stopped_at)
+        result.steered = ["%.2fs %s" % (t - start, text) for t, text in getattr(self.gate, "steered", ())]
         if status == Status.FAILURE and stopped_at is None:
             result.failed_at = self.explainer.failed_at(task.root if task is not None else self.root,
                                                         under=task is not None)

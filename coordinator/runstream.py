@@ -296,6 +296,8 @@ class RunStream(RunObserver):
                   "duration": round(result.duration, 6), "calls": len(result.calls)}
         if getattr(result, "failed_at", ""):   # where the failure the reason names is written
             record["at"] = result.failed_at
+        if getattr(result, "steered", None):   # what bmtree control changed
+            record["steered"] = list(result.steered)
         if getattr(result, "ended", ""):   # a tree with cleanup: how root ended, how its cleanup did
             cleanup = getattr(result, "cleanup_status", None)
             record["cleanup"] = {"ended": result.ended, "status": cleanup.value if cleanup is not None else None,

@@ -10,7 +10,7 @@ import re
 import textwrap
 from typing import Any, Dict, List, Optional
 
-from coordinator.runevents import cleanup_at, cleanup_said, status_word, terminal_text
+from coordinator.runevents import cleanup_at, cleanup_said, status_word, steered_lines, terminal_text
 from coordinator.watchstate import WatchState
 
 __all__ = ["brief", "values_text", "cut", "share", "where_text", "pending_text", "call_text", "result_text",
@@ -136,7 +136,9 @@ def result_text(end: Dict[str, Any]) -> str:
         head = "result: %s in %.2fs (%s ticks)" % (status_word(end.get("status")), float(end.get("duration") or 0.0),
                                                     end.get("ticks"))
     cleanup = cleanup_said(end.get("cleanup"))
-    return head + (("  reason: %s" % end["reason"]) if end.get("reason") else "") + ("  " + cleanup if cleanup else "")
+    steered = end.get("steered") if isinstance(end.get("steered"), list) else []
+    return head + (("  reason: %s" % end["reason"]) if end.get("reason") else "") + ("  " + cleanup if cleanup else "") \
+        + ("  steered: %s" % "; ".join(str(s) for s in steered) if steered else "")
 
 
 def wrap(text: str, width: int, most: Optional[int] = None) -> List[str]:
@@ -161,11 +163,12 @@ def summary_lines(state: WatchState) -> List[str]:
             if state.nodes:
                 out.append("the watch ended before the run %s (at %.2fs, tick %d)" % (name, state.now(), state.tick))
         else:
-            out.append(result_text(dict(end, reason="", cleanup=None)))
+            out.append(result_text(dict(end, reason="", cleanup=None, steered=None)))
             if end.get("reason"):
                 out.append("reason: %s" % end["reason"])
                 if end.get("at"):
                     out.append("at: %s" % end["at"])
+            out.extend(steered_lines(end.get("steered")))
             if cleanup_said(end.get("cleanup")):
                 out.append(cleanup_said(end.get("cleanup")))
                 out.extend(cleanup_at(end.get("cleanup")))

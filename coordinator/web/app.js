@@ -282,7 +282,8 @@ function draw(s) {
   const r = $("result");
   r.className = s.end ? s.end.status : "";
   r.textContent = s.end ? "result: " + statusWord(s.end.status) + (s.end.status === "UNFINISHED" ? "" : " in " + sec(s.end.duration))
-    + (s.end.reason ? " (" + s.end.reason + ")" : "") + (s.cleanup ? "; " + s.cleanup : "") : "";
+    + (s.end.reason ? " (" + s.end.reason + ")" : "") + (s.cleanup ? "; " + s.cleanup : "")
+    + (Array.isArray(s.end.steered) && s.end.steered.length ? "; steered: " + s.end.steered.join("; ") : "") : "";
   const down = graphAlert(s);
   $("alert").hidden = !down;
   $("alert").textContent = down;

@@ -75,6 +75,10 @@ def test_each_command_steers_the_run_and_is_logged(tmp_path):
         seen.wait_for("end       FAILURE")
         assert run.finish() == 1, run.out.text()
         assert watch.wait(60) == 0
+        # the summary says what control changed, each when it took effect and by whom
+        steered = [line for line in run.out.text().splitlines() if line.startswith("steered: ")]
+        assert len(steered) == 2 and "blackboard text = \"changed by control\" by /bmtree_control" in steered[0] \
+            and "'done' forced to FAILURE by /bmtree_control" in steered[1], run.out.text()
         # the run log says who did what
         log_path = run.out.wait_for("run log: ").split(": ", 1)[1]
         records = [r for r in read_log(log_path).records if r.get("type") == "control"]
@@ -98,7 +102,8 @@ def test_a_run_without_control_refuses_every_command(tmp_path):
     from tests.integration.test_watch_web import browser, start_web, text, wait_until
 
     driver = browser(tmp_path)
-    run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=2.0))
+    # a 16 s drive: the control command, the terminal and the page join while it runs, also on a loaded machine
+    run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=0.5))
     term = web = None
     try:
         run.out.wait_for("RUNNING   go to the kitchen")
@@ -170,6 +175,7 @@ def test_keys_in_the_terminal_and_buttons_on_the_page(tmp_path):
         wait_until(driver, lambda d: text(d, "answer") == "ok: resumed")
         wait_until(driver, lambda d: not d.find_element("id", "paused").is_displayed())
         wait_until(driver, lambda d: "result: FAILURE" in text(d, "result"), timeout=150)
+        assert "steered: " in text(driver, "result") and "'done' forced to FAILURE by /bmtree_" in text(driver, "result")
         assert "forced to FAILURE by control" in text(driver, "events") + str(driver.execute_script(
             "return [...document.querySelectorAll('#tree g.node title')].map(t=>t.textContent).join('|')"))
         assert run.finish() == 1, run.out.text()
