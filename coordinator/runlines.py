@@ -31,13 +31,13 @@ def call_line(started: float, target: Any, status: Any, duration: Optional[float
     line = "  +%7.3fs  %-26s %-11s %8s  %s" % (started, target, status, dur, error or "")
     if inputs is not None:
         line += "%sinputs %s" % ("  " if error else "", short_json(inputs))
-    return terminal_text(line.rstrip())
+    return terminal_text(line.rstrip(), newlines=False)   # a module's error of several lines: still one row
 
 
 def late_line(text: str) -> str:
     """Under its call in an end-of-run summary (live and ``bmtree replay``): the answer that came after
     the call had ended (``text``: its notice, which says when). Not a call's line: no ``+`` time."""
-    return terminal_text(" " * 14 + "late answer: " + text)
+    return terminal_text(" " * 14 + "late answer: " + text, newlines=False)
 
 
 def stop_label(interrupted: bool, reason: str) -> Tuple[str, str]:

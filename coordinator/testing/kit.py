@@ -54,9 +54,22 @@ class TreeRun:
         self.transport = transport
         defs = transport.mocks.definitions
         self._functions = {"%s.%s" % (m, f) for m, d in defs.items() for f in d.functions}
-        self._by_name: Dict[str, List[str]] = {}
+        self._by_name: Dict[str, List[Tuple[Any, List[str]]]] = {}   # name -> (node, statuses), in the order they ran
         for b, statuses in result.history.items():
-            self._by_name.setdefault(b.name, [s.value for s in statuses])
+            self._by_name.setdefault(b.name, []).append((b, [s.value for s in statuses]))
+
+    def __repr__(self) -> str:
+        """What a failed ``assert run.succeeded`` shows: how the run ended and why, where, what steered it."""
+        said = "%s in %.2f s" % (self.status.value, self.duration)
+        if self.reason and self.status != Status.SUCCESS:
+            said += ": %s" % self.reason
+        if self.result.failed_at:
+            said += " (at %s)" % self.result.failed_at
+        if self.result.ended:
+            said += "; cleanup (root %s): %s" % (self.result.ended, self.cleanup_status or "did not run")
+            if self.result.cleanup_reason:
+                said += ": %s" % self.result.cleanup_reason
+        return "<TreeRun %s>" % said
 
     @property
     def succeeded(self) -> bool:
@@ -100,13 +113,25 @@ class TreeRun:
         """The tree blackboard at the end, one-field messages unwrapped (``answer == "yes"``)."""
         return {k: plain(v) for k, v in self.result.blackboard.items()}
 
-    def statuses(self, name: str) -> List[str]:
-        """Statuses the first node called ``name`` went through (``["RUNNING", "SUCCESS"]``)."""
+    def statuses(self, name: str, nth: Optional[int] = None) -> List[str]:
+        """Statuses the node called ``name`` went through (``["RUNNING", "SUCCESS"]``). Several nodes so
+        named (a subtree included twice) that went through different ones: KeyError naming each, unless
+        ``nth`` says which (0: the first of them to run)."""
         __tracebackhide__ = True
         if name not in self._by_name:
             raise KeyError("no node named %r ran%s (nodes: %s)" % (
                 name, did_you_mean(name, self._by_name), ", ".join(sorted(self._by_name))))
-        return self._by_name[name]
+        ran = self._by_name[name]
+        if nth is not None:
+            if not 0 <= nth < len(ran):
+                raise KeyError("run.statuses(%r, %d): %d node%s named %r ran (nth is 0 to %d)" % (
+                    name, nth, len(ran), "s" if len(ran) > 1 else "", name, len(ran) - 1))
+            return ran[nth][1]
+        if any(statuses != ran[0][1] for _b, statuses in ran[1:]):
+            said = ["%d: %s %s" % (i, _where(b), statuses) for i, (b, statuses) in enumerate(ran)]
+            raise KeyError("%d nodes named %r ran, through different statuses (%s): say which, "
+                           "run.statuses(%r, nth) (0: the first to run)" % (len(ran), name, "; ".join(said), name))
+        return ran[0][1]
 
     @property
     def ended(self) -> str:
@@ -316,8 +341,14 @@ class TreeTest:
         return run
 
     def _check_inputs(self) -> None:
-        """UsageError naming the tree's inputs without a default that ``inputs`` lacks, and how to give them."""
+        """UsageError naming an input ``inputs`` gives that the tree does not declare, or the tree's inputs
+        without a default that ``inputs`` lacks, and how to give them."""
         __tracebackhide__ = True
+        unknown = sorted(str(k) for k in self.inputs if k not in self.tree.inputs)
+        if unknown:   # a typo would silently run the default: a green test that tests nothing
+            k = unknown[0]
+            raise UsageError("%s declares no input %r%s (its inputs: %s)" % (
+                self.path, k, did_you_mean(k, self.tree.inputs), ", ".join(sorted(self.tree.inputs)) or "none"))
         missing = sorted(self.tree.required_inputs - set(self.inputs))
         if missing:
             example = ", ".join("%r: ..." % m for m in missing)
@@ -325,3 +356,19 @@ class TreeTest:
                              "inputs={%s}); in a scenario file, the scenario's inputs: {%s}" % (
                                  self.path, "s" if len(missing) > 1 else "", ", ".join(repr(m) for m in missing),
                                  example, example, ", ".join("%s: ..." % m for m in missing)))
+
+
+def _where(b: Any) -> str:
+    """Where a behaviour is written: ``go_safely.yaml:12:9`` (and the include it is in), or its name."""
+    import os
+
+    def at(x: Any) -> str:
+        pos = getattr(getattr(x, "bmtree_node", None), "pos", None)
+        return "%s:%s:%s" % (os.path.basename(str(pos.file)), pos.line, pos.column) if pos is not None else ""
+
+    said, up = at(b) or repr(b.name), b.parent
+    while up is not None:   # the include it came through: a subtree included twice is written once
+        if getattr(getattr(up, "bmtree_node", None), "kind", "") == "include" and at(up):
+            return "%s (in %s at %s)" % (said, up.name, at(up))
+        up = up.parent
+    return said
