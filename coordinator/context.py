@@ -1,6 +1,7 @@
 """State of one run: the tree blackboard, calls in flight and their correlation, the log."""
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import typing
@@ -27,12 +28,39 @@ from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "WAKE", "gone_text",
-           "late_answer_text", "plain"]
+__all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "SUCCESS_FALSE", "WAKE", "gone_text",
+           "late_answer_text", "plain", "success_false_said"]
 
 log = logging.getLogger("bmtree.coordinator")
 
 WAKE = object()
+
+
+SUCCESS_FALSE = "answered success: false"
+
+
+def _unset(value: Any, depth: int = 0) -> bool:
+    """An output left at its message's default (``""``, 0, an empty list, a point at 0,0,0): it says nothing."""
+    if isinstance(value, dict):
+        return depth < 8 and all(_unset(v, depth + 1) for v in value.values())
+    return value in ("", 0, False, None, [])
+
+
+def _set_part(value: Any) -> Any:
+    """``value`` without the fields left at their defaults (``{"position": {"x": 1.5}}``)."""
+    if isinstance(value, dict):
+        return {k: _set_part(v) for k, v in value.items() if not _unset(v)}
+    return value
+
+
+def success_false_said(error: Any, outputs: Any, width: int = 100) -> str:
+    """``error`` with the other outputs of a call that answered ``success: false`` (the original modules'
+    way to say why: ``answered success: false (error_code "E42: gripper jammed")``); else ``error``."""
+    if error != SUCCESS_FALSE or not isinstance(outputs, dict):
+        return str(error or "")
+    said = ", ".join("%s %s" % (k, json.dumps(_set_part(v), ensure_ascii=False, separators=(",", ":"), default=str))
+                     for k, v in outputs.items() if k != "success" and not _unset(v))
+    return "%s (%s)" % (error, said if len(said) <= width else said[:width - 1] + "…") if said else str(error)
 
 
 def plain(value: Any) -> Any:

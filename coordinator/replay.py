@@ -15,7 +15,7 @@ import sys
 import types
 from typing import Any, Callable, Dict, List, Optional, Set, TextIO, Tuple
 
-from coordinator.context import LATE_ANSWER
+from coordinator.context import LATE_ANSWER, success_false_said
 from coordinator.replaystate import Failure, Replay
 from coordinator.runevents import (
     CLEANUP_NOTICES,
@@ -103,7 +103,7 @@ def _stop(replay: Replay) -> Tuple[Optional[int], str, Callable[[Dict[str, Any]]
             return stop_label(interrupted, str(end.get("reason") or ""))
         if str(c.get("call_id")) in cut_calls:  # the cleanup's time limit, or a second Ctrl-C
             return cleanup_stop_label(str(said.get("reason") or ""))
-        return str(c.get("status")), str(c.get("error") or "")
+        return str(c.get("status")), success_false_said(c.get("error"), c.get("outputs"))
 
     return stop, what, label
 

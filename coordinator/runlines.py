@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
 
 from py_trees.common import Status
 
-from coordinator.context import CallRecord, late_answer_text
+from coordinator.context import CallRecord, late_answer_text, success_false_said
 from coordinator.runevents import cleanup_at, status_word, steered_lines, terminal_text
 
 if TYPE_CHECKING:
@@ -94,6 +94,7 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
             lines.extend(cleanup_lines(result))
             continue
         status, error = shown_status(result, c, cleanup, cut)
+        error = success_false_said(error, c.outputs)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:

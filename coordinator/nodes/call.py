@@ -15,7 +15,7 @@ from comm.errors import ProtocolError, did_you_mean
 from comm.messages import FunctionCall, new_id
 from comm.rostypes import resolve_type
 from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
-from coordinator.context import CallRecord, RecordStatus
+from coordinator.context import SUCCESS_FALSE, CallRecord, RecordStatus, success_false_said
 from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import (
     Flow,
@@ -139,9 +139,10 @@ class Call(Leaf):
         values = result.values
         rec.output_messages = dict(values)
         if self.node.spec.check_success and "success" in values and unwrap(values["success"]) is False:
-            self.ctx.finish(rec, RecordStatus.FAILED, "answered success: false")
+            self.ctx.finish(rec, RecordStatus.FAILED, SUCCESS_FALSE)
             self._write_outputs(values)   # the original modules' convention: why, in the other outputs
-            return self._ended(RecordStatus.FAILED, "answered success: false", "%s answered success: false" % rec.target)
+            return self._ended(RecordStatus.FAILED, SUCCESS_FALSE, "%s %s" % (
+                rec.target, success_false_said(SUCCESS_FALSE, rec.outputs)))
         self.ctx.finish(rec, RecordStatus.SUCCEEDED)
         self.feedback_message = "succeeded in %.3fs" % (rec.duration or 0.0)
         self._write_outputs(values)

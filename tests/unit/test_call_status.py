@@ -233,3 +233,20 @@ def test_an_answered_success_false_still_writes_its_outputs(tree):
     assert run.said() == ["missed (answered success: false)"]
     t.mocks["arm.grasp"].script(reject("busy"))   # an answer without outputs writes none
     assert "cup_pose" not in t.run().blackboard
+
+
+def test_the_reason_and_the_summary_of_a_success_false_say_the_outputs_that_tell_why(tree):
+    """An original module says why in its other outputs (an error code); the reason and the summary row
+    showed only ``answered success: false``. Outputs left at their defaults say nothing and are left out;
+    the ``error`` key keeps its text (trees compare it)."""
+    from coordinator.runner import summary_lines
+
+    t = tree("  call: arm.grasp\n  inputs: {object: cup}\n  error: why\n")
+    t.mocks["arm.grasp"].succeed(success=False, pose={"position": {"x": 1.5}})
+    run = t.run()
+    assert run.reason == 'arm.grasp answered success: false (pose {"position":{"x":1.5}})', run.reason
+    assert run.blackboard["why"] == "answered success: false"
+    row = [line for line in summary_lines(run.result, "t") if line.startswith("  +")][0]
+    assert "arm.grasp" in row and "failed" in row and 'answered success: false (pose {"position":{"x":1.5}})' in row, row
+    t.mocks["arm.grasp"].succeed(success=False)   # every other output at its default
+    assert t.run().reason == "arm.grasp answered success: false"
