@@ -34,7 +34,8 @@ __all__ = ["Failure", "Replay", "find_run", "read_run", "cmd_runs", "cmd_replay"
 
 
 def find_run(ref: str, directory: Optional[str] = None) -> str:
-    """A run log by path, ``last``, number in ``bmtree runs`` (1 = newest) or start of its name."""
+    """A run log by path, ``last``, number in ``bmtree runs`` (1 = newest), start of its name or of its start
+    time as ``bmtree runs`` shows it."""
     if os.path.isfile(ref):
         return ref
     directory = directory or default_runs_dir()
@@ -48,11 +49,21 @@ def find_run(ref: str, directory: Optional[str] = None) -> str:
         if not 1 <= k <= len(runs):
             raise RunLogError("there are %d recorded runs in %s; %s is not one of them" % (len(runs), directory, ref))
         return runs[-k].path
-    hits = [r.path for r in runs if os.path.basename(r.path).startswith(ref)]
+    # the start of its file name (the process's start), or of its start as 'bmtree runs' shows it (the first
+    # tick, seconds later with --sim: 20261126-072501 or "2026-11-26 07:25:01")
+    hits = [r.path for r in runs if os.path.basename(r.path).startswith(ref) or any(
+        _start_text(r.started, form).startswith(ref) for form in ("%Y%m%d-%H%M%S", "%Y-%m-%d %H:%M:%S"))]
     if len(hits) != 1:
         raise RunLogError("%s runs in %s start with %r (use the number shown by 'bmtree runs')" % (
             "no" if not hits else "%d" % len(hits), directory, ref))
     return hits[0]
+
+
+def _start_text(started: Any, form: str) -> str:
+    try:
+        return datetime.datetime.fromtimestamp(float(started)).strftime(form)
+    except (TypeError, ValueError, OverflowError, OSError):
+        return "?"
 
 
 def cmd_runs(args: Any) -> int:
@@ -69,7 +80,7 @@ def cmd_runs(args: Any) -> int:
     print("recorded runs in %s (newest first):" % directory)
     print("%3s  %-19s  %-24s %9s  %-11s %s" % ("#", "start", "tree", "duration", "result", "reason"))
     for k, r in enumerate(reversed(runs[-args.limit:] if args.limit else runs), 1):
-        start = datetime.datetime.fromtimestamp(r.started).strftime("%Y-%m-%d %H:%M:%S")
+        start = _start_text(r.started, "%Y-%m-%d %H:%M:%S")
         dur = "%.2fs" % r.duration if isinstance(r.duration, (int, float)) else "-"
         print(terminal_text("%3d  %-19s  %-24s %9s  %-11s %s" % (k, start, r.name[:24], dur, status_word(r.status),
                                                                 r.reason), newlines=False))

@@ -765,3 +765,24 @@ def test_replay_draws_a_switch_with_its_cases(sim_defs, tmp_path, capsys):
     out = capsys.readouterr().out
     drawn = out[out.index("act on the answer"):]
     assert "say great [✓]" in drawn and "say sorry [-]" in drawn, out
+
+
+def test_find_run_by_the_start_bmtree_runs_shows(sim_defs, tmp_path, capsys):
+    """The file name has the process's start, ``bmtree runs`` the first tick's (seconds later with --sim):
+    the time shown finds the run, as the README says the start of its name does."""
+    import datetime
+    import json
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    log_path, _ = recorded(GO, sim_defs, tmp_path, lambda m: None)
+    lines = open(log_path).read().splitlines()
+    head = json.loads(lines[0])
+    head["started"] = datetime.datetime(2026, 1, 1, 10, 0, 3).timestamp()   # 3 s after the name's time
+    (runs / "20260101-100000-aaaaaa-go.jsonl").write_text("\n".join([json.dumps(head)] + lines[1:]) + "\n")
+    assert cli.main(["runs", "--dir", str(runs)]) == 0
+    assert "2026-01-01 10:00:03" in capsys.readouterr().out
+    for ref in ("20260101-100003", "2026-01-01 10:00:03", "20260101-100000"):
+        assert find_run(ref, str(runs)).endswith("aaaaaa-go.jsonl"), ref
+    with pytest.raises(RunLogError, match="no runs"):
+        find_run("20260101-100004", str(runs))
