@@ -26,6 +26,7 @@ from coordinator.clock import Clock
 from coordinator.refs import resolve, unwrap
 from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
+from modules.answers import NOT_RETURNED
 from modules.definition import FunctionDefinition, ModuleDefinition
 
 __all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "SUCCESS_FALSE", "WAKE", "gone_text",
@@ -116,6 +117,20 @@ class CallRecord:
     late_at: Optional[float] = None   # when it came (clock time, as ``started``)
     late_error: str = ""
     late_result: Optional[FunctionResult] = None
+    cancel_sent: bool = False   # the tree stopped it (halted, timed out): its module was asked to cancel it
+    cancel_answer: str = ""     # the module's ``cancelled`` answer to that (its text)
+
+    @property
+    def maybe_running(self) -> str:
+        """Why a call the tree stopped may still run on its module ('' when it is known to have ended): no
+        answer to its cancel (yet: see ``TreeRunner.confirm_cancels``), or its module says its code goes on."""
+        if not self.cancel_sent or self.late_status is not None:
+            return ""
+        if not self.cancel_answer:
+            return "its module did not answer the cancel"
+        if NOT_RETURNED in self.cancel_answer:
+            return "its module says %s" % self.cancel_answer.partition(", but ")[2]
+        return ""
 
     @property
     def inputs(self) -> Dict[str, Any]:
@@ -282,6 +297,7 @@ class RunContext:
         self.finish(rec, status, error)
         fn = rec.function
         assert fn is not None
+        rec.cancel_sent = True
         self.transport.send_cancel(CancelRequest(call_id=rec.call_id, basic_mod=fn.module, function=fn.name))
 
     def request(self, names: List[str]) -> str:
@@ -385,6 +401,8 @@ class RunContext:
             log.warning("ignored a result of %s.%s carrying the id of call %s to %s", result.basic_mod,
                         result.function, result.call_id, fn.qualified)
             return
+        if result.status == RecordStatus.CANCELLED and not rec.cancel_answer:
+            rec.cancel_answer = result.error or "cancelled"
         if result.status == RecordStatus.CANCELLED or rec.late_status is not None:
             log.debug("a late answer (%s) to call %s of %s, which had ended %s", result.status, result.call_id,
                       rec.target, rec.status)

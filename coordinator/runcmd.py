@@ -382,6 +382,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             result = runner.run(args.max_duration)
             interrupts.done()  # a shutdown request from now on only waits for the leave
+            runner.confirm_cancels()   # the calls it stopped: ended on their module, or said to go on
         finally:
             if view is not None:
                 view.stop()
@@ -390,8 +391,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
         stopped_at = interrupts.last_signal
+        running: List[Any] = []
+        if runner is not None and runner.result is not None:
+            try:   # (a second Ctrl-C meanwhile: said without waiting)
+                running = runner.confirm_cancels()
+            except KeyboardInterrupt:
+                running = [c for c in runner.ctx.calls if c.maybe_running]
         err(interrupted_line(runner.result if runner is not None else None, runner is not None,
-                             interrupts.shutdown_request))
+                             interrupts.shutdown_request, running))
         if runner is not None and runner.result is not None and tree is not None:
             with interrupts.held(again_exits=False):  # what it did and where its log is, before a second Ctrl-C
                 _report(runner.result, tree.name)

@@ -99,6 +99,8 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
                                c.inputs if c is result.failed_call else None))
         if c.late_at is not None:
             lines.append(late_line(late_answer_text(c, result.started)))
+        elif c.maybe_running:
+            lines.append(terminal_text(" " * 14 + "may still be running: %s" % c.maybe_running, newlines=False))
     return [terminal_text(line) for line in lines]   # a module's error, a tree's names: never the terminal's
 
 

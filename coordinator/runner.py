@@ -45,6 +45,10 @@ __all__ = ["Display", "NoticeLines", "RunResult", "StatusHistory", "TreeRunner",
            "cleanup_lines", "cleanup_stop_label", "late_line", "short_json", "shown_status", "stop_label",
            "summary_lines"]
 
+#: seconds ``bmtree run`` waits after the run for the modules to answer the cancels of the calls it stopped (a
+#: module's runtime answers once the code returned, or after its 1 s grace when it does not)
+CANCEL_CONFIRM = 1.5
+
 KILL_AFTER = 1e-6
 """How long after ``kill_at`` a killed run ends (so that what came at ``kill_at`` itself is ticked)."""
 
@@ -348,6 +352,20 @@ class TreeRunner:
         self.root.stop(Status.INVALID)
         self._tell([])
         return reason, stopped_at
+
+    def confirm_cancels(self, wait: float = CANCEL_CONFIRM) -> List[CallRecord]:
+        """After the run: wait up to ``wait`` seconds for the answers to the cancels of the calls the tree
+        stopped (a module answers at once, or after its cancel's grace when the call's code goes on); the
+        calls that may still run on their module (``maybe_running``), which the summary says."""
+        ctx = self.ctx
+        end = ctx.clock.now() + wait
+        while True:
+            waiting = [c for c in ctx.calls if c.cancel_sent and not c.cancel_answer and c.late_status is None]
+            left = end - ctx.clock.now()
+            if not waiting or left <= 0:
+                break
+            self._wait(min(0.05, left))
+        return [c for c in ctx.calls if c.maybe_running]
 
     def _wait(self, wait: float) -> None:
         """Wait up to ``wait`` seconds for messages, then hand over all that came."""

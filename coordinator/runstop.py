@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Sequence
 
 from coordinator.cliutil import err
 
@@ -12,10 +12,11 @@ __all__ = ["RequestNotice", "interrupted_line", "shutdown_notice"]
 NOTICE_FIRST = 1.0  # s a shutdown request waits for its notice to be in the run before it stops it
 
 
-def interrupted_line(result: Any, started: bool, request: str = "") -> str:
+def interrupted_line(result: Any, started: bool, request: str = "", running: Sequence[Any] = ()) -> str:
     """What ``bmtree run`` says when a stop signal ended it (``started``: the tree was ticking; ``result``:
     the run's, None if it had none; ``request``: rospy's reason when a shutdown request of the run's node
-    stopped it, not Ctrl-C): what happened to the calls, then how the cleanup, if any, went."""
+    stopped it, not Ctrl-C; ``running``: the calls that may still run on their module, their cancel not
+    confirmed): what happened to the calls, then how the cleanup, if any, went."""
     by = " by a shutdown request of its node (%s)" % request if request else ""
     if not started:
         return "interrupted during start-up%s: nothing was called" % by
@@ -23,6 +24,10 @@ def interrupted_line(result: Any, started: bool, request: str = "") -> str:
     sent = result is not None and any(id(c) not in mine for c in result.calls)
     line = ("interrupted%s: running calls were cancelled" % by if sent
             else "interrupted%s before any call was sent" % by)
+    if running:
+        targets = sorted({str(c.target) for c in running})
+        line += " (but %s may still be running: %s did not confirm the cancel)" % (
+            ", ".join(targets), "its module" if len(targets) == 1 else "their modules")
     status = getattr(result, "cleanup_status", None)
     if status is None:
         return line + (", and the cleanup did not run" if getattr(result, "ended", "") else "")

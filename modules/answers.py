@@ -11,11 +11,14 @@ from comm.messages import CallStatus, FunctionResult
 from modules.basicmodule import Failure
 from modules.errortext import bounded, place_of, raised_text, said, which_call, wire_text
 
-__all__ = ["Answers", "CANCELLED_TEXT"]
+__all__ = ["Answers", "CANCELLED_TEXT", "NOT_RETURNED"]
 
 log = logging.getLogger("bmtree.module")
 
 CANCELLED_TEXT = "cancelled by the coordinator"
+#: in the ``cancelled`` answer of a call whose code did not return within the cancel's grace: the coordinator
+#: tells its user that the call may go on moving the robot
+NOT_RETURNED = "its code has not returned"
 
 
 def _size(text: str) -> int:
@@ -115,8 +118,10 @@ class Answers:
             size = _size(text)
         return text
 
-    def cancelled(self, call: Any) -> FunctionResult:
-        return self.result(call, CallStatus.CANCELLED, CANCELLED_TEXT)
+    def cancelled(self, call: Any, still_running: float = 0.0) -> FunctionResult:
+        """``still_running``: the grace after which the call's code still runs (it does not look at its cancel)."""
+        return self.result(call, CallStatus.CANCELLED, "%s, but %s after %gs: it goes on running" % (
+            CANCELLED_TEXT, NOT_RETURNED, still_running) if still_running else CANCELLED_TEXT)
 
     def result(self, call: Any, status: CallStatus, error: str) -> FunctionResult:
         return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.server.definition.name, function=call.ctx.function,

@@ -318,7 +318,7 @@ class ModuleServer:
                         which_call(call.ctx.call_id), call.fn.qualified, self.cancel_grace,
                         "%s stays busy until it does" % self.definition.name
                         if call.exclusive else "it goes on running")
-        self._finish(call, self.answers.cancelled(call))
+        self._finish(call, self.answers.cancelled(call, self.cancel_grace if late else 0.0))
 
     # -- running ---------------------------------------------------------------------
     def _run(self, call: _Call, work: Optional[Callable[..., Any]]) -> None:

@@ -50,6 +50,9 @@ def test_the_next_run_is_told_at_start_that_an_earlier_runs_call_holds_the_modul
     wait_announced("stuckarm")
     first = _run(tmp_path, "  call: stuckarm.grip\n  timeout: 0.5\n")
     assert first.returncode == 1 and "no answer within 0.5s" in first.stdout, first.stdout + first.stderr
+    # the run waited for the answer to its cancel: the module says the code goes on (not "cancelled")
+    assert "may still be running: its module says its code has not returned after 1s: it goes on running" \
+        in first.stdout, first.stdout
     assert "warning: module stuckarm" not in first.stderr, first.stderr
     second = _run(tmp_path, "  call: stuckarm.status\n")
     said = (r"busy with call \w+ \(grip\): it was cancelled (\d+\.\d) s ago and its code has not returned; stuckarm "

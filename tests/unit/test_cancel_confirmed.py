@@ -1,0 +1,76 @@
+"""After a run, ``bmtree run`` waits a moment for the answers to the cancels of the calls the tree stopped,
+and says the ones that may still run on their module: before, Ctrl-C printed "running calls were
+cancelled" while a function that ignores its cancel went on moving the arm."""
+from __future__ import annotations
+
+from typing import Any, List
+
+import pytest
+
+from coordinator.runner import summary_lines
+from coordinator.runstop import interrupted_line
+from coordinator.testing import kit
+from coordinator.testing.kit import TreeTest
+
+TREE = """format: 1
+name: grab
+root:
+  call: navigation.go_to
+  inputs: {place: kitchen}
+  timeout: 2
+"""
+
+
+@pytest.fixture
+def grab(tmp_path, sim_defs, monkeypatch):
+    path = tmp_path / "grab.yaml"
+    path.write_text(TREE)
+    runners: List[Any] = []
+    real = kit.TreeRunner
+
+    def keep(*a: Any, **k: Any) -> Any:
+        runners.append(real(*a, **k))
+        return runners[-1]
+
+    monkeypatch.setattr(kit, "TreeRunner", keep)
+    t = TreeTest(str(path), definitions=sim_defs)
+    t.runners = runners
+    return t
+
+
+def test_a_call_whose_code_ignores_its_cancel_is_said_to_be_maybe_running(grab):
+    grab.mocks["navigation.go_to"].respond(lambda place: {"success": True, "room": place}, delay=60.0)
+    grab.mocks.ignoring_cancels("navigation.go_to")
+    run = grab.run()
+    assert run.failed and run.reason == "navigation.go_to: no answer within 2s"
+    running = grab.runners[-1].confirm_cancels()
+    call = run.calls("navigation.go_to")[0]
+    assert running == [call]
+    assert call.maybe_running == "its module says its code has not returned after 1s: it goes on running"
+    lines = summary_lines(run.result, "grab")
+    row = lines.index([line for line in lines if line.startswith("  +")][0])
+    assert lines[row + 1] == " " * 14 + "may still be running: " + call.maybe_running, lines
+    assert interrupted_line(run.result, True, running=running) == (
+        "interrupted: running calls were cancelled (but navigation.go_to may still be running: its module did not "
+        "confirm the cancel)")
+
+
+def test_a_call_that_honours_its_cancel_is_not(grab):
+    grab.mocks["navigation.go_to"].hang()
+    run = grab.run()
+    assert run.failed and grab.runners[-1].confirm_cancels() == []
+    assert run.calls("navigation.go_to")[0].cancel_answer == "cancelled by the coordinator"
+    assert not [line for line in summary_lines(run.result, "grab") if "may still be running" in line]
+    assert interrupted_line(run.result, True) == "interrupted: running calls were cancelled"
+
+
+def test_a_module_that_never_answers_the_cancel_is_said_so(grab, monkeypatch):
+    # the cancel never reaches the module (an original module, a module cut off): no answer comes
+    monkeypatch.setattr(kit.InProcessTransport, "send_cancel", lambda self, cancel: self.sent.append(cancel))
+    grab.mocks["navigation.go_to"].hang()
+    run = grab.run()
+    call = run.calls("navigation.go_to")[0]
+    runner = grab.runners[-1]
+    start = runner.ctx.clock.now()
+    assert runner.confirm_cancels(0.5) == [call] and runner.ctx.clock.now() - start == pytest.approx(0.5)
+    assert call.maybe_running == "its module did not answer the cancel"
