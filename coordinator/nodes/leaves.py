@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any, Dict, FrozenSet, Iterable, List, Optional
+from typing import Any, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
 from py_trees.common import Status
 
@@ -11,6 +11,7 @@ from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError
 from coordinator.nodes.base import (
+    NEVER,
     Flow,
     NodeKind,
     Option,
@@ -426,6 +427,16 @@ class SetKind(NodeKind):
 
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return dict.fromkeys(node.spec)
+
+    own_outcome = True
+
+    def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
+        """Its keys when it succeeds; it fails only when a value it reads cannot be worked out, so a ``set`` of
+        literals never fails (the keys it wrote before a later step failed are there in a selector's next child)."""
+        read = list(self.reads(node))
+        if read:
+            f.need(node, read, avail)
+        return frozenset(self.writes(node)), (frozenset() if read else NEVER)
 
     def copies(self, node: TreeNode) -> Dict[str, Ref]:
         """A key set to ``$pose`` or ``$g.position`` holds what it holds (a literal: not known)."""

@@ -365,3 +365,25 @@ def test_the_readme_examples_check_and_run(tmp_path, bmtree_tree):
     run = t.run()
     assert run.succeeded, run.reason
     assert said(run)[-1] == "Coffee: yes, tea: no."
+
+
+def test_a_set_of_literals_never_fails_and_one_that_works_something_out_may(tmp_path):
+    """SMACH's "try, then say why": the selector's next child reads what the first child's ``set`` wrote
+    before its call failed. A ``set`` of literals cannot fail: the key is there on every path (it was
+    refused, 'not written on every path'), and coverage does not ask for its FAILURE."""
+    tree = """format: 1
+root:
+  selector:
+    - sequence:
+        - set: {a: "x"%s}
+        - call: vision.find_object
+          inputs: {object: apple}
+    - call: speech.say
+      inputs: {text: "{a}"}
+"""
+    lines = coverage_lines(tmp_path, tree % "", {"vision.find_object": fail("no apple")})
+    assert "set 'set a' reached SUCCESS" in lines, lines
+    path = write(tmp_path, "t2.yaml", tree % ', b: "$(len(a))"')   # reads a key: it may fail, as before
+    with pytest.raises(TreeErrors) as e:
+        TreeTest(path, definitions=DEFS)
+    assert "t2.yaml:9:24: reads 'a', which is not written on every path before this node" in str(e.value), str(e.value)
