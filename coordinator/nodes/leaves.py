@@ -10,6 +10,7 @@ from py_trees.common import Status
 from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError
+from coordinator.exprhints import quoted_key_warnings
 from coordinator.nodes.base import (
     NEVER,
     Flow,
@@ -209,6 +210,7 @@ class CheckKind(NodeKind):
         return _WRITES_NOTHING
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
+        errors.extend(quoted_key_warnings(node.spec, node.value_pos, types))
         if node.spec is not None and not node.spec.well_typed:
             found = expr_errors(node.spec, types)
             at = node.value_pos if found else None   # a Pos made only when needed
@@ -359,6 +361,7 @@ class WaitEventKind(NodeKind):
         param_type_errors(spec.timeout, spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
         if spec.where is not None and spec.event is not None:   # the params' types, not the tree keys'
             expr_type_errors(spec.where, spec.where_pos, {q.name: {q.rostype} for q in spec.event.params}, errors)
+            errors.extend(quoted_key_warnings(spec.where, spec.where_pos, types, spec.target))
 
     def schema(self) -> Dict[str, Any]:
         return with_no_timeout(super().schema())

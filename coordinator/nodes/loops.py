@@ -13,6 +13,7 @@ from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, kind_of
+from coordinator.exprhints import quoted_key_warnings
 from coordinator.nodes.base import (
     NEVER,
     Flow,
@@ -168,6 +169,7 @@ class RepeatKind(Counted):
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         super().check_types(node, types, errors)
         expr_type_errors(node.spec.cond, node.spec.cond_pos, types, errors)
+        errors.extend(quoted_key_warnings(node.spec.cond, node.spec.cond_pos, types))
 
     def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
         s = node.spec
