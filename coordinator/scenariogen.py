@@ -18,22 +18,31 @@ after the tree took the answer. An event before the first call keeps its time in
 
 A run whose log has no end (the coordinator was killed, the robot lost power), or that was
 interrupted (Ctrl-C, SIGTERM), becomes a scenario of what the tree saw until its last recorded tick: it stops there
-(``max_duration``, so its status is ``failure``) after the same calls; answers and events
-the tree had not ticked on yet are left out, so those calls hang.
+(``max_duration``, so its status is ``failure``; ``killed_at`` for a killed run of a tree with ``cleanup:``,
+whose cleanup the run never reached) after the same calls; answers and events the tree had not ticked on
+yet are left out, so those calls hang.
+
+An answer the tree took after its call's ``timeout`` (before the timeout's tick) comes just before that
+timeout. The expected ``reason`` is the run's (around a call id or a measured time). A run a scenario cannot
+reproduce (steered; the Blackboard node, or a ``wait_event``'s module node, lost) is a RunLogError.
 """
 from __future__ import annotations
 
 import heapq
 import math
 import os
+import re
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
 from coordinator.runlog import RunLog, RunLogError, empty_file
 from coordinator.testing.expected import legacy_times
+from coordinator.testing.limits import DEFAULT_MAX_DURATION
 
-__all__ = ["scenario_from_log", "seen_until", "write_scenario", "cut_short"]
+__all__ = ["scenario_from_log", "seen_until", "write_scenario", "cut_short", "expected_reason"]
+
+_BEFORE_TIMEOUT = 1e-6  # how long before its call's timeout an answer that beat it in the run comes
 
 
 def cut_short(log: RunLog) -> bool:
@@ -68,9 +77,11 @@ def _times(defs: Dict[str, Any], target: str, kind: str, values: Any) -> Dict[st
     return {k: legacy_times(types[k], v) if k in types else v for k, v in values.items()}
 
 
-def _outcome(end: Dict[str, Any], defs: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+def _outcome(end: Dict[str, Any], defs: Optional[Dict[str, Any]] = None, timeout: Any = None) -> Dict[str, Any]:
+    """The mock's outcome for a call that ended as ``end`` says; ``timeout``: the call's (its ``call_start``'s),
+    which an answer the tree took must beat (:func:`_before_timeout`)."""
     answer = end.get("answer")
-    delay = round(float(end.get("duration") or 0.0), 6)
+    delay = _before_timeout(round(float(end.get("duration") or 0.0), 6), timeout)
     if answer == "succeeded":
         out: Dict[str, Any] = {"succeed": _times(defs or {}, str(end.get("target")), "outputs", end.get("outputs"))}
     elif answer == "failed":
@@ -85,6 +96,16 @@ def _outcome(end: Dict[str, Any], defs: Optional[Dict[str, Any]] = None) -> Dict
     if delay:
         out["delay"] = delay
     return out
+
+
+def _before_timeout(delay: float, timeout: Any) -> float:
+    """``delay``, or just under ``timeout`` when it is not: the run's tree took an answer (or a module's loss:
+    after the coordinator's 10 s wait for its restart, under ``timeout: 10``) before the timeout's tick, which a
+    simulated clock never delays: there the call would end ``no answer within 10s``."""
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not math.isfinite(timeout) \
+            or timeout <= 2 * _BEFORE_TIMEOUT or delay < timeout - _BEFORE_TIMEOUT:
+        return delay
+    return math.floor((timeout - _BEFORE_TIMEOUT) * 1e6 + 1e-6) / 1e6   # microseconds, as the delays are written
 
 
 def _events(seen: RunLog, answered: Dict[Any, float], defs: Dict[str, Any]) -> List[Dict[str, Any]]:
@@ -175,19 +196,24 @@ def seen_until(log: RunLog) -> Tuple[RunLog, float]:
     return RunLog(log.path, log.records[:last + 1], log.truncated), math.ceil(t * 1e6) / 1e6
 
 
-def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
+def scenario_from_log(log: RunLog, out_path: str, moved: Optional[List[str]] = None) -> Dict[str, Any]:
     """The scenario file's content for ``log``, with the tree path and the definitions the run was given
-    (``modules:``) relative to ``out_path``."""
+    (``modules:``) relative to ``out_path``; RunLogError for a run a scenario could not reproduce. ``moved``
+    gets the answers moved before their call's timeout (:func:`_before_timeout`: ``target #n (after Ss)``)."""
     tree = log.tree
     end = log.end
     seen = log  # what the tree acted on
     stop_at: Optional[float] = None
     stopped = _cleanup_stop(log) or _control_stop(log)
     killed = _killed_in_cleanup(log)
+    in_root = False   # killed while root ran, in a tree with cleanup: killed_at
     if stopped is not None:  # the cleanup ran after the stop: root stops then, the cleanup runs as it did
         stop_at = stopped
     elif cut_short(log) and killed is None:
         seen, stop_at = seen_until(log)
+        in_root = _killed_in_root(log)
+        if in_root:  # killed, not stopped: its cleanup never ran, nor does the scenario's (max_duration would run it)
+            killed, stop_at = stop_at, None
     steered = [r for r in log.of_type("control") if r.get("ok") and r.get("command") in ("force", "set")]
     if steered:  # a scenario scripts the modules; what a person forced or wrote is not theirs to redo
         first = steered[0]
@@ -196,6 +222,7 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
                               log.path, len(steered), "s" if len(steered) > 1 else "", "s" if len(steered) > 1 else "",
                               float(first.get("t") or 0.0), first.get("command"),
                               " ".join(str(v) for v in (first.get("args") or {}).values())))
+    _refuse_unreproducible(seen)
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
@@ -204,13 +231,17 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     mocks: Dict[str, List[Dict[str, Any]]] = {}
     calls: List[Dict[str, Any]] = []
     answered: Dict[Any, float] = {}  # call_id -> when its answer comes, after its start
+    moved = [] if moved is None else moved
     for start in seen.of_type("call_start"):
         target = str(start.get("target"))
         finished = ends.get(start.get("call_id"))
-        outcome = _outcome(finished, defs) if finished else {"hang": True}
+        outcome = _outcome(finished, defs, start.get("timeout")) if finished else {"hang": True}
         mocks.setdefault(target, []).append(outcome)
         if "hang" not in outcome:
             answered[start.get("call_id")] = float(outcome.get("delay", 0.0))
+            took = round(float((finished or {}).get("duration") or 0.0), 6)
+            if took > outcome.get("delay", 0.0):
+                moved.append("%s #%d (after %gs)" % (target, len(mocks[target]), took))
         calls.append({target: _times(defs, target, "inputs", start.get("inputs"))})
     events = _events(seen, answered, defs)
     stored = _stored(seen, defs)
@@ -229,11 +260,15 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
         scenario["max_duration"] = tree["max_duration"]
     if killed is not None:
         scenario["killed_at"] = killed
-    status = "failure" if stop_at is not None else str((end or {}).get("status", "") or _root_status(log)).lower()
+        if "max_duration" not in scenario and killed >= DEFAULT_MAX_DURATION:   # else that default stops it first
+            scenario["max_duration"] = math.ceil(killed) + 1
+    status = "failure" if stop_at is not None or in_root else str(  # stopped, or killed while root ran
+        (end or {}).get("status", "") or _root_status(log)).lower()
     if stopped is not None:  # what the cleanup was told (ended_reason) is the replayed stop's reason
         said = _stop_reason(log)
         calls = _restated(calls, said, replayed_reason(said, stopped))
-    scenario["expect"] = {"status": status, "calls": calls}
+    reason = expected_reason(_run_reason(log, status, stop_at, killed))
+    scenario["expect"] = dict({"status": status}, **({"reason": reason} if reason else {}), calls=calls)
     cleanup = (end or {}).get("cleanup")
     if isinstance(cleanup, dict) and cleanup.get("status") is not None:
         scenario["expect"]["cleanup"] = "success" if cleanup.get("status") == "SUCCESS" else "failure"
@@ -246,11 +281,74 @@ def scenario_from_log(log: RunLog, out_path: str) -> Dict[str, Any]:
     return data
 
 
+def _run_reason(log: RunLog, status: str, stop_at: Optional[float], killed: Optional[float]) -> str:
+    """Why the run failed, as the scenario's run says it: the end's reason; a stop's restated as the
+    scenario's stop (:func:`replayed_reason`); for a run killed in its cleanup, what the cleanup was told.
+    '' when it succeeded, or was killed while root ran (its log has no reason)."""
+    end, said = log.end, _stop_reason(log)
+    if status != "failure" or (end is None and (killed is None or not said)):   # killed in root: no reason said
+        return ""
+    if end is not None and end.get("status") != "INVALID" and stop_at is None:
+        return said
+    return replayed_reason(said, stop_at) if stop_at is not None else said
+
+
+def expected_reason(reason: str) -> Any:
+    """``reason`` as a scenario's ``expect: reason``: the text; or, when it holds what differs from run to
+    run (a call id, a measured time: ``succeeded in 0.004s``), the pieces around them, which the
+    scenario's reason must contain in this order. '' for no reason."""
+    pieces = [p for p in _VOLATILE.split(reason) if p.strip()]
+    if len(pieces) == 1 and pieces[0] == reason:
+        return reason
+    return pieces or ""
+
+
+_VOLATILE = re.compile(r"\b[0-9a-f]{16}\b|\b\d+\.\d{3}s\b")  # a call's (request's) id; a time as "%.3fs" says it
+
+# The failures of a node a scenario cannot reproduce: its kind, its reason's pattern, and what the error says
+_UNREPRODUCIBLE = {
+    "recall": (re.compile(r"^Blackboard node lost: |^no answer from the Blackboard node within |"
+                          r"the Blackboard node did not store the result of "), "of the Blackboard node",
+               "a scenario's Blackboard never goes down nor loses a result", "in which the Blackboard node stayed up"),
+    "wait_event": (re.compile(r"'s node (is gone|was restarted) \(.*(event can come|lost meanwhile)"),
+                   "%s's node was lost while it waited", "a scenario's module dies only during a call to it (die), "
+                   "unseen by a wait_event", "in which that node stayed up")}
+
+
+def _refuse_unreproducible(seen: RunLog) -> None:
+    """RunLogError (one line) when a node failed for what a scenario cannot reproduce (:data:`_UNREPRODUCIBLE`)."""
+    nodes = {n.get("id"): n for n in seen.tree.get("nodes") or [] if isinstance(n, dict)}
+    found = [(r, nodes[c[0]], c[2]) for r in seen.of_type("tick") for c in r.get("changes") or []
+             if isinstance(c, list) and len(c) > 2 and c[1] == "FAILURE" and isinstance(c[2], str)
+             and isinstance(c[0], int) and c[0] in nodes and nodes[c[0]].get("kind") in _UNREPRODUCIBLE
+             and _UNREPRODUCIBLE[nodes[c[0]]["kind"]][0].search(c[2])]
+    if not found:
+        return
+    r, node, why = found[0]
+    _, what, cannot, instead = _UNREPRODUCIBLE[node["kind"]]
+    if "%s's" in what:
+        what = what % str(node.get("target") or "its module").split(".")[0]
+    raise RunLogError("%s: the %s '%s' failed at %.3fs because %s (%s)%s; %s, so a scenario could not end the same "
+                      "way: make it from a run %s" % (
+                          seen.path, node["kind"], node.get("name"), float(r.get("t") or 0.0), what, _line(why),
+                          " (and %d more such failure%s)" % (len(found) - 1, "s" if len(found) > 2 else "")
+                          if len(found) > 1 else "", cannot, instead))
+
+
+def _with_cleanup(log: RunLog) -> bool:
+    nodes = log.tree.get("nodes") or []
+    return bool(nodes) and isinstance(nodes[0], dict) and nodes[0].get("kind") == "with_cleanup"
+
+
+def _killed_in_root(log: RunLog) -> bool:
+    """A run of a tree with ``cleanup:`` killed (no end record) while root ran: its cleanup never began."""
+    return log.end is None and _with_cleanup(log) and _killed_in_cleanup(log) is None
+
+
 def _killed_in_cleanup(log: RunLog) -> Optional[float]:
     """For a run of a tree with ``cleanup:`` killed (no end record) while its cleanup ran: when its log
     ends (its last record, rounded up to the microsecond), the scenario's ``killed_at``; else None."""
-    nodes = log.tree.get("nodes") or []
-    if log.end is not None or not (nodes and isinstance(nodes[0], dict) and nodes[0].get("kind") == "with_cleanup"):
+    if log.end is not None or not _with_cleanup(log):
         return None
     from coordinator.replaystate import Replay
 
@@ -350,6 +448,11 @@ def _module_paths(log: RunLog, folder: str) -> List[str]:
 _HEADER_START = "# Written by 'bmtree replay"
 
 
+def _line(text: Any) -> str:
+    """``text`` on one line, for the header's comments."""
+    return " ".join(str(text or "").split())
+
+
 def write_scenario(log: RunLog, out_path: str) -> None:
     """Write the scenario of ``log`` to ``out_path``: a new file, or one this wrote before (a
     tree or anything else of the user's there is refused, RunLogError, never overwritten)."""
@@ -362,7 +465,8 @@ def write_scenario(log: RunLog, out_path: str) -> None:
         if not ours:
             raise RunLogError("--scenario %s: the file exists and was not written by 'bmtree replay --scenario'; "
                               "bmtree does not overwrite it (choose a new name)" % out_path)
-    data = scenario_from_log(log, out_path)
+    moved: List[str] = []
+    data = scenario_from_log(log, out_path, moved)
     end = log.end
     scenario = data["scenarios"][0]
     killed = ("# It was killed at %gs while the cleanup ran (its log ends there): killed_at ends\n"
@@ -371,25 +475,32 @@ def write_scenario(log: RunLog, out_path: str) -> None:
     if _control_stop(log) is not None:
         how = ("# The run was stopped by control (%s) at %gs: this stops root then\n"
                "# (max_duration: a stop, so its status is failure%s).\n" % (
-                   _stop_reason(log), scenario["max_duration"], ", then the cleanup runs as it did, and\n"
+                   _line(_stop_reason(log)), scenario["max_duration"], ", then the cleanup runs as it did, and\n"
                    "# reads 'stopped after %g s' as ended_reason" % scenario["max_duration"]
                    if log.end.get("cleanup") else ""))
     elif _cleanup_stop(log) is not None:
         how = ("# The run was %s (%s) at %gs, then its cleanup ran: this stops root\n"
                "# then (max_duration: a stop, so its status is failure, and the cleanup reads\n"
                "# 'stopped after %g s' as ended_reason), then the cleanup runs as it did.\n" % (
-                   "interrupted" if end is not None else "stopped", _stop_reason(log), scenario["max_duration"],
+                   "interrupted" if end is not None else "stopped", _line(_stop_reason(log)), scenario["max_duration"],
                    scenario["max_duration"])) + killed
+    elif _killed_in_root(log):
+        how = ("# The run has no end (it was killed while root ran, before its cleanup): this ends at its\n"
+               "# last recorded tick, %gs (killed_at: root is halted there, and the cleanup does not run),\n"
+               "# after the same calls; the calls still running then hang.\n" % scenario["killed_at"])
     elif killed:
         how = "# Root ended by itself (%s), then its cleanup ran.\n" % scenario["expect"]["status"] + killed
     elif cut_short(log):
         how = ("# The run %s: this stops at its last recorded tick, %gs, after the\n"
                "# same calls; the calls still running then hang.\n" % (
-                   "has no end (it was killed)" if end is None else "was interrupted (%s)" % end.get("reason"),
+                   "has no end (it was killed)" if end is None else "was interrupted (%s)" % _line(end.get("reason")),
                    data["scenarios"][0]["max_duration"]))
     else:
         how = "# and the run must end the same way (%s%s) with the same calls.\n" % (
-            end.get("status"), ": %s" % end.get("reason") if end.get("reason") else "")
+            end.get("status"), ": %s" % _line(end.get("reason")) if end.get("reason") else "")
+    if moved:
+        how += ("# The run's tree took these answers after their call's timeout, before the timeout's tick (which\n"
+                "# a simulated clock does not delay): here they come just before it: %s.\n" % _line(", ".join(moved)))
     header = (_HEADER_START + " %s --scenario': the modules answer as they did in that run,\n" % (
         os.path.basename(log.path)) + how)
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=110)

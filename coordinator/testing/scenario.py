@@ -176,9 +176,13 @@ def _expectations(sc: LMap, at: Pos, out: sm.Problems) -> Any:
     check_calls(expect, at, out.add)
     check_duration(expect, at, out.add)
     sm.mapping(expect, "blackboard", at, "blackboard is a mapping of tree key: value", out)
-    if "reason" in expect and not isinstance(expect["reason"], str):
-        out.add(pos_of(expect, "reason", at), "reason is text that the run's reason must contain, got %r" % (
-            expect["reason"],))
+    want = expect.get("reason")
+    if isinstance(want, list):   # the pieces around what differs from run to run (replay --scenario writes them)
+        if not want or not all(isinstance(p, str) and p for p in want):
+            out.add(pos_of(expect, "reason", at), "reason as a list holds the texts the run's reason must contain, "
+                                                   "in this order (at least one, none empty), got %r" % (want,))
+    elif "reason" in expect and not isinstance(want, str):
+        out.add(pos_of(expect, "reason", at), "reason is text that the run's reason must contain, got %r" % (want,))
     return expect
 
 
@@ -267,10 +271,8 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
         problems.extend(expect_calls_in_order(run, s.calls) if in_order else expect_calls(run, s.calls))
     problems.extend(expect_duration(run.duration, duration_of(expect)))
     problems.extend(cleanup_problems(expect, run.result))
-    if "reason" in expect and str(expect["reason"]) not in run.reason:
-        problems.append("reason %r does not contain %r" % (run.reason, str(expect["reason"])) if run.reason
-                        else "no reason (the run %s), expected one containing %r" % (
-                            "succeeded" if run.status == Status.SUCCESS else "gave none", str(expect["reason"])))
+    if "reason" in expect:
+        problems.extend(_reason_problems(run, expect["reason"]))
     bb = run.result.blackboard  # the values as the tree holds them: messages keep their types
     for k, v in (expect.get("blackboard") or {}).items():
         if k not in bb:
@@ -282,6 +284,29 @@ def _run(s: _Scenario) -> Tuple[TreeRun, List[str]]:
         if d is not None:
             problems.append(d.said("blackboard %s" % k))
     return run, problems
+
+
+def _reason_problems(run: TreeRun, want: Any) -> List[str]:
+    """``expect: reason`` against the run's: a text it must contain, or texts it must contain in this order
+    (what ``bmtree replay --scenario`` writes around a call id or a measured time)."""
+    pieces = [want] if isinstance(want, str) else [str(p) for p in want]
+    reason, at, missing = run.reason, 0, None
+    for i, piece in enumerate(pieces):
+        found = reason.find(piece, at)
+        if found < 0:
+            missing = i
+            break
+        at = found + len(piece)
+    if missing is None:
+        return []
+    said = repr(pieces[0]) if len(pieces) == 1 else "%s in this order" % ", ".join(map(repr, pieces))
+    if not reason:
+        return ["no reason (the run %s), expected one containing %s" % (
+            "succeeded" if run.status == Status.SUCCESS else "gave none", said)]
+    if len(pieces) == 1:
+        return ["reason %r does not contain %r" % (reason, pieces[0])]
+    return ["reason %r does not contain %s: %r not found%s" % (
+        reason, said, pieces[missing], " after %r" % pieces[missing - 1] if missing else "")]
 
 
 def run_scenario_file(path: str, definitions: Definitions = None,

@@ -39,8 +39,8 @@ def test_a_run_killed_in_the_cleanup_after_a_stop_stops_root_when_the_run_did(tm
     _killed_at(log, 6.0)
     out_path, scenario = _scenario(tmp_path, log)
     assert scenario["max_duration"] == pytest.approx(4.5) and scenario["killed_at"] == pytest.approx(4.5)
-    assert scenario["expect"] == {"status": "failure", "calls": [{"speech.say": {"text": "a"}},
-                                                                 {"speech.say": {"text": "b"}}]}
+    assert scenario["expect"] == {"status": "failure", "reason": "stopped after 4.5 s while 'wait 2s' was running",
+                                  "calls": [{"speech.say": {"text": "a"}}, {"speech.say": {"text": "b"}}]}
     text = open(out_path).read()
     assert "# The run was stopped (interrupted while 'wait 2s' was running) at 4.5s, then its cleanup ran" in text
     assert "# It was killed at 4.5s while the cleanup ran (its log ends there): killed_at ends" in text
@@ -75,8 +75,8 @@ def test_a_run_killed_in_the_cleanup_after_root_failed_lets_root_fail_by_itself(
     _killed_at(log, 3.0)                # in the cleanup's wait
     out_path, scenario = _scenario(tmp_path, log)
     assert scenario["killed_at"] == pytest.approx(1.5) and "max_duration" not in scenario
-    assert scenario["expect"] == {"status": "failure", "calls": [{"speech.say": {"text": "a"}},
-                                                                 {"speech.say": {"text": "bye failed"}}]}
+    assert scenario["expect"] == {"status": "failure", "reason": "speech.say failed: muted",
+                                  "calls": [{"speech.say": {"text": "a"}}, {"speech.say": {"text": "bye failed"}}]}
     assert "# Root ended by itself (failure), then its cleanup ran." in open(out_path).read()
     out = io.StringIO()
     assert run_scenario_file(out_path, sim_defs, out) == [True], out.getvalue()
