@@ -114,6 +114,11 @@ class Watchdog:
         self._owing.set()
 
     # bookkeeping, from any thread ----------------------------------------------------
+    def gone_since(self, key: str) -> Optional[float]:
+        """Seconds since the process of ``key``'s node was found gone, while no new one is known; else None."""
+        gone = self._gone.get(key)
+        return time.monotonic() - gone[1] if gone is not None else None
+
     def call_sent(self, call_id: str, module: str) -> None:
         with self._lock:
             self._calls[call_id] = (module, time.monotonic())

@@ -393,6 +393,21 @@ class RosTransport(Transport):
         """The node the run found for ``module`` before it started (None if none)."""
         return next((node for node, m in list(self.node_modules.items()) if m == module), None)
 
+    def _gone_text(self, module: str, node: str) -> str:
+        """``node %s stopped (its process is gone) 3.2 s ago`` when the watchdog found it so, else ''."""
+        since = self.watchdog.gone_since(module)
+        return "node %s stopped (its process is gone) %.1f s ago" % (node, since) if since is not None else ""
+
+    def unsent_note(self, call_id: str) -> str:
+        for module, route in list(self._routes.items()):
+            if route.unsent(call_id):
+                node = self.whereabouts.known(module) or "?"
+                gone = self._gone_text(module, node)
+                return "never sent: %s" % (gone + " and was not started again" if gone else
+                                           "no node of %s is connected to %s (node %s restarting, or unable to reach "
+                                           "this process?)" % (module, self.topics_of(module)[0], node))
+        return ""
+
     def _gave_up(self, module: str, keys: List[str]) -> None:
         """Calls that waited :data:`HOLD_LIMIT` seconds for ``module``'s node to connect end as
         ``module_lost``, never sent (its node runs but did not connect, or none was found)."""
@@ -402,8 +417,10 @@ class RosTransport(Transport):
         self.screen.ended(ids)
         if ids:
             node = self.whereabouts.known(module) or "?"
-            reason = "no node of it connected to %s within %gs (node %s: restarting, or unable to reach this " \
-                     "process?): the call was never sent" % (self.topics_of(module)[0], self.hold_limit, node)
+            gone = self._gone_text(module, node)
+            reason = ("%s and was not started again within %gs: the call was never sent" % (gone, self.hold_limit)
+                      if gone else "no node of it connected to %s within %gs (node %s: restarting, or unable to reach "
+                      "this process?): the call was never sent" % (self.topics_of(module)[0], self.hold_limit, node))
             log.warning("module %s: %s", module, reason)
             self._deliver(ModuleLost(module=module, node=node, reason=reason, call_ids=ids))
 

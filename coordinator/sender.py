@@ -155,6 +155,11 @@ class TopicSender:
                         return True
         return False
 
+    def unsent(self, key: str) -> bool:
+        """True while the message ``key`` waits for a subscriber (it was never sent)."""
+        with self._cond:
+            return any(w[0] == key for w in self._unconnected)
+
     def give_up_after(self, limit: float, on_expired: Callable[[List[str]], None]) -> None:
         """Bound the wait for a subscriber: a message kept ``limit`` seconds is dropped, never sent, and
         ``on_expired`` gets the keys of those dropped (from a timer's thread)."""

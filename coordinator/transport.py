@@ -73,6 +73,11 @@ class Transport(abc.ABC):
     def unwatch_module(self, key: str) -> None:  # noqa: B027 - optional, no-op default
         """The wait that :meth:`watch_module` gave ``key`` for has ended."""
 
+    def unsent_note(self, call_id: str) -> str:
+        """Why the call ``call_id`` has not been sent yet (its module's node is not connected: gone, restarting),
+        for the reason of a call that timed out so; '' when it was sent (or this transport cannot tell)."""
+        return ""
+
     def close(self) -> None:  # noqa: B027 - optional, no-op default
         """Stop receiving and release resources."""
 

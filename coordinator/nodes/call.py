@@ -121,7 +121,8 @@ class Call(Leaf):
                 return self._ended(rec.status, rec.error, "%s %s: %s" % (rec.target, rec.status, rec.error)
                                    if rec.error else "%s %s" % (rec.target, rec.status))
             if self.deadline is not None and self.ctx.clock.now() >= self.deadline:
-                error = "no answer within %gs" % self.timeout
+                unsent = self.ctx.transport.unsent_note(rec.call_id) if rec.call_id else ""
+                error = "no answer within %gs%s" % (self.timeout, " (%s)" % unsent if unsent else "")
                 self.ctx.cancel(rec, RecordStatus.TIMEOUT, error)
                 return self._ended(RecordStatus.TIMEOUT, error, "%s: %s" % (rec.target, error))
             return Status.RUNNING

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -191,3 +192,25 @@ def test_a_call_to_an_original_module_whose_node_died_ends_at_once(ros_graph):
                               "was not sent"
     finally:
         transport.close()
+
+
+def test_a_retry_to_a_killed_module_that_is_not_restarted_says_its_process_is_gone(ros_graph, tmp_path):
+    """The run knew the node's process was gone; the retry's reason guessed 'restarting, or unable to reach
+    this process?' and a timed-out one said only 'no answer within 3s', though it was never sent."""
+    proc = start_probe(ros_graph)
+    run = _Run(tmp_path, "  retry: 3\n  child:\n    call: probe.work\n    inputs: {seconds: 100.0, tag: x}\n"
+                         "    timeout: 3\n")
+    try:
+        assert run.wait_line("RUNNING", "probe.work", timeout=60) is not None, run.end(1)
+        ros_graph.kill_node(proc)
+        out = run.end(60)
+    finally:
+        if run.proc.poll() is None:
+            run.proc.kill()
+    assert run.proc.returncode == 1, out
+    rows = [line for line in out.split("calls:")[-1].splitlines() if "probe.work" in line]
+    assert len(rows) == 3 and "module_lost" in rows[0] and "its process is gone" in rows[0], out
+    for row in rows[1:]:   # held for a node that does not come back: timed out, never sent, and why
+        assert "timeout" in row and re.search(r"no answer within 3s \(never sent: node /bm_probe stopped \(its "
+                                              r"process is gone\) \d+\.\d s ago and was not started again\)", row), out
+    assert "restarting, or unable to reach" not in out, out
