@@ -96,7 +96,8 @@ class Parser:
         try:
             text = self.loader(path)
         except OSError as exc:
-            self.err(at or Pos(shown, 1, 1), "cannot read %s: %s" % (shown, exc.strerror or exc))
+            self.err(at or Pos(shown, 1, 1), "cannot read %s: %s%s" % (shown, exc.strerror or exc,
+                                                                       _include_hint(path, stack)))
             return None
         except UnicodeDecodeError as exc:   # where it is, if the loader decoded the whole file at once
             data = exc.object
@@ -450,7 +451,10 @@ class Parser:
         target = getattr(node.spec, "target", None) or raw.get(node.kind, node.kind)
         for name, key_ in value.items():
             if allowed is not None and name not in allowed:
-                self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, closest(name, allowed, what)))
+                turned = isinstance(key_, str) and key_ in allowed and name.isidentifier()   # SMACH's remapping order
+                self.err(value.key_pos[name], "%s has no %s %r%s" % (target, what, name, (
+                    "; %s maps %s name → tree key: did you mean {%s: %s}?" % (key, what, key_, name)) if turned
+                    else closest(name, allowed, what)))
                 if isinstance(key_, str) and key_.isidentifier():
                     out[name] = key_   # its key still counts as written: no knock-on "no node writes" below
             elif not isinstance(key_, str) or not key_.isidentifier():
@@ -503,3 +507,16 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
         raise TreeErrorsWithWarnings(errors, found)
     assert tree is not None
     return tree
+
+
+def _include_hint(path: str, stack: Tuple[str, ...]) -> str:
+    """For an include that is not there but would be from the working folder: that its path is relative to
+    the including file's folder, and what to write (``include: trees/ask.yaml`` in trees/main.yaml)."""
+    if not stack or os.path.exists(path):
+        return ""
+    here = os.path.dirname(os.path.abspath(stack[-1]))
+    written = os.path.relpath(path, here)
+    if written.startswith("..") or not os.path.isfile(written):
+        return ""
+    return " (an include's path is relative to the folder of the file that includes it, %s: write %s)" % (
+        os.path.relpath(here) + os.sep, os.path.relpath(os.path.abspath(written), here))

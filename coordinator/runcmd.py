@@ -314,6 +314,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
             graph.adopt()  # loopback: the private graph works whatever the hostname
             print("simulated robot up, master at %s" % graph.uri)
+            print("  (to watch it from another terminal: ROS_MASTER_URI=%s bmtree watch)" % graph.uri)
             guard = _start_guard(args.wait, interrupts)
         assert guard is not None
         with guard.watching():  # a master that stops answering now: a bounded wait, then exit 3

@@ -38,6 +38,9 @@ def test_each_command_steers_the_run_and_is_logged(tmp_path):
     run = SimRun(tmp_path, tree=STEERED, world=slow_world(tmp_path, speed=0.4), extra=("--control",))
     watch = None
     try:
+        # the run says how to watch its private master (the watch below does just that)
+        said = run.out.wait_for("to watch it from another terminal")
+        assert "(to watch it from another terminal: ROS_MASTER_URI=%s bmtree watch)" % run.env["ROS_MASTER_URI"] in said
         run.out.wait_for("RUNNING   go to the kitchen")
         watch = subprocess.Popen(bmtree_cmd("watch", "--plain", "--wait", "60"), stdout=subprocess.PIPE,
                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, env=run.env)
