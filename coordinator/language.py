@@ -97,7 +97,7 @@ class Parser:
             text = self.loader(path)
         except OSError as exc:
             self.err(at or Pos(shown, 1, 1), "cannot read %s: %s%s" % (shown, exc.strerror or exc,
-                                                                       _include_hint(path, stack)))
+                                                                       parsehints.include_hint(path, stack)))
             return None
         except UnicodeDecodeError as exc:   # where it is, if the loader decoded the whole file at once
             data = exc.object
@@ -508,15 +508,3 @@ def load_tree(path: str, definitions: Mapping[str, ModuleDefinition],
     assert tree is not None
     return tree
 
-
-def _include_hint(path: str, stack: Tuple[str, ...]) -> str:
-    """For an include that is not there but would be from the working folder: that its path is relative to
-    the including file's folder, and what to write (``include: trees/ask.yaml`` in trees/main.yaml)."""
-    if not stack or os.path.exists(path):
-        return ""
-    here = os.path.dirname(os.path.abspath(stack[-1]))
-    written = os.path.relpath(path, here)
-    if written.startswith("..") or not os.path.isfile(written):
-        return ""
-    return " (an include's path is relative to the folder of the file that includes it, %s: write %s)" % (
-        os.path.relpath(here) + os.sep, os.path.relpath(os.path.abspath(written), here))

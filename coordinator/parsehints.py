@@ -3,6 +3,7 @@ YAML read as a mapping or a list, the closest name, how to split a node with two
 from __future__ import annotations
 
 import json
+import os
 import re
 from typing import Any, Dict, List, Mapping, Tuple
 
@@ -13,7 +14,7 @@ from coordinator.nodes import REGISTRY
 from coordinator.othernames import foreign_option, option_hint, takes
 from coordinator.yamlsrc import LMap
 
-__all__ = ["LEAF_OPTIONS", "XML_HINT", "closest", "foreign_hint", "foreign_option", "key_fix", "looks_like_xml",
+__all__ = ["LEAF_OPTIONS", "XML_HINT", "closest", "foreign_hint", "foreign_option", "include_hint", "key_fix", "looks_like_xml",
            "misplaced", "nearby", "nest_hint", "quoted_mapping", "quoted_mapping_message", "unquoted"]
 
 _KINDS = frozenset(REGISTRY)
@@ -185,3 +186,14 @@ def quoted_mapping_message(text: str, key: Any = None) -> str:
             % (json.dumps(text, ensure_ascii=False), "" if key is None else "%s: " % key, shown))
 
 
+def include_hint(path: str, stack: Tuple[str, ...]) -> str:
+    """For an include that is not there but would be from the working folder: that its path is relative to
+    the including file's folder, and what to write (``include: trees/ask.yaml`` in trees/main.yaml)."""
+    if not stack or os.path.exists(path):
+        return ""
+    here = os.path.dirname(os.path.abspath(stack[-1]))
+    written = os.path.relpath(path, here)
+    if written.startswith("..") or not os.path.isfile(written):
+        return ""
+    return " (an include's path is relative to the folder of the file that includes it, %s: write %s)" % (
+        os.path.relpath(here) + os.sep, os.path.relpath(os.path.abspath(written), here))
