@@ -253,3 +253,17 @@ def test_run_refuses_a_set_value_before_anything_starts(tmp_path, capsys, monkey
     assert out.err.strip() == ("error: --set x: 'abc' is text, but navigation.approach's target.x at %s:9:28 takes "
                                "a number (float64)" % path)
     assert "starting the simulated robot" not in out.out and "running" not in out.out
+
+
+def test_set_values_for_counts_and_durations_are_checked_before_the_run(tmp_path):
+    """A count or duration a --set value could never be (retry: $n, timeout: $secs) was found mid-run, after the
+    robot had started and its cleanup had run: exit 1, not 2."""
+    path = tmp_path / "t.yaml"
+    path.write_text("format: 1\ninputs:\n  secs: {default: 5}\n  n: {default: 2}\nroot:\n  retry: $n\n  child:\n"
+                    "    timeout: $secs\n    child: {wait: 1}\n")
+    tree = load_tree(str(path), default_definitions(), given={"secs", "n"})
+    assert set_value_errors(tree, {"secs": "abc", "n": -2}) == [
+        "%s:6:10: count of retry $n is -2 (--set n), not an integer >= 1: give --set n a value that is one" % path,
+        "%s:8:14: duration of timeout $secs is 'abc' (--set secs), not a positive number of seconds: give --set secs "
+        "a value that is one" % path]
+    assert set_value_errors(tree, {"secs": 3, "n": 1}) == []
