@@ -189,7 +189,11 @@ class FailureExplainer(RunObserver):
         setter = inc.children[0] if inc.children else None
         if setter is None or not setter.name.startswith("arguments of "):  # an include without args
             return "%s in %s" % (pos, inc.name)
-        return "%s in %s" % (pos, include_label(inc.name, getattr(setter, "written", None)))
+        values = getattr(setter, "written", None)
+        if "(" not in inc.name and values:   # a named include: its name, then the values (which the name hides)
+            said = include_label("x(%s)" % ", ".join("%s=$%s" % (k, k) for k in values), values)[1:]
+            return "%s in %s %s" % (pos, inc.name, said)
+        return "%s in %s" % (pos, include_label(inc.name, values))
 
 
 def _where(b: Any) -> str:

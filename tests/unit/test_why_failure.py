@@ -291,3 +291,16 @@ def test_replay_and_watch_say_where_the_failure_and_the_cleanups_are_written(sim
         assert len(cleanup) == 1, lines
         assert lines[cleanup[0] + 1] == "  at: %s:%d:7" % (path, line), lines
         assert not [x for x in lines if x.startswith("at: ")], lines  # root succeeded: nothing of its own
+
+
+def test_a_named_include_says_its_name_and_the_values_it_was_included_with(sim_defs, tmp_path):
+    """A name given to an include hid the values: ``at: go.yaml:6:3 in go to the door`` (which door?)."""
+    (tmp_path / "go.yaml").write_text("format: 1\nname: go\ninputs:\n  place: {}\nroot:\n  call: navigation.go_to\n"
+                                      "  inputs: {place: $place}\n")
+    (tmp_path / "t.yaml").write_text("format: 1\nname: t\nroot:\n  include: go.yaml\n  name: go to the door\n"
+                                     "  args: {place: garage}\n")
+    t = TreeTest(str(tmp_path / "t.yaml"), sim_defs)
+    t.mocks["navigation.go_to"].fail("blocked")
+    run = t.run()
+    assert run.result.failed_at == '%s:6:3 in go to the door (place="garage")' % (tmp_path / "go.yaml"), \
+        run.result.failed_at
