@@ -19,7 +19,7 @@ from __future__ import annotations
 from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
-from coordinator.nodes.base import Flow
+from coordinator.nodes.base import SET_ARG, Flow
 from coordinator.refs import Computed, Ref
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of, top_of
 from coordinator.values import Binding, KeyTypes, Template, ref_type
@@ -46,10 +46,10 @@ def key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None,
     return _key_types(tree, nodes, given)[0]
 
 
-def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]],
-               given: FrozenSet[str]) -> Tuple[KeyTypes, List[TreeNode], Dict[str, List[TreeNode]]]:
+def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]], given: FrozenSet[str],
+               values: Optional[Mapping[str, Any]] = None) -> Tuple[KeyTypes, List[TreeNode], Dict[str, List[TreeNode]]]:
     """:func:`key_types`, with the nodes that bind a file's inputs (includes) and the writers of the keys
-    that are inputs of a file."""
+    that are inputs of a file; ``values``: those the run gives (``--set``), bound as such."""
     types = KeyTypes((k, {None}) for k in tree.inputs)
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
     kinds = kinds_in(nodes)
@@ -78,7 +78,7 @@ def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]],
         if copies:
             _settle(types, copies)
     if inputs:
-        types.bound = _bindings(tree, binders, writers, given)
+        types.bound = _bindings(tree, binders, writers, given, values or {})
     types.why_not = _Choices(nodes, inputs)
     return types, binders, writers
 
@@ -145,14 +145,16 @@ def _literal(value: Any) -> bool:
 
 
 def _bindings(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[TreeNode]],
-              given: FrozenSet[str]) -> Dict[str, Dict[str, List[Binding]]]:
+              given: FrozenSet[str], values: Mapping[str, Any]) -> Dict[str, Dict[str, List[Binding]]]:
     """The literals each file's inputs start with, where no node but the includes of that file writes them:
     the values its counts, durations and lists read as ``$input`` (see ``KeyTypes``). An include that
     gives a value another one gave already is not listed again (its fix is the same)."""
     out: Dict[str, Dict[str, List[Binding]]] = {}
     here = tree.root.pos.file
     for k, default in tree.inputs.items():
-        if k not in given and k not in writers and _literal(default):
+        if k in values and k not in writers and _literal(values[k]):   # --set: its value, said so
+            out.setdefault(k, {}).setdefault(here, []).append((values[k], SET_ARG, None))
+        elif k not in given and k not in writers and _literal(default):
             out.setdefault(k, {}).setdefault(here, []).append((default, "", None))
     files, sole = _included(binders, writers)
     seen: Set[Tuple[str, str, str, str]] = set()
@@ -189,17 +191,19 @@ def _included(binders: List[TreeNode], writers: Dict[str, List[TreeNode]]
 
 
 def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None, given: FrozenSet[str] = frozenset(),
-                defaults: Optional[Mapping[str, Any]] = None) -> List[TreeError]:
+                defaults: Optional[Mapping[str, Any]] = None, values: Optional[Mapping[str, Any]] = None
+                ) -> List[TreeError]:
     """References that cannot fit the input they are passed to (``given``: inputs the caller sets); a
     ``warning: `` among them is one (the tree's default of an input that cannot be used as it is). And the
     literals tree inputs are given (their defaults, the includes' arguments) that a call input they are
     passed to (``$x``, ``$x.field``, anywhere in its value) could never take, at the literal: the call would
     refuse them when built, after the calls before it ran; only where no node writes the key (a key some node
     may write could hold another value by then). ``defaults``: each file's ``inputs:`` as written, by file
-    (where a default is)."""
+    (where a default is). ``values``: the inputs the run gives (``--set``), checked where counts and durations read
+    them."""
     errors: List[TreeError] = []
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
-    types, binders, writers = _key_types(tree, nodes, given)
+    types, binders, writers = _key_types(tree, nodes, given, values)
     choices = types.why_not if isinstance(types.why_not, _Choices) else None
     for n in nodes:
         nk = n.nodekind

@@ -58,21 +58,12 @@ def set_value_errors(tree: TreeFile, values: Mapping[str, Any]) -> List[str]:
 
 def _param_misfits(tree: TreeFile, values: Mapping[str, Any]) -> List[str]:
     """The counts, durations and lists of the tree (``retry: $n``, ``timeout: $secs``) that a given value could
-    never be: checked as a default is (``bmtree check`` warns of one), with the value in its place."""
-    import dataclasses
-    import re
-
+    never be, checked as a default is (``bmtree check`` warns of one)."""
     from coordinator.dataflow import check_types
 
-    shown = dataclasses.replace(tree, inputs=dict(tree.inputs, **{k: v for k, v in values.items() if k in tree.inputs}))
-    out = []
-    for e in check_types(shown):
-        m = re.match(r"warning: (.*) \(the default of input '(\w+)'\)(, not [^:]*|: [^;]*?)(?:: a run that does not "
-                     r"set the input fails here.*)?$", e.message)
-        if m and m.group(2) in values:
-            out.append("%s: %s (--set %s)%s: give --set %s a value that is one" % (
-                e.pos, m.group(1), m.group(2), m.group(3), m.group(2)))
-    return out
+    given = {k: v for k, v in values.items() if k in tree.inputs}
+    return ["%s: %s" % (e.pos, e.message) for e in check_types(tree, given=frozenset(given), values=given)
+            if "(--set " in e.message]
 
 
 def _sources(tree: TreeFile, binders: List[TreeNode], writers: Dict[str, List[TreeNode]], values: Mapping[str, Any],

@@ -26,10 +26,11 @@ if TYPE_CHECKING:  # pragma: no cover
     from coordinator.yamlsrc import LMap
     from modules.definition import FunctionDefinition
 
-__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "PARAM_TYPES", "fixed", "join",
+__all__ = ["Flow", "NEVER", "NodeKind", "Option", "TYPES", "ValueType", "NO_DEFAULT", "SET_ARG", "PARAM_TYPES", "fixed", "join",
            "meet", "param_keys", "repeated_outputs", "run_param", "where"]
 
 NO_DEFAULT = object()
+SET_ARG = "--set"   # a binding's "argument" for a value the run is given, not a default (dataflow._bindings)
 _NOTHING: FrozenSet[str] = frozenset()
 
 
@@ -182,7 +183,9 @@ def _bound_errors(ref: Ref, at: Pos, types: Any, type_name: str, label: str,
             continue
         one = "a shorter list" if long else "one"
         warn, risk, fix = "", "", "give the input a %s" % ("shorter default" if long else "default that is one")
-        if arg:
+        if arg == SET_ARG:   # a value the run is given (bmtree run --set)
+            origin, fix = "--set %s" % ref.key, "give --set %s a value that is %s" % (ref.key, one)
+        elif arg:
             origin, fix = "argument %r of the include at %s" % (arg, where(include, at)), "pass %s there" % one
         elif include is not None:
             origin = "the default of input %r; the include at %s passes no argument" % (ref.key, where(include, at))
