@@ -4,6 +4,7 @@
     not   := 'not' not | cmp ;  cmp := sum (('=='|'!='|'<'|'<='|'>'|'>='|'in') sum)?
     sum   := term (('+'|'-') term)* ;  term := unary (('*'|'/') unary)* ;  unary := '-' unary | value
     value := number | string | true | false | null | ref | func '(' [expr (',' expr)*] ')' | '(' expr ')'
+           | '[' [expr (',' expr)*] ']'
     ref   := ['$'] name ('.' field | '[' index ']')*
 
 ``check`` holds one; a ``$( … )`` value and a template's ``{ … }`` hold one too. A one-field ROS
@@ -33,7 +34,7 @@ from coordinator.exprfuncs import (
 )
 from coordinator.exprparse import Parser
 from coordinator.exprtypes import static_kind
-from coordinator.refs import Ref, RefError, kind_of, unwrap
+from coordinator.refs import Ref, RefError, check_size, kind_of, unwrap
 
 __all__ = ["BRIEF", "Expr", "ExprError", "FUNCTIONS", "brief", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
 
@@ -124,6 +125,13 @@ class Expr:
             return arithmetic(node[1], unwrap(self._eval(node[2], lookup)), unwrap(self._eval(node[3], lookup)))
         if op == "call":
             return apply_function(node[1], [unwrap(self._eval(a, lookup)) for a in node[2]])
+        if op == "list":
+            items = [unwrap(self._eval(a, lookup)) for a in node[1]]
+            try:
+                check_size(items)   # [xs, xs] in a loop doubles xs at each run
+            except RefError as exc:
+                raise ExprError(str(exc))
+            return items
         a, b = unwrap(self._eval(node[2], lookup)), unwrap(self._eval(node[3], lookup))
         try:
             return compare(node[1], a, b)

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from typing import Any, Dict, List, Tuple
 
-from coordinator.refs import MAX_NESTING, RefError, kind_of, unwrap
+from coordinator.refs import MAX_NESTING, RefError, check_size, kind_of, unwrap
 
 __all__ = ["ExprError", "FUNCTIONS", "BRIEF", "brief", "MAX_TEXT", "check_text_size", "text_of", "described",
-           "arithmetic", "apply_function", "compare", "VERB", "ORDER"]
+           "arithmetic", "apply_function", "compare", "list_hint", "VERB", "ORDER"]
 
 
 class ExprError(RefError):
@@ -28,6 +28,7 @@ FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
     "max": ((1, 8), "number", "number"),
     "at": ((2, 2), "", ""),
     "join": ((1, 2), "", "string"),
+    "split": ((1, 2), "string", "list"),
 }
 
 
@@ -92,14 +93,22 @@ def check_text_size(text: str) -> str:
 
 
 def arithmetic(op: str, a: Any, b: Any) -> Any:
-    """``a op b`` for ``+ - * /``: numbers, or two texts joined by ``+`` (bounded by :data:`MAX_TEXT`)."""
+    """``a op b`` for ``+ - * /``: numbers, two texts joined by ``+`` (bounded by :data:`MAX_TEXT`), or two
+    lists put one after the other by ``+`` (bounded as any value built from references)."""
     ka, kb = kind_of(a), kind_of(b)
     if op == "+" and ka == kb == "string":
         if len(a) + len(b) > MAX_TEXT:
             return check_text_size(a + b[:MAX_TEXT + 1 - len(a)])  # raises without building it whole
         return a + b
+    if op == "+" and ka == kb == "list":
+        joined = list(a) + list(b)
+        try:
+            check_size(joined)   # a list added to itself in a loop doubles at each run
+        except RefError as exc:
+            raise ExprError(str(exc))
+        return joined
     if ka != "number" or kb != "number":
-        raise ExprError("cannot %s %s and %s" % (VERB[op], described(a), described(b)))
+        raise ExprError("cannot %s %s and %s%s" % (VERB[op], described(a), described(b), list_hint(op, ka, kb)))
     if op == "/" and b == 0:
         raise ExprError("division by zero")
     try:
@@ -115,6 +124,13 @@ def arithmetic(op: str, a: Any, b: Any) -> Any:
 VERB = {"+": "add", "-": "subtract", "*": "multiply", "/": "divide"}
 
 
+def list_hint(op: str, ka: str, kb: str) -> str:
+    """`` (to add an element to a list, write names + [x])``: the fix when ``+`` meets one list."""
+    if op == "+" and (ka == "list") != (kb == "list") and None not in (ka, kb):
+        return " (to add an element to a list, write it in brackets: names + [name])"
+    return ""
+
+
 def apply_function(name: str, args: List[Any]) -> Any:
     """The value of function ``name`` of :data:`FUNCTIONS` on ``args`` (their number checked when parsed)."""
     want = FUNCTIONS[name][1]
@@ -126,6 +142,8 @@ def apply_function(name: str, args: List[Any]) -> Any:
         return _at(a, args[1])
     if name == "join":
         return _join(a, args[1] if len(args) > 1 else ", ")
+    if name == "split":
+        return _split(a, args[1] if len(args) > 1 else None)
     if name == "len":
         if kind_of(a) not in ("string", "list"):
             raise ExprError("len() takes a string or a list, got %s" % described(a))
@@ -151,6 +169,16 @@ def _join(seq: Any, sep: Any) -> str:
     if not isinstance(sep, str):
         raise ExprError("join() takes text as separator, got %s" % described(sep))
     return check_text_size(sep.join(text_of(x) for x in seq))
+
+
+def _split(text: str, sep: Any) -> List[str]:
+    """``split(heard)``: the words of a text (at runs of spaces, none empty); ``split(text, ',')`` the
+    pieces between each ``sep``."""
+    if sep is None:
+        return text.split()
+    if sep == "":
+        raise ExprError("split() takes a separator of at least one character, got ''")
+    return text.split(sep)
 
 
 def _at(seq: Any, i: Any) -> Any:

@@ -167,6 +167,8 @@ class Parser:
             node = self._or()
             self._expect(")")
             return node
+        if value == "[" and kind == "op":
+            return self._list(at)
         if kind == "func":
             return self._call(value, at)
         if kind == "ref":
@@ -175,6 +177,17 @@ class Parser:
             self.ref_offsets.append(at)
             return ("ref", value[0], at)
         raise ExprError("expected a value, found %r" % (value or "end of expression"), at)
+
+    def _list(self, at: int) -> Any:
+        """``[a, b]``: a list of the values of its expressions (``names + [heard]`` appends one)."""
+        items = []
+        if self._peek()[1] != "]":
+            items.append(self._or())
+            while self._peek()[1] == ",":
+                self._take()
+                items.append(self._or())
+        self._expect("]")
+        return ("list", tuple(items), at)
 
     def _call(self, name: str, at: int) -> Any:
         self._expect("(")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 from typing import Any, Callable, List, Optional, Tuple
 
-from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, text_of
+from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, list_hint, text_of
 from coordinator.refs import Ref, kind_of
 
 __all__ = ["never_true", "static_kind"]
@@ -19,6 +19,10 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
     op = node[0]
     if op == "lit":
         return kind_of(node[1])
+    if op == "list":
+        for item in node[1]:
+            static_kind(item, key_kind, errors)
+        return "list"
     if op == "ref":
         return key_kind(node[1])
     if op in ("and", "or"):
@@ -37,10 +41,10 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
         a, b = static_kind(node[2], key_kind, errors), static_kind(node[3], key_kind, errors)
         if a is None or b is None:
             return None
-        if node[1] == "+" and a == b == "string":
-            return "string"
+        if node[1] == "+" and a == b and a in ("string", "list"):
+            return a
         if a != "number" or b != "number":
-            errors.append((node[4], "cannot %s a %s and a %s" % (VERB[node[1]], a, b)))
+            errors.append((node[4], "cannot %s a %s and a %s%s" % (VERB[node[1]], a, b, list_hint(node[1], a, b))))
             return None
         return "number"
     if op == "call":
@@ -99,8 +103,8 @@ def never_true(node: Any, why_not: Callable[[str, str, bool], str], errors: List
         never_true(left, why_not, errors)
         never_true(right, why_not, errors)
         return
-    if op == "call":
-        for arg in node[2]:
+    if op in ("call", "list"):
+        for arg in node[2 if op == "call" else 1]:
             never_true(arg, why_not, errors)
         return
     for child in node[1:]:   # and, or, not, neg, arith: their operands are tuples
