@@ -178,26 +178,24 @@ class Parser:
             return ("ref", value[0], at)
         raise ExprError("expected a value, found %r" % (value or "end of expression"), at)
 
-    def _list(self, at: int) -> Any:
-        """``[a, b]``: a list of the values of its expressions (``names + [heard]`` appends one)."""
+    def _items(self, close: str) -> List[Any]:
+        """Expressions separated by commas up to ``close`` (taken): a list's elements, a call's arguments."""
         items = []
-        if self._peek()[1] != "]":
+        if self._peek()[1] != close:
             items.append(self._or())
             while self._peek()[1] == ",":
                 self._take()
                 items.append(self._or())
-        self._expect("]")
-        return ("list", tuple(items), at)
+        self._expect(close)
+        return items
+
+    def _list(self, at: int) -> Any:
+        """``[a, b]``: a list of the values of its expressions (``names + [heard]`` appends one)."""
+        return ("list", tuple(self._items("]")), at)
 
     def _call(self, name: str, at: int) -> Any:
         self._expect("(")
-        args = []
-        if self._peek()[1] != ")":
-            args.append(self._or())
-            while self._peek()[1] == ",":
-                self._take()
-                args.append(self._or())
-        self._expect(")")
+        args = self._items(")")
         (lo, hi), _, _ = FUNCTIONS[name]
         if not lo <= len(args) <= hi:
             raise ExprError("%s() takes %s, got %d" % (name, "1 argument" if hi == 1 else "%d to %d arguments"
