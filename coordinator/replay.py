@@ -4,7 +4,8 @@ A replay rebuilds the recorded tree's shape as plain py_trees behaviours and app
 recorded status changes to it (:mod:`coordinator.replaystate`), showing them to the live
 display itself, so it prints exactly what the live display printed (and, with
 ``--at``/``--step``/``--failure``, the tree, the tree blackboard and the calls in flight at a
-moment). ``--scenario`` writes a ``bmtree test`` file whose mocks answer as the modules
+moment; the report after it, ``--at`` and ``--failure`` also list the last module events received).
+``--scenario`` writes a ``bmtree test`` file whose mocks answer as the modules
 answered (see :mod:`coordinator.scenariogen`).
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ from coordinator.runevents import (
     steered_lines,
     terminal_text,
 )
+from coordinator.runlines import short_json
 from coordinator.runlog import RunLog, RunLogError, default_runs_dir, list_runs, read_log, writer_alive
 from coordinator.runner import Display, call_line, cleanup_stop_label, late_line, stop_label
 
@@ -161,6 +163,7 @@ def _report(replay: Replay, out: TextIO) -> None:
             out.write(late_line(str(answer.get("text"))) + "\n")
     for c in replay.pending.values():
         out.write("  +%7.3fs  %-26s %-11s %8s\n" % (float(c.get("t") or 0.0), c.get("target"), "no end", "-"))
+    _events(replay.events, out, "events:", REPORT_EVENTS)
     graph = [n for n in replay.notices  # late answers are listed under their calls
              if n.get("what") != LATE_ANSWER or str(n.get("call_id")) not in listed]
     for head, notices in (("the ROS graph:", [n for n in graph if n.get("what") not in CLEANUP_NOTICES]),
@@ -175,10 +178,37 @@ def _report(replay: Replay, out: TextIO) -> None:
             out.write("  +%7.3fs  %s\n" % (float(c.get("t") or 0.0), control_line(c)))
 
 
+REPORT_EVENTS = 20  # the events the report after a replay lists: the last ones
+MOMENT_EVENTS = 10  # those --at and --failure list, received by the moment they show
+
+
+def _event_line(rec: Dict[str, Any]) -> str:
+    """A module event the run received, in the columns of a call's line: when, ``module.event``, its
+    params as compact JSON cut as a call's inputs are (none shown when the record has none)."""
+    name = "%s.%s" % (rec.get("module") or "?", rec.get("event") or "?")
+    params = short_json(rec["params"]) if rec.get("params") is not None else ""
+    return terminal_text(("  +%7.3fs  %-26s %s" % (float(rec.get("t") or 0.0), name, params)).rstrip(),
+                         newlines=False)
+
+
+def _events(events: List[Dict[str, Any]], out: TextIO, head: str, limit: int) -> None:
+    """The module events ``events`` (received so far), the last ``limit`` of them, under ``head``; nothing
+    without any."""
+    if not events:
+        return
+    out.write(head + "\n")
+    left_out = len(events) - limit
+    if left_out > 0:
+        out.write("  … %d earlier event%s left out\n" % (left_out, "" if left_out == 1 else "s"))
+    for rec in events[-limit:]:
+        out.write(_event_line(rec) + "\n")
+
+
 def _jump_to_failure(replay: Replay, out: TextIO) -> None:
     """``--failure``: the failure the run's reason names (not one the tree recovered from or went on
-    past), where, why, the call that failed with its inputs, and the state after that tick; for a run
-    stopped from outside or killed, when that was and the state at its last tick before it."""
+    past), where, why, the call that failed with its inputs, the state after that tick and the last events
+    received before it; for a run stopped from outside or killed, when that was, the state at its last
+    tick before it and the last events received before it."""
     log = replay.log
     ended, others = replay.failures()
     end = log.end or {}
@@ -198,6 +228,8 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
 
     stop, stopped, label = _stop(replay)
     shown = ended
+    events: Optional[List[Dict[str, Any]]] = None   # the events shown: by default, those before the failure's tick
+    before = "the failure"
     if ended is not None:
         replay.to_tick(ended.index)
         out.write("the failure that ended the run, at %.3fs: %s\n" % (ended.t, where(ended)))
@@ -214,6 +246,10 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
             why = "%s%s" % (end.get("reason") or "the run ended %s" % end.get("status"),
                             " (at %.3fs)" % replay.stop_time(stop) if stopped else "")
             when = "its last tick before %s" % ("it was stopped" if stopped else "its end")
+        # those until the stop (or the end of its log), not only until its last tick: a wait_event skips
+        # the events it does not want without a tick
+        events = [r for r in log.records[:stop] if r.get("type") == "event"]
+        before = "it was stopped" if stopped else "its end" if end else "its log ends"
         out.write("no leaf's failure ended this run: %s\nthe state at %s, at %.3fs:\n" % (why, when, replay.t))
     elif others:
         shown = others[0]
@@ -246,6 +282,7 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
             out.write("  … and %d more\n" % (len(others) - 5))
     _cleanup_failure(replay, out, label)
     replay.snapshot(out, stopped if ended is None and stopped else "")
+    _events(replay.events if events is None else events, out, "events received before %s:" % before, MOMENT_EVENTS)
 
 
 def _cleanup_failure(replay: Replay, out: TextIO, label: Callable[[Dict[str, Any]], Tuple[str, str]]) -> None:
@@ -324,6 +361,7 @@ def cmd_replay(args: Any) -> int:
             replay.next()
         out.write("at %.3fs:\n" % at)
         replay.snapshot(out)
+        _events(replay.events, out, "events received by %.3fs:" % at, MOMENT_EVENTS)
         return 0
     if args.step:
         interactive = sys.stdin.isatty()
