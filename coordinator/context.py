@@ -23,6 +23,7 @@ from comm.messages import (
 from comm.rostypes import from_message
 from comm.textenum import TextEnum
 from coordinator.clock import Clock
+from coordinator.received import Received
 from coordinator.refs import resolve, unwrap
 from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
@@ -200,10 +201,10 @@ class RunContext:
         self.blackboard: Dict[str, Any] = {}
         self.calls: List[CallRecord] = []
         self.pending: typing.OrderedDict[str, CallRecord] = OrderedDict()
-        self.events: List[Event] = []
-        # per event, the ticks done before it arrived: events with one number came together, between two
-        # ticks, and a wait_event restarted by a loop takes the ones that came with the one it took
-        self.event_ticks: List[int] = []
+        # the events received, each with the ticks done before it arrived (events with one number came
+        # together, between two ticks, and a wait_event restarted by a loop takes the ones that came with
+        # the one it took); only the recent ones and those a waiting wait_event has not read are kept
+        self.events = Received()
         self.ticks_done = 0
         self.notices: List[Notice] = []
         self.observers: List[RunObserver] = list(observers or [])
@@ -362,8 +363,7 @@ class RunContext:
                 while len(self.unstored) > 1000:  # a long run without recalls: the old ones are stored by now
                     self.unstored.popitem(last=False)
         elif isinstance(item, Event):
-            self.events.append(item)
-            self.event_ticks.append(self.ticks_done)
+            self.events.append(item, self.ticks_done)
             if self.observers:
                 notify(self.observers, "on_event", item, self.clock.now())
         elif isinstance(item, BlackboardAnswer):

@@ -248,10 +248,12 @@ class WaitEvent(Leaf):
         self.ctx.unwatch(self.watch)   # (a watch left by a run that was not terminated)
         ev_def = self.node.spec.event
         self.watch = self.ctx.watch_module(ev_def.module, ev_def.name) if ev_def is not None else None
-        events, ticks = self.ctx.events, self.ctx.event_ticks
+        events = self.ctx.events
         self.seen = len(events)
         took, self.took = self.took, None
-        self.together = [] if took is None else [j for j in range(took + 1, self.seen) if ticks[j] == ticks[took]]
+        self.together = [] if took is None or not events.kept(took) else [
+            j for j in range(took + 1, self.seen) if events.tick_of(j) == events.tick_of(took)]
+        events.read_from(self, self.together[0] if self.together else self.seen)
         self.timeout, self.reason = run_param(self.node.spec.timeout, self.ctx.lookup, "seconds",
                                               "timeout of wait_event")
         self.deadline = None if self.timeout is None else self.ctx.clock.now() + self.timeout
@@ -286,6 +288,7 @@ class WaitEvent(Leaf):
                         self.ctx.write(key, values[param])
                 self.took = index
                 return Status.SUCCESS
+        events.read_from(self, self.seen)   # all read: the older ones may go
         gone = self.ctx.module_gone(self.watch)
         if gone:   # after the events that came before: one sent before it died is still taken
             return self._fail(gone)
@@ -296,8 +299,9 @@ class WaitEvent(Leaf):
         return Status.RUNNING
 
     def terminate(self, new_status: Status) -> None:
-        """Ended or halted: its module's node is no longer watched for it."""
+        """Ended or halted: its module's node is no longer watched for it, nor events kept for it."""
         self.ctx.unwatch(self.watch)
+        self.ctx.events.done(self)
         self.watch = None
 
 
