@@ -5,7 +5,7 @@ import json
 import logging
 import queue
 import typing
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
@@ -209,7 +209,7 @@ class RunContext:
         self.notices: List[Notice] = []
         self.observers: List[RunObserver] = list(observers or [])
         self.answers: Dict[str, BlackboardAnswer] = {}
-        self.dropped: List[FunctionResult] = []
+        self.dropped: typing.Deque[FunctionResult] = deque(maxlen=100)  # the last results that matched no call
         self._ended: typing.OrderedDict[str, CallRecord] = OrderedDict()  # calls that ended without an answer
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()  # in C: a cheap hand-off from the receiving threads
         # calls whose results the next recall must see stored: call_id -> (module.function, the
