@@ -45,10 +45,12 @@ SHUTDOWN_MARGIN = 5.0
 REQUEST_ANSWERED = 3.0  # s the leave waits for rospy to end the shutdown it held and answer the request
 
 
-def _report(result: Any, tree_name: str) -> None:
+def _report(result: Any, tree_name: str, files: Any = None) -> None:
     from coordinator.runner import summary_lines
 
-    for line in summary_lines(result, tree_name):
+    recorded = files is not None and files.log_path is not None
+    every = "bmtree replay lists them from the run log" if recorded else ""
+    for line in summary_lines(result, tree_name, every):
         print(line)
 
 
@@ -387,7 +389,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         finally:
             if view is not None:
                 view.stop()
-        _report(result, tree.name)
+        _report(result, tree.name, files)
         files.report(print)
         return EXIT_OK if result.succeeded else EXIT_FAILED
     except KeyboardInterrupt:
@@ -402,7 +404,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                              interrupts.shutdown_request, running))
         if runner is not None and runner.result is not None and tree is not None:
             with interrupts.held(again_exits=False):  # what it did and where its log is, before a second Ctrl-C
-                _report(runner.result, tree.name)
+                _report(runner.result, tree.name, files)
                 files.report(print)
         return EXIT_ENV
     finally:

@@ -3,7 +3,7 @@ end and ``replay``/``watch`` label them."""
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING, Any, List, Optional, Set, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Optional, Set, Tuple
 
 from py_trees.common import Status
 
@@ -75,10 +75,17 @@ def shown_status(result: RunResult, c: CallRecord, cleanup: Optional[Set[int]] =
     return status, error
 
 
-def summary_lines(result: RunResult, tree_name: str) -> List[str]:
-    """The end-of-run summary: result (``INTERRUPTED`` for a run stopped by Ctrl-C), reason, every call
+FOLD_OVER = 60   # calls of root a summary lists one by one; beyond, the middle ones are counted
+FOLD_FIRST, FOLD_LAST = 10, 30
+
+
+def summary_lines(result: RunResult, tree_name: str, every_call: str = "") -> List[str]:
+    """The end-of-run summary: result (``INTERRUPTED`` for a run stopped by Ctrl-C), reason, the calls
     (the failing one with its inputs; those the stop from outside, or the end of a cut cleanup, halted
-    said so)."""
+    said so). Of a root that made more than :data:`FOLD_OVER` calls, the first and last ones, the failing
+    one and those that may still be running or answered late are listed, and the others counted by status
+    in one line each run of them, so that a long run's summary stays short and its reason on the screen
+    (``every_call``: where they all are, said on those lines)."""
     lines = ["", "%s: %s in %.2f s (%d ticks)" % (tree_name, status_word(result.status), result.duration,
                                                    result.ticks)]
     if result.reason and not result.succeeded:
@@ -89,11 +96,20 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
     lines.append("calls:")
     cleanup = {id(c) for c in result.cleanup_calls}
     cut = {id(c) for c in result.cleanup_cut_calls}
-    for c in [c for c in result.calls if id(c) not in cleanup] + [None] + list(result.cleanup_calls):
+    root = [c for c in result.calls if id(c) not in cleanup]
+    folded: Dict[str, int] = {}
+    for i, c in enumerate(root + [None] + list(result.cleanup_calls)):
         if c is None:
+            lines.extend(_folded(folded, every_call))
             lines.extend(cleanup_lines(result))
             continue
         status, error = shown_status(result, c, cleanup, cut)
+        if (len(root) > FOLD_OVER and FOLD_FIRST <= i < len(root) - FOLD_LAST and c is not result.failed_call
+                and c.late_at is None and not c.maybe_running):
+            folded[status] = folded.get(status, 0) + 1
+            continue
+        lines.extend(_folded(folded, every_call))
+        folded = {}
         error = success_false_said(error, c.outputs)
         lines.append(call_line(c.started - result.started, c.target, status, c.duration, error,
                                c.inputs if c is result.failed_call else None))
@@ -102,6 +118,16 @@ def summary_lines(result: RunResult, tree_name: str) -> List[str]:
         elif c.maybe_running:
             lines.append(terminal_text(" " * 14 + "may still be running: %s" % c.maybe_running, newlines=False))
     return [terminal_text(line) for line in lines]   # a module's error, a tree's names: never the terminal's
+
+
+def _folded(by_status: Dict[str, int], every_call: str) -> List[str]:
+    """The line in place of calls not listed in a long run's summary: how many, by status."""
+    n = sum(by_status.values())
+    if not n:
+        return []
+    return ["  … %d call%s not listed (%s)%s" % (n, "" if n == 1 else "s", ", ".join(
+        "%d %s" % (k, status) for status, k in sorted(by_status.items(), key=lambda sk: -sk[1])),
+        ": %s" % every_call if every_call else "")]
 
 
 def cleanup_lines(result: RunResult) -> List[str]:
