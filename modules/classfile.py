@@ -14,7 +14,8 @@ __all__ = ["load_class", "where_raised"]
 
 
 def load_class(spec: str) -> Callable[[], BasicModule]:
-    """``package.module:Class`` or ``path/to/file.py:Class``."""
+    """``package.module:Class`` or ``path/to/file.py:Class`` (whose folder is put first on the path, as
+    ``python path/to/file.py`` does, so that it imports the modules beside it)."""
     if ":" not in spec:
         raise ValueError("expected MODULE:CLASS or FILE.py:CLASS, got %r" % spec)
     where, cls_name = spec.rsplit(":", 1)
@@ -28,6 +29,9 @@ def load_class(spec: str) -> Callable[[], BasicModule]:
                 raise ValueError("%s: not a Python source file (it contains NUL bytes)" % where)
         module = importlib.util.module_from_spec(sp)
         sys.modules[mod_name] = module
+        folder = os.path.dirname(os.path.abspath(where))
+        if folder not in sys.path:   # as ``python FILE.py`` does: a driver wrapper beside the file imports
+            sys.path.insert(0, folder)
         sp.loader.exec_module(module)
     else:
         module = _import_module(where, spec)

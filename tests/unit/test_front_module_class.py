@@ -67,3 +67,19 @@ def test_an_importable_module_that_imports_something_missing_says_where(folder, 
 def test_an_importable_module_loads(folder, monkeypatch):
     monkeypatch.syspath_prepend(str(folder))
     assert load_class("gripper:Gripper").__name__ == "Gripper"
+
+
+def test_a_class_file_imports_the_modules_beside_it(folder, monkeypatch, capsys):
+    """A driver wrapper beside the class file (``from driverlib import force``) imports, as with ``python
+    gripper.py``; before, the node said ``No module named 'driverlib'`` unless PYTHONPATH had the folder."""
+    (folder / "shelf").mkdir()
+    (folder / "shelf" / "driverlib_beside.py").write_text("FORCE = 7.5\n")
+    (folder / "shelf" / "wrapped.py").write_text(
+        "from driverlib_beside import FORCE\nfrom modules import BasicModule\n\n\n"
+        "class Wrapped(BasicModule):\n    force = FORCE\n")
+    monkeypatch.chdir(str(folder / ".."))   # not from its folder
+    try:
+        cls = load_class("%s:Wrapped" % (folder / "shelf" / "wrapped.py"))
+        assert cls.force == 7.5
+    finally:
+        sys.modules.pop("driverlib_beside", None)
