@@ -41,6 +41,11 @@ def cmd_check(args: argparse.Namespace) -> int:
     defs = definitions_from(args.modules)
     problems = warned = 0
     for path in args.trees:
+        other = _not_checked_here(path)
+        if other:
+            problems += 1
+            err(other)
+            continue
         if _is_definition(path):   # a module's definition: checked as one (it is no tree)
             try:
                 d = load_definition(path)
@@ -77,10 +82,34 @@ def _is_definition(path: str) -> bool:
     if not path.endswith(".json"):
         return False
     try:
-        data = json.loads(read_text(path))
-    except (OSError, ValueError, RecursionError):
+        text = read_text(path)
+    except (OSError, ValueError):
         return False   # the tree loader says what is wrong with it
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError):
+        return '"Basic Module"' in text   # a definition with a JSON mistake: said as JSON, not as YAML
     return isinstance(data, dict) and "Basic Module" in data
+
+
+_NOT_TREES = {".py": "a Python module's class", ".pyc": "compiled Python", ".cpp": "C++ source", ".cc": "C++ source",
+              ".cxx": "C++ source", ".c": "C source", ".h": "a C/C++ header", ".hpp": "a C++ header",
+              ".xml": "XML (a BehaviorTree.CPP tree?)", ".launch": "a roslaunch file", ".msg": "a ROS message",
+              ".srv": "a ROS service", ".action": "a ROS action", ".so": "a compiled library"}
+
+
+def _not_checked_here(path: str) -> str:
+    """Why ``bmtree check`` does not read ``path`` (its extension says it is neither a tree nor a module's
+    definition), with what does check it; '' for any other file."""
+    ext = os.path.splitext(path)[1].lower()
+    what = _NOT_TREES.get(ext)
+    if what is None:
+        return ""
+    how = {".py": ": bmtree-module --definition DEF.json --class %s:CLASS checks the class against the definition "
+                  "before it connects to a master" % path,
+           ".xml": ": bmtree trees are YAML (trees/README.md)"}.get(ext, "")
+    return "%s: not a tree or a module definition but %s; bmtree check reads trees (.yaml) and module definitions " \
+           "(.json)%s" % (path, what, how)
 
 
 def cmd_schema(args: argparse.Namespace) -> int:

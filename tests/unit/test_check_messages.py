@@ -164,3 +164,20 @@ def test_a_value_of_the_wrong_type_found_when_running_is_said_the_same_way(tmp_p
     assert run.failed
     assert run.reason.endswith("speech.say: cannot build the call: input 'text' takes text (std_msgs/String), "
                                "got {'x': 1.0}"), run.reason
+
+
+def test_check_says_what_a_file_is_when_it_is_no_tree(tmp_path, capsys):
+    """A definition with a JSON mistake is said as JSON (it was a YAML syntax error), and a module's class
+    file is not read as a tree (it was ``mapping values are not allowed here``)."""
+    bad = tmp_path / "gripper.json"
+    bad.write_text('{"Basic Module": "gripper",\n "Functions": [],}\n')
+    cls = tmp_path / "gripper.py"
+    cls.write_text("class Gripper:\n    def open(self): return {'success': True}\n")
+    status = bmtree(["check", str(bad), str(cls)])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 2
+    assert lines[0].startswith("%s:2:18: invalid JSON: " % bad), lines
+    assert lines[1] == ("%s: not a tree or a module definition but a Python module's class; bmtree check reads "
+                        "trees (.yaml) and module definitions (.json): bmtree-module --definition DEF.json "
+                        "--class %s:CLASS checks the class against the definition before it connects to a "
+                        "master" % (cls, cls)), lines
