@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from typing import Any, Dict, List, Sequence
 
 from coordinator.cliutil import err
 
@@ -24,10 +24,14 @@ def interrupted_line(result: Any, started: bool, request: str = "", running: Seq
     sent = result is not None and any(id(c) not in mine for c in result.calls)
     line = ("interrupted%s: running calls were cancelled" % by if sent
             else "interrupted%s before any call was sent" % by)
-    if running:
-        targets = sorted({str(c.target) for c in running})
-        line += " (but %s may still be running: %s did not confirm the cancel)" % (
-            ", ".join(targets), "its module" if len(targets) == 1 else "their modules")
+    if running:   # why, as each call's summary row says it (no answer to its cancel, or code still running)
+        why: Dict[str, List[str]] = {}
+        for c in running:
+            targets = why.setdefault(str(c.maybe_running or "its module did not confirm the cancel"), [])
+            if str(c.target) not in targets:
+                targets.append(str(c.target))
+        line += " (but %s)" % "; ".join("%s may still be running: %s" % (", ".join(sorted(t)), w)
+                                        for w, t in why.items())
     status = getattr(result, "cleanup_status", None)
     if status is None:
         return line + (", and the cleanup did not run" if getattr(result, "ended", "") else "")

@@ -51,8 +51,8 @@ def test_a_call_whose_code_ignores_its_cancel_is_said_to_be_maybe_running(grab):
     row = lines.index([line for line in lines if line.startswith("  +")][0])
     assert lines[row + 1] == " " * 14 + "may still be running: " + call.maybe_running, lines
     assert interrupted_line(run.result, True, running=running) == (
-        "interrupted: running calls were cancelled (but navigation.go_to may still be running: its module did not "
-        "confirm the cancel)")
+        "interrupted: running calls were cancelled (but navigation.go_to may still be running: its module says its "
+        "code has not returned after 1s: it goes on running)")   # as its summary row says (it said "did not confirm")
 
 
 def test_a_call_that_honours_its_cancel_is_not(grab):
@@ -74,3 +74,6 @@ def test_a_module_that_never_answers_the_cancel_is_said_so(grab, monkeypatch):
     start = runner.ctx.clock.now()
     assert runner.confirm_cancels(0.5) == [call] and runner.ctx.clock.now() - start == pytest.approx(0.5)
     assert call.maybe_running == "its module did not answer the cancel"
+    assert interrupted_line(run.result, True, running=[call]) == (
+        "interrupted: running calls were cancelled (but navigation.go_to may still be running: its module did not "
+        "answer the cancel)")
