@@ -114,7 +114,7 @@ class MasterWatch:
                 continue
             if down or pid != self._pid:
                 try:
-                    self.register_again()
+                    self.register_again(restarted=pid != self._pid)
                 except Exception as exc:  # the master went away again: retry next period
                     log.warning("could not register again with the ROS master: %s", exc)
                     down = self.down = True
@@ -131,8 +131,9 @@ class MasterWatch:
             except Exception:  # a hook must not stop the watch
                 log.exception("master watch hook %r failed", hook)
 
-    def register_again(self) -> None:
-        """Register every topic, service and kept parameter of this node with the master."""
+    def register_again(self, restarted: bool = True) -> None:
+        """Register every topic, service and kept parameter of this node with the master (``restarted``: it
+        answers with another pid; else it was only unreachable, and may have dropped this node meanwhile)."""
         import rospy
         from rospy.impl.registration import get_service_manager, get_topic_manager
 
@@ -154,7 +155,11 @@ class MasterWatch:
             if v is not None:
                 master.setParam(caller_id, key, v)
         self._call(self.on_restart)
-        rospy.logwarn("registered again with the restarted ROS master at %s", self.master_uri)
+        if restarted:
+            rospy.logwarn("registered again with the restarted ROS master at %s", self.master_uri)
+        else:
+            rospy.logwarn("the ROS master at %s answers again (it was unreachable, not restarted): registered again",
+                          self.master_uri)
         self.registered.set()
 
 

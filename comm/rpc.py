@@ -116,6 +116,9 @@ class MasterProxy(xmlrpc.client.ServerProxy):
                               % (exc or type(exc).__name__)) from exc
 
 
+UNREACHABLE = frozenset((errno.ETIMEDOUT, errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN, errno.ENETDOWN))
+"""Errors that say nothing of the peer's process: its machine did not answer (a link down, a cable pulled,
+keepalive probes unanswered). A process that ended on a machine that answers is refused (or reset)."""
 KEEPALIVE = (("TCP_KEEPIDLE", 5), ("TCP_KEEPINTVL", 2), ("TCP_KEEPCNT", 3))  # a dead peer noticed in ~11 s
 
 
@@ -145,10 +148,11 @@ class PidLine:
             return None
 
     def ask(self) -> Optional[int]:
-        """The pid; None when no answer comes in time (alive but busy, or stopped).
+        """The pid; None when no answer comes in time (alive but busy, or stopped), or its machine cannot
+        be reached (:data:`UNREACHABLE`: a link that dropped is no process that ended).
 
         Raises:
-            OSError: the connection was refused or broken (the process is gone).
+            OSError: the connection was refused or broken by the peer's machine (the process is gone).
         """
         for fresh in (self._conn is None, True):  # a kept connection closed meanwhile: once more, afresh
             try:
@@ -169,6 +173,8 @@ class PidLine:
                 return None
             except (OSError, http.client.HTTPException) as exc:
                 self.close()
+                if isinstance(exc, OSError) and exc.errno in UNREACHABLE:
+                    return None   # no route, or no answer from its machine: the network, not the process
                 if fresh:
                     raise exc if isinstance(exc, OSError) else OSError("bad answer: %s" % exc)
             except (xmlrpc.client.Error, ValueError, TypeError):  # answered, but not as a ROS node does

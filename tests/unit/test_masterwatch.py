@@ -31,7 +31,7 @@ def stand_in(tmp_path, monkeypatch):
 def watch(stand_in, monkeypatch):
     w = MasterWatch(period=0.05)
     registered = []
-    monkeypatch.setattr(w, "register_again", lambda: registered.append(time.monotonic()))
+    monkeypatch.setattr(w, "register_again", lambda restarted=True: registered.append(time.monotonic()))
     w.registrations = registered
     w.start()
     yield w
