@@ -270,6 +270,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     graph = None
     transport = None
     runner = None
+    recorder: Any = None
     interrupts = Interrupts(EXIT_ENV)  # Ctrl-C and SIGTERM stop the tree (KeyboardInterrupt), never a registration
     guard = None
     stopped_at = None  # when a stop signal stopped the run: a second one leaves the graph at once
@@ -386,6 +387,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             result = runner.run(args.max_duration)
             interrupts.done()  # a shutdown request from now on only waits for the leave
             runner.confirm_cancels()   # the calls it stopped: ended on their module, or said to go on
+            recorder.close()   # after the answers to its cancels, which the log keeps too
         finally:
             if view is not None:
                 view.stop()
@@ -400,6 +402,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 running = runner.confirm_cancels()
             except KeyboardInterrupt:
                 running = [c for c in runner.ctx.calls if c.maybe_running]
+        if recorder is not None:
+            recorder.close()
         err(interrupted_line(runner.result if runner is not None else None, runner is not None,
                              interrupts.shutdown_request, running))
         if runner is not None and runner.result is not None and tree is not None:
@@ -408,6 +412,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 files.report(print)
         return EXIT_ENV
     finally:
+        if recorder is not None:
+            recorder.close()   # (done already, unless the run ended by an error)
         if guard is not None:
             guard.stop()
         try:

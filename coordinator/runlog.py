@@ -112,7 +112,7 @@ class RunFiles:
         if self.log_path is not None:
             self.writer = RunLogWriter(self.log_path)
             all_sinks.append(self.writer)
-        return RunStream(all_sinks, meta, self.run_id)
+        return RunStream(all_sinks, meta, self.run_id, linger=True)   # closed by bmtree run after the cancels
 
     def report(self, say: Any) -> None:
         if self.writer is not None:
@@ -262,8 +262,11 @@ class RunLog:
 
     @property
     def end(self) -> Optional[Dict[str, Any]]:
-        last = self.records[-1]
-        return last if last.get("type") == "end" else None
+        """The end record: the last one but for the notices that came after it (answers to its cancels)."""
+        for rec in reversed(self.records):
+            if rec.get("type") != "notice":
+                return rec if rec.get("type") == "end" else None
+        return None
 
     def of_type(self, kind: str) -> List[Dict[str, Any]]:
         return [r for r in self.records if r.get("type") == kind]
@@ -380,13 +383,15 @@ class RunSummary:
 
 
 def _tail_record(path: str, ids: Set[int]) -> Tuple[Optional[Dict[str, Any]], str]:
-    """The last complete record of ``path`` (a cut last line is dropped) and, when it cannot be used,
-    why (``path:line: why``; the log reads as one without an end)."""
+    """The last complete record of ``path`` (a cut last line is dropped), or its end record when only notices
+    follow it (the answers to the run's cancels, which came after its end), and, when it cannot be used, why
+    (``path:line: why``; the log reads as one without an end)."""
     with open(path, "rb") as fh:
         fh.seek(0, os.SEEK_END)
         size = fh.tell()
         fh.seek(max(0, size - 65536))
         tail = fh.read().split(b"\n")
+    last: Optional[Dict[str, Any]] = None   # the last record, when only notices are in the tail
     for back, raw in enumerate(reversed(tail)):
         if back == len(tail) - 1 and size > 65536:
             break      # the start of the block, in the middle of a line
@@ -394,10 +399,13 @@ def _tail_record(path: str, ids: Set[int]) -> Tuple[Optional[Dict[str, Any]], st
         if rec is None and (back == 0 or not raw.strip()):
             continue   # the cut last line, or the empty one after the last newline
         problem = problem or record_problem(rec, ids) or ""
-        if not problem:
-            return rec, ""
-        return None, "%s:%d: %s" % (path, _line_count(path) + 1 - back, problem)
-    return None, ""
+        if problem:
+            return None, "%s:%d: %s" % (path, _line_count(path) + 1 - back, problem)
+        if rec.get("type") == "notice":   # after the end record, the answers to its cancels: the end is before
+            last = last or rec
+            continue
+        return (rec if rec.get("type") == "end" else last or rec), ""
+    return last, ""
 
 
 def _line_count(path: str) -> int:

@@ -152,7 +152,10 @@ class RunStream(RunObserver):
         meta: extra facts for the ``tree`` record (``inputs`` given, ``max_duration``, ``sim`` …).
     """
 
-    def __init__(self, sinks: Sequence[Sink], meta: Optional[Dict[str, Any]] = None, run_id: str = ""):
+    def __init__(self, sinks: Sequence[Sink], meta: Optional[Dict[str, Any]] = None, run_id: str = "",
+                 linger: bool = False):
+        self.linger = linger   # after the end record, notices until close(): late answers to its cancels
+        self._lingering = self._closed = False
         self.sinks = list(sinks)
         self.meta = dict(meta or {})
         self.run_id = run_id or "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
@@ -277,12 +280,14 @@ class RunStream(RunObserver):
                                       "values": [dict(v, value=plain(v["value"])) for v in values]})
 
     def on_notice(self, notice: Any, now: float) -> None:
-        if self._open:
+        if self._open or self._lingering:
             record = {"v": VERSION, "type": "notice", "run": self.run_id, "t": self._t(now),
                       "what": notice.what, "text": notice.text}
             if getattr(notice, "call_id", ""):
                 record["call_id"] = notice.call_id
             self._emit("events", record)
+            if self._lingering:   # no tick flushes it now
+                self.flush()
 
     def on_control(self, record: Any, now: float) -> None:
         if self._open:
@@ -307,6 +312,18 @@ class RunStream(RunObserver):
                 record["cleanup"]["at"] = result.cleanup_failed_at
         self._emit("end", record)
         self._open = False
+        if self.linger:
+            self._lingering = True
+            self.flush()
+        else:
+            self.close()
+
+    def close(self) -> None:
+        """The end of the records: after the end record, those that came while the run still took them in
+        (the answers to its cancels, a master or Blackboard node back), then the sinks are closed."""
+        if self._open or self._closed:
+            return   # the run has not ended (its end record comes first), or this was done
+        self._lingering, self._closed = False, True
         for s in self.sinks:
             s.flush()
             s.close()

@@ -77,3 +77,35 @@ def test_a_module_that_never_answers_the_cancel_is_said_so(grab, monkeypatch):
     assert interrupted_line(run.result, True, running=[call]) == (
         "interrupted: running calls were cancelled (but navigation.go_to may still be running: its module did not "
         "answer the cancel)")
+
+
+def test_the_answers_to_its_cancels_go_into_the_run_log_after_its_end(grab, tmp_path, capsys, monkeypatch):
+    """The late answer that proves the module did run the call came after the end record, and the log was
+    closed at the end: the terminal said it, the log (and so replay) did not."""
+    from coordinator.replay import cmd_replay
+    from coordinator.runlog import RunLogWriter, list_runs, read_log
+    from coordinator.runstream import RunStream
+
+    grab.mocks["navigation.go_to"].respond(lambda place: {"success": True, "room": place}, delay=2.5)
+    # the cancel is lost (a link down, an original module): the module runs the call to its end
+    monkeypatch.setattr(kit.InProcessTransport, "send_cancel", lambda self, cancel: self.sent.append(cancel))
+    path = str(tmp_path / "runs" / "20261126-091737-17983e-grab.jsonl")
+    (tmp_path / "runs").mkdir()
+    stream = RunStream([RunLogWriter(path, fsync=False)], linger=True)
+    run = grab.run(observers=[stream])
+    assert run.failed
+    grab.runners[-1].confirm_cancels()   # as bmtree run does after the run: the answer comes at 2.5 s
+    stream.close()
+    log = read_log(path)
+    assert log.end is not None and log.end["status"] == "FAILURE"
+    late = [r for r in log.records if r.get("type") == "notice" and r.get("what") == "late_answer"]
+    assert len(late) == 1 and log.records.index(late[0]) > log.records.index(log.end), log.records[-3:]
+    assert "answered succeeded at 2.50s: the module did run it" in late[0]["text"], late
+    listed = list_runs(str(tmp_path / "runs"))
+    assert [(r.status, r.reason) for r in listed] == [("FAILURE", "navigation.go_to: no answer within 2s")]
+    import argparse
+
+    cmd_replay(argparse.Namespace(run=path, dir=None, at=None, step=False, failure=False, scenario=None, web=False,
+                                  speed=None, bind=None, port=None))
+    out = capsys.readouterr().out
+    assert "late answer: navigation.go_to" in out and "the module did run it" in out, out
