@@ -24,6 +24,7 @@ command -v dot >/dev/null || need+=(graphviz)
 # the catkin package and its tests: catkin_make, rosrun, and ss/ip for the network tests
 command -v catkin_make >/dev/null || need+=(catkin)
 command -v rosrun >/dev/null || need+=(rosbash)
+command -v rosnode >/dev/null || need+=(python3-rosnode)   # rosnode kill / cleanup, which bmtree's messages name
 [ -x /usr/lib/rosout/rosout ] || [ -n "${ROS_DISTRO:-}" ] || need+=(rosout)   # roslaunch starts it
 { command -v ss >/dev/null && command -v ip >/dev/null; } || need+=(iproute2)
 # C++ basic modules (modules/cpp): a compiler, cmake, roscpp and the message headers, nlohmann json
