@@ -234,6 +234,7 @@ class LinePrinter:
         self._end: Optional[Tuple[int, str]] = None  # the end's line, held until its last tick is printed
         self._noted = 0  # the watch's own notices printed (another run started)
         self._held: List[Dict[str, Any]] = []  # call_end records that ended halted, until their label is known
+        self._early: List[Dict[str, Any]] = []  # records that came before the tree (its nodes' names unknown)
 
     def finish(self) -> None:
         """Print the held lines (the calls' and the end's), if their tick or end never came."""
@@ -275,11 +276,22 @@ class LinePrinter:
         self._noted = len(state.notes)
         if rec.get("run") and state.run and rec.get("run") != state.run:
             kind = None  # another run's record: the state keeps it aside, the notice above said so
+        if not state.nodes and kind not in (None, "tree"):
+            if len(self._early) < 1000:   # topics are not ordered among them: said once the tree names the nodes
+                self._early.append(rec)
+            self._write(lines)
+            return
         if kind == "call_end" and rec.get("status") == "halted":
             self._held.append(rec)
         lines += self._settled(state)
         if kind == "tree":
             lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
+            self._write(lines)
+            early, self._early = self._early, []
+            for r in early:
+                if r.get("run") in (None, rec.get("run")):
+                    self.record(r, state)
+            return
         elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
             self._caught = rec.get("run")  # the periodic snapshots after the first say nothing new
             running = ["%s RUNNING" % name(int(k)) for k, v in (rec.get("status") or {}).items()

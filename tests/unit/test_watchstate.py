@@ -312,3 +312,23 @@ def test_the_latched_end_that_overtakes_the_last_ticks_is_printed_after_them():
     before = out.getvalue()
     p2.finish()
     assert "end       SUCCESS" not in before.splitlines()[-1] and out.getvalue().endswith("end       SUCCESS\n")
+
+
+def test_records_that_come_before_the_tree_are_printed_with_their_names_after_it():
+    """Topics are not ordered among them: a watch that joined (or came back after a link drop) got ticks
+    before the tree, and `watch --plain` printed `RUNNING   1`, a node's id, before `run …`."""
+    s = WatchState()
+    out = io.StringIO()
+    p = LinePrinter(out)
+
+    def take(rec):
+        s.apply(rec)
+        p.record(rec, s)
+
+    take({"type": "tick", "run": "r1", "n": 1, "t": 0.1, "changes": [[0, "RUNNING"], [2, "RUNNING"]]})
+    take({"type": "call_start", "run": "r1", "t": 0.1, "call_id": "c1", "target": "m.f", "inputs": {"x": 1}})
+    assert out.getvalue() == ""
+    take(tree_record())
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("run r1: ") and [line[11:] for line in lines[1:]] == [
+        "RUNNING   root", "RUNNING   leaf 0.0", 'call      m.f {"x":1}'], lines
