@@ -165,6 +165,12 @@ class Navigation(SimModule):
         self._rospy.set_param(ODOMETER_PARAM, odometer)
         self._rospy.set_param(AT_PARAM, at)
         self._rospy.set_param(ROOM_PARAM, self._here())
+        from comm.masterwatch import watch_master
+
+        watch = watch_master()   # a restarted master knows no room: vision would look in its own stale one
+        for param, now in ((ROOM_PARAM, self._here), (ODOMETER_PARAM, lambda: self.state.odometer),
+                           (AT_PARAM, lambda: self.state.at)):
+            watch.keep_param(param, now)
 
     def shutdown(self) -> None:
         if self._rospy is not None:  # a later graph on this master must not see a stale room

@@ -149,3 +149,29 @@ def _wait_registered_probe(graph, timeout=30.0):
     while master.getParam("/t", "/bmtree/modules/probe")[0] != 1:
         assert time.monotonic() < end, "the probe did not announce itself"
         time.sleep(0.02)
+
+
+def test_the_simulated_robot_keeps_where_it_is_across_a_master_restart(own_graph, tmp_path):
+    """The simulated modules share the robot's room on the parameter server; a restarted master had none,
+    so vision looked in its own stale room and found the apple in the kitchen while the robot stood in
+    the living room (a rehearsal's false success). Navigation sets its state again."""
+    graph = own_graph
+    graph.start_node(["-m", "modules.sim", "navigation"], "/bm_navigation")
+    graph.start_node(["-m", "modules.sim", "vision"], "/bm_vision")
+    tree = tmp_path / "look.yaml"
+    tree.write_text("format: 1\nroot:\n  sequence:\n    - call: navigation.go_to\n      inputs: {place: living_room}\n"
+                    "    - call: vision.find_object\n      inputs: {object: apple}\n")
+    run = subprocess.run([sys.executable, "-m", "coordinator", "run", "-q", "--no-record", "--wait", "30", str(tree)],
+                         env=graph.env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 1 and "answered success: false" in run.stdout, run.stdout + run.stderr  # no apple there
+    _restart_master(graph)
+    master = xmlrpc.client.ServerProxy(graph.uri)
+    end = time.monotonic() + 30
+    while master.getParam("/t", "/sim/robot_room")[0] != 1:
+        assert time.monotonic() < end, "navigation did not share the robot's room with the restarted master"
+        time.sleep(0.05)
+    assert master.getParam("/t", "/sim/robot_room")[2] == "living_room"
+    tree.write_text("format: 1\nroot:\n  call: vision.find_object\n  inputs: {object: apple}\n")   # looks where it is
+    run = subprocess.run([sys.executable, "-m", "coordinator", "run", "-q", "--no-record", "--wait", "30", str(tree)],
+                         env=graph.env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 1 and "answered success: false" in run.stdout, run.stdout + run.stderr
