@@ -92,9 +92,10 @@ def _is_definition(path: str) -> bool:
     return isinstance(data, dict) and "Basic Module" in data
 
 
+# (an XML file is read as a tree: the loader names BehaviorTree.CPP's)
 _NOT_TREES = {".py": "a Python module's class", ".pyc": "compiled Python", ".cpp": "C++ source", ".cc": "C++ source",
               ".cxx": "C++ source", ".c": "C source", ".h": "a C/C++ header", ".hpp": "a C++ header",
-              ".xml": "XML (a BehaviorTree.CPP tree?)", ".launch": "a roslaunch file", ".msg": "a ROS message",
+              ".launch": "a roslaunch file", ".msg": "a ROS message",
               ".srv": "a ROS service", ".action": "a ROS action", ".so": "a compiled library"}
 
 
@@ -106,8 +107,7 @@ def _not_checked_here(path: str) -> str:
     if what is None:
         return ""
     how = {".py": ": bmtree-module --definition DEF.json --class %s:CLASS checks the class against the definition "
-                  "before it connects to a master" % path,
-           ".xml": ": bmtree trees are YAML (trees/README.md)"}.get(ext, "")
+                  "before it connects to a master" % path}.get(ext, "")
     return "%s: not a tree or a module definition but %s; bmtree check reads trees (.yaml) and module definitions " \
            "(.json)%s" % (path, what, how)
 
