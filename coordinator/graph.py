@@ -93,6 +93,8 @@ class RosGraph:
         self.nodes: List[subprocess.Popen] = []
         self._last: Set[int] = set()  # pids of the nodes stopped after the others
         self._names: Set[str] = set()  # every node name started, for forget_dead_nodes
+        #: node name -> its process (the last one started under that name), for what asks why it ended
+        self.procs: Dict[str, subprocess.Popen] = {}
         self._logs: List = []
 
     @property
@@ -128,9 +130,12 @@ class RosGraph:
                     os.environ[k] = v
         return restore
 
+    def log_path(self, name: str) -> str:
+        """The file that takes the output of process ``name`` (a node's name, or ``rosmaster``)."""
+        return os.path.join(self.ros_home, "%s.out" % name.strip("/").replace("/", "_"))
+
     def _log(self, name: str):
-        path = os.path.join(self.ros_home, "%s.out" % name.strip("/").replace("/", "_"))
-        fh = open(path, "ab")
+        fh = open(self.log_path(name), "ab")
         self._logs.append(fh)
         return fh
 
@@ -172,6 +177,7 @@ class RosGraph:
                                 stdout=self._log(name), stderr=subprocess.STDOUT, start_new_session=True)
         self.nodes.append(proc)
         self._names.add(name)
+        self.procs[name] = proc
         if stop_last:
             self._last.add(proc.pid)
         if wait:
@@ -183,8 +189,7 @@ class RosGraph:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if proc is not None and proc.poll() is not None:
-                raise GraphError("node %s exited with code %s (see %s)" % (
-                    name, proc.returncode, os.path.join(self.ros_home, name.strip("/") + ".out")))
+                raise GraphError("node %s exited with code %s (see %s)" % (name, proc.returncode, self.log_path(name)))
             code, _, uri = master.lookupNode("/bmtree", name)
             if code == 1 and node_alive(uri, 0.5):
                 return uri
@@ -213,6 +218,7 @@ class RosGraph:
         end_processes([p for p in self.nodes if p.pid in self._last], 3.0)
         self.nodes.clear()
         self._last.clear()
+        self.procs.clear()
         if self.master is None and self.uri:
             self.forget_dead_nodes()
         if self.master is not None:

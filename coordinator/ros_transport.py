@@ -56,7 +56,7 @@ from comm.messages import (
 )
 from comm.nodelife import registering
 from coordinator.preflight import diff_definitions, wait_ready
-from coordinator.rosliveness import Whereabouts, node_of, uri_of
+from coordinator.rosliveness import GONE, Whereabouts, node_of, uri_of
 from coordinator.rosstream import RosStreamSink
 from coordinator.runevents import Notice
 from coordinator.sender import TopicSender, peer_gone, topic_senders, widen_accept_queue
@@ -396,7 +396,7 @@ class RosTransport(Transport):
     def _gone_text(self, module: str, node: str) -> str:
         """``node %s stopped (its process is gone) 3.2 s ago`` when the watchdog found it so, else ''."""
         since = self.watchdog.gone_since(module)
-        return "node %s stopped (its process is gone) %.1f s ago" % (node, since) if since is not None else ""
+        return "" if since is None else self.whereabouts.explain("node %s stopped %s %.1f s ago" % (node, GONE, since))
 
     def unsent_note(self, call_id: str) -> str:
         for module, route in list(self._routes.items()):
@@ -428,6 +428,7 @@ class RosTransport(Transport):
         """A lost module's dead connection is closed before the run hears of it: a retry then waits
         for the restarted node instead of going into the old socket."""
         if isinstance(item, ModuleLost):
+            item.reason = self.whereabouts.explain(item.reason)  # why it ended, when known (--sim)
             self.screen.ended(item.call_ids)
             route = self._routes.get(item.module)
             if route is not None:

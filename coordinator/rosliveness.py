@@ -11,6 +11,7 @@ last address (refused: gone) instead of being taken for one not started yet.
 """
 from __future__ import annotations
 
+import re
 import threading
 from typing import Callable, Dict, Optional
 
@@ -21,9 +22,11 @@ from comm.rpc import master_api
 from coordinator.preflight import legacy_nodes
 from modules.discovery import PARAM_ROOT, node_alive
 
-__all__ = ["LIVENESS_QUESTION", "Whereabouts", "node_of", "uri_of"]
+__all__ = ["LIVENESS_QUESTION", "GONE", "Whereabouts", "node_of", "uri_of"]
 
 LIVENESS_QUESTION = 2.0  # s a liveness lookup may wait for the master (then: not known now)
+GONE = "(its process is gone)"  # what a lost node's reason says of its process when nothing more is known
+_STOPPED = re.compile(r"node (\S+) stopped " + re.escape(GONE))
 
 
 def node_of(module: str) -> Optional[str]:
@@ -71,10 +74,15 @@ class Whereabouts:
     preflight), for a module whose node this has never seen itself. A node the master no longer
     knows is asked at its last address: a dead process refuses (the watchdog says it stopped), a
     live one answers (a restarted master it has not registered with again yet: not lost).
+
+    ``ended(node)``, when set, says why ``node``'s process ended ("" when it cannot tell): the
+    simulated robot's graph started it and knows (``bmtree run --sim``, :mod:`coordinator.simprocess`);
+    :meth:`explain` puts that in a lost node's reason instead of :data:`GONE`.
     """
 
     def __init__(self, run_node: Callable[[str], Optional[str]] = lambda module: None):
         self.run_node = run_node
+        self.ended: Optional[Callable[[str], str]] = None
         self._nodes: Dict[str, str] = {}  # module -> its node, when last seen
         self._uris: Dict[str, str] = {}  # node -> its XML-RPC URI, when last seen
         self._lock = threading.Lock()
@@ -112,6 +120,19 @@ class Whereabouts:
                 self._uris[node] = uri
                 return uri
             return self._uris.get(node)
+
+    def explain(self, reason: str) -> str:
+        """``reason`` (``node /bm_gripper stopped (its process is gone)``) with what :attr:`ended` says of
+        the node it names instead of :data:`GONE` (``… stopped (its process exited with code 7)``); as it
+        is otherwise."""
+        found = _STOPPED.search(reason) if self.ended is not None else None
+        if found is None or self.ended is None:
+            return reason
+        try:
+            why = self.ended(found.group(1))
+        except Exception:  # a reason is never lost for want of a better one
+            return reason
+        return reason.replace(GONE, "(%s)" % why, 1) if why else reason
 
     @staticmethod
     def registered(node: str) -> bool:

@@ -297,7 +297,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         legacy = legacy_option(getattr(args, "legacy", None), defs)
         mods, recall = used_modules(tree)
         if args.sim:
-            from coordinator.simgraph import SIM_MODULES, ModuleStartError, start_sim
+            from coordinator.simgraph import SIM_MODULES, ModuleStartError, process_ends, start_sim
 
             mine = {um.definition.name for um in user_modules}
             sim = [m for m in SIM_MODULES if m not in mine]
@@ -311,7 +311,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print("its Blackboard store and module logs go to %s" % files.sim_dir)
             try:
                 graph = start_sim(world=args.world, ros_home=files.sim_dir, modules=sim, user_modules=user_modules,
-                                  address=args.ros_ip)
+                                  address=args.ros_ip, timeout=args.wait)
             except ModuleStartError as exc:
                 err("error: %s" % exc)
                 return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
@@ -327,6 +327,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             if hint:
                 err("warning: %s" % hint)
             transport = RosTransport(max_bytes=args.max_bytes, liveness=args.liveness)
+            transport.whereabouts.ended = process_ends(graph) if graph is not None else None  # --sim: why one ended
             stream_sink = transport.stream_sink()
             # rospy initialized: a shutdown request of its node (rosnode kill) stops the run as Ctrl-C does, ROS up
             request_notice = RequestNotice()
