@@ -98,6 +98,10 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._owed_id = ""  # the call_id of the owed call (a library node echoes it in BM_output)
         self._checked = ""  # the C++ node whose BM_info was compared with the definition
         self._gone_said = ""  # the URI of a C++ node whose death is in the log already
+        self._deaths: Dict[str, Tuple[float, str]] = {}  # URI of a C++ node gone -> (when, how: "died (…)")
+        self._served = ""  # the URI of the C++ node last connected: its death is said, and refuses calls at once
+        self._misnamed = ""  # no node serves the module, but one named as it serves another: what is there
+        self._live = False  # the C++ node found is running (its missing connections are worth a wait)
         self._watch_stop = threading.Event()
         self._watcher: Optional[threading.Thread] = None
 
@@ -211,13 +215,16 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
     # -- a call ----------------------------------------------------------------------
     def _execute(self, name: str, inputs: Dict[str, Any]) -> Dict[str, Any]:
         fn = self.definition.function(name)
-        if not self._ready or not self._out_sub.impl.has_connection(self.cpp_uri):
-            # first call after a failure, or the C++ node was restarted (new URI): find it again
+        if not self._ready or not self._out_sub.impl.has_connection(self.cpp_uri) or self._said_gone():
+            # first call after a failure, or the C++ node died or was restarted (new URI): find it again. Only a
+            # live node still connecting is waited for: a dead one refuses the call at once (no code runs)
             self._ready = False
-            missing = self._wait_connected(min(2.0, self.connect_timeout))
+            ctx = getattr(self._local, "ctx", None)
+            missing = self._wait_connected(min(2.0, self.connect_timeout),
+                                           cancelled=ctx.cancelled.is_set if ctx is not None else lambda: False)
             if missing:
-                raise Rejected("the C++ node of module %r is not connected: %s" % (self.definition.name,
-                                                                                   "; ".join(missing)))
+                raise Rejected(self._misnamed or self._down() or "the C++ node of module %r is not connected: %s" % (
+                    self.definition.name, "; ".join(missing)))
         self._settle_owed()
         with self._cond:
             info = self._infos.get(self.cpp_node) if self.library else None
@@ -276,7 +283,9 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
             if self._gone():
                 self._ready = False
                 self._say_gone()
-                raise Failure("the C++ node %s exited during the call (no BM_output)" % self.cpp_node)
+                death = self._deaths.get(self.cpp_uri)
+                raise Failure("the C++ node %s exited during the call (no BM_output)%s" % (
+                    self.cpp_node, ": %s; start it again" % self._death_note(death) if death else ""))
 
     def _give_up(self, call: _Call) -> str:
         """After ``--call-timeout``: cancel the call on the C++ node and say what happened (the

@@ -9,11 +9,12 @@ from __future__ import annotations
 import logging
 import socket
 import time
-from typing import List, Optional
+from typing import Any, Callable, List, Optional, Tuple
 from urllib.parse import urlsplit
 
 from comm.nodelife import stop_requested
 from comm.rpc import MASTER_TIMEOUT, master_api
+from modules.basicmodule import BindingError
 
 __all__ = ["CppNodeGraph"]
 
@@ -41,10 +42,19 @@ def _some(names: List[str], shown: int = 3) -> str:
     return "%s and %d more" % (", ".join(names[:shown]), len(names) - shown)
 
 
+def _clock(at: float) -> str:
+    """A moment of this day, as the bridge's reader compares it with the logs (local time)."""
+    return time.strftime("%H:%M:%S", time.localtime(at))
+
+
 class CppNodeGraph:
     """The graph side of :class:`modules.bridge.CppBridge` (a base class of it, on its state): which
     node is the C++ node (``cpp_node``, ``cpp_uri``, ``library``, ``cancellable``, ``emits``), what is
-    not connected yet, and whether its process is gone."""
+    not connected yet, and whether its process is gone.
+
+    A C++ node that this bridge served and whose process is gone is *down* (``_deaths``: when and
+    how, by URI): a call is refused at once, saying so, until a node subscribes ``BM_input`` again;
+    only a live node whose connections are still being made is waited for."""
 
     def _find_node(self) -> Optional[str]:
         """The C++ node: whoever subscribes ``/<BM>/BM_input`` (its name is not fixed)."""
@@ -63,8 +73,16 @@ class CppNodeGraph:
                 except rosgraph.masterapi.Error:
                     continue
         # one killed outright stays registered: live ones first (its restart under another name)
-        nodes = [n for n in uris if not _refuses(uris[n])] or list(uris)
-        nodes = [n for n in nodes if n in talkers] or nodes  # a tool may listen to BM_input too
+        live = [n for n in uris if not _refuses(uris[n])]
+        served = [n for n in uris if uris[n] == self._served and n not in live]
+        if not any(n in talkers for n in live) and (served or self._served in self._deaths):
+            # the node this bridge served is gone and none took its place (a tool may listen), unless it is
+            # being started again under its name (subscribed already, BM_output not yet advertised)
+            nodes = [n for n in live if n == self.cpp_node] or served
+        else:
+            nodes = live or list(uris)
+            nodes = [n for n in nodes if n in talkers] or nodes  # a tool may listen to BM_input too
+        self._misnamed = "" if nodes else self._serves_another(master, pubs, subs)
         if not nodes:
             return None
         if len(nodes) > 1:
@@ -77,15 +95,67 @@ class CppNodeGraph:
         self.emits = node in next((n for t, n in pubs if t == "/%s/BM_event" % name), [])
         return node
 
+    def _serves_another(self, master: Any, pubs: List[Any], subs: List[Any]) -> str:
+        """Nobody subscribes ``/<BM>/BM_input``, but a live node named as the module (the C++ node's
+        name, ``bmtree::run``'s) serves another module: the module name in its code is not the
+        definition's. What is there, in words ("" if no such node)."""
+        import rosgraph
+
+        name = self.definition.name
+        for topic, nodes in subs:
+            if not topic.endswith("/BM_input") or topic == "/%s/BM_input" % name:
+                continue
+            for n in nodes:
+                if n == self._self_name or n.rsplit("/", 1)[-1] != name:
+                    continue
+                try:
+                    if _refuses(master.lookupNode(n)):
+                        continue
+                except rosgraph.masterapi.Error:
+                    continue
+                other = topic[:-len("/BM_input")]
+                if n in next((x for t, x in pubs if t == other + "/BM_info"), []):  # built with bmtree's library
+                    what, fix = "publishes %s/BM_info and subscribes %s" % (other, topic), \
+                        "the name given to BasicModule in the C++ code must be the definition's (BasicModule(nh, " \
+                        "\"%s\"))" % name
+                else:
+                    what, fix = "subscribes %s" % topic, "the module name in the C++ code must be the definition's"
+                return "node %s is running and serves module %r (it %s), but the definition %s is module %r: %s" % (
+                    n, other.lstrip("/"), what, self.definition.source or name, name, fix)
+        return ""
+
+    def _down(self) -> str:
+        """Why calls are refused at once: the C++ node this bridge served is gone and no other has
+        taken its place ("" if not known to be so)."""
+        death = self._deaths.get(self.cpp_uri)
+        if death is None:
+            return ""
+        return "the C++ node %s of module %r is not running: %s; start it again" % (
+            self.cpp_node, self.definition.name, self._death_note(death))
+
+    @staticmethod
+    def _death_note(death: Tuple[float, str]) -> str:
+        at, how = death
+        verb, _, why = how.partition(" ")
+        return "it %s at %s %s" % (verb, _clock(at), why)
+
     def _missing(self) -> List[str]:
         """What is not connected yet between this bridge and the C++ node, in words."""
         name = self.definition.name
+        served = self._served
+        self._live = False
         node = self._find_node()
         if node is None:
-            return ["no node subscribes /%s/BM_input (is the C++ node running?)" % name]
+            if served and served == self.cpp_uri:  # the node served stopped and unregistered (Ctrl-C, rosnode kill)
+                self._say_gone()
+            return [self._misnamed or self._down() or "no node subscribes /%s/BM_input (is the C++ node running?)"
+                    % name]
         if self._gone():  # killed outright: the master still lists it, but nothing listens at its port
-            return ["the C++ node %s is registered with the master but not running (its process is gone: start it "
-                    "again)" % node]
+            if served and served == self.cpp_uri:
+                self._say_gone()
+            return [self._down() or "the C++ node %s is registered with the master but not running (its process is "
+                    "gone: start it again)" % node]
+        self._live = True  # its connections may still be on their way: worth a wait
         sync = [("/%s/BM_input" % name, self._in_pub)]
         if self.cancellable:
             sync.append(("/%s/BM_cancel" % name, self._cancel_pub))
@@ -101,17 +171,23 @@ class CppNodeGraph:
             out.append("%s does not publish %s to the bridge" % (node, _some(mute)))
         return out
 
-    def _wait_connected(self, timeout: float, check: bool = False) -> List[str]:
+    def _wait_connected(self, timeout: float, check: bool = False,
+                        cancelled: Optional[Callable[[], bool]] = None) -> List[str]:
         """What is still missing after ``timeout`` ([] once connected). With ``check`` (at start),
         a library node's BM_info is compared with the definition as soon as it arrives: a
         definition that does not match it (an output of another type: a data topic the node never
-        publishes) stops the bridge at once, every difference named, instead of after the wait."""
+        publishes), or a node named as the module that serves another, stops the bridge at once,
+        every difference named, instead of after the wait. For a call (``cancelled`` given: True
+        once the call is cancelled) only a live C++ node whose connections are being made is
+        waited for: none running, a dead one or a master that does not answer is said at once."""
         end = time.monotonic() + timeout
         while True:
             try:
-                missing = self._missing()
+                missing = self._missing()  # sets _live
             except OSError as exc:
                 missing = ["the ROS master does not answer: %s" % exc]
+            if check and self._misnamed:
+                raise BindingError(self._misnamed)  # exit 2: the C++ code and the definition disagree
             if check and self.library and self.cpp_node and self.cpp_node != self._checked:
                 with self._cond:
                     informed = self.cpp_node in self._infos
@@ -119,8 +195,11 @@ class CppNodeGraph:
                     self._check_signatures(wait=0)  # BindingError (exit 2) on a difference
             if not missing:
                 self._ready = True
+                self._served = self.cpp_uri
                 return []
             if time.monotonic() >= end or stop_requested():
+                return missing
+            if cancelled is not None and (not self._live or cancelled()):
                 return missing
             time.sleep(0.05)
 
@@ -130,6 +209,10 @@ class CppNodeGraph:
         A node that is merely slow is not gone: only the call's deadline ends its call.
         """
         return _refuses(self.cpp_uri)
+
+    def _said_gone(self) -> bool:
+        """True once the log said that the C++ node's process is gone (the watch noticed it between calls)."""
+        return bool(self._gone_said) and self._gone_said == self.cpp_uri
 
     def _say_gone(self) -> None:
         """One line in the bridge's log when its C++ node's process is gone (once per node): an error
@@ -141,6 +224,7 @@ class CppNodeGraph:
         if not uri or uri == self._gone_said:
             return
         self._gone_said = uri
+        at = time.time()
         now: Optional[str] = ""  # the node's URI on the master now ("": not known, None: unregistered)
         try:  # bounded: asked from a call's thread, whose answer a master that does not answer must not hold
             now = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT).lookupNode(node)
@@ -149,12 +233,14 @@ class CppNodeGraph:
         except (rosgraph.masterapi.MasterException, OSError):
             pass
         if now is None:
+            self._deaths[uri] = (at, "exited (it unregistered from the master: Ctrl-C or rosnode kill)")
             log.warning("the C++ node %s of module %r has exited (it unregistered from the master); calls are "
                         "refused until it is started again", node, self.definition.name)
         elif now and now != uri:
             log.warning("the C++ node %s of module %r at %s is gone; a new node of that name runs at %s (the next "
                         "call is sent to it)", node, self.definition.name, uri, now)
         else:
+            self._deaths[uri] = (at, "died (killed or crashed: nothing listens at %s)" % uri)
             log.error("the C++ node %s of module %r died (killed or crashed: nothing listens at %s%s); calls are "
                       "refused until it is started again", node, self.definition.name, uri,
                       ", and it is still registered with the master" if now else "")
