@@ -26,7 +26,8 @@ from modules.discovery import PARAM_ROOT, LiveModule, announced_modules, legacy_
 if TYPE_CHECKING:
     from coordinator.ros_transport import RosTransport
 
-__all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "PING_EVERY", "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
+__all__ = ["wait_ready", "diff_definitions", "legacy_nodes", "call_limit_warnings", "first_uses", "PING_EVERY",
+           "ANNOUNCEMENTS_EVERY", "PING_PATIENCE"]
 
 PING_EVERY = 0.25  # seconds between pings of a module that has not answered yet
 ANNOUNCEMENTS_EVERY = 0.5  # seconds between master queries while modules are missing
@@ -297,3 +298,33 @@ def legacy_nodes(names: List[str]) -> Dict[str, Tuple[str, str]]:
                 except rosgraph.masterapi.MasterError:
                     continue
     return found
+
+
+def call_limit_warnings(tree: Any, limits: Dict[str, float], default_timeout: float) -> List[str]:
+    """Call leaves that would wait longer than their module itself does (a bridge's --call-timeout):
+    the call would fail then, blaming the module, before the tree's timeout."""
+    from coordinator.treeast import top_of, walk
+
+    out = []
+    for n in walk(top_of(tree)):
+        fn = getattr(n.spec, "function", None) if n.nodekind.name == "call" else None
+        limit = limits.get(fn.module) if fn is not None else None
+        if fn is None or not limit:
+            continue
+        timeout = n.spec.timeout if n.spec.timeout is not None else default_timeout
+        if isinstance(timeout, (int, float)) and timeout > limit:
+            out.append("warning: %s: call %s waits up to %g s, but module %r gives up a call after %g s (a "
+                       "bridge's --call-timeout): the call would fail then; give the module a longer limit"
+                       % (n.value_pos or n.pos, fn.qualified, timeout, fn.module, limit))
+    return out
+
+
+def first_uses(tree: Any) -> Dict[str, str]:
+    """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
+    from coordinator.treeast import top_of, walk
+
+    out: Dict[str, str] = {}
+    for n in walk(top_of(tree)):
+        for m in n.nodekind.modules(n):
+            out.setdefault(m, str(n.value_pos or n.pos))
+    return out

@@ -29,6 +29,7 @@ from coordinator.cliutil import (
     wait_master,
 )
 from coordinator.errors import TreeError, TreeErrors, UsageError
+from coordinator.preflight import call_limit_warnings, first_uses
 from coordinator.runstop import RequestNotice, interrupted_line, shutdown_notice
 
 __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line", "shutdown_notice"]
@@ -72,36 +73,6 @@ def _warn_without_blackboard() -> None:
         return
     err("warning: no Blackboard node is running on this master: the results of this run's calls are not stored "
         "(start one: bmtree-blackboard, or roslaunch bmtree blackboard.launch)")
-
-
-def call_limit_warnings(tree: Any, limits: Dict[str, float], default_timeout: float) -> List[str]:
-    """Call leaves that would wait longer than their module itself does (a bridge's --call-timeout):
-    the call would fail then, blaming the module, before the tree's timeout."""
-    from coordinator.treeast import top_of, walk
-
-    out = []
-    for n in walk(top_of(tree)):
-        fn = getattr(n.spec, "function", None) if n.nodekind.name == "call" else None
-        limit = limits.get(fn.module) if fn is not None else None
-        if fn is None or not limit:
-            continue
-        timeout = n.spec.timeout if n.spec.timeout is not None else default_timeout
-        if isinstance(timeout, (int, float)) and timeout > limit:
-            out.append("warning: %s: call %s waits up to %g s, but module %r gives up a call after %g s (a "
-                       "bridge's --call-timeout): the call would fail then; give the module a longer limit"
-                       % (n.value_pos or n.pos, fn.qualified, timeout, fn.module, limit))
-    return out
-
-
-def first_uses(tree: Any) -> Dict[str, str]:
-    """Each module the tree uses -> where it is first used (``file:line:column``), for errors."""
-    from coordinator.treeast import top_of, walk
-
-    out: Dict[str, str] = {}
-    for n in walk(top_of(tree)):
-        for m in n.nodekind.modules(n):
-            out.setdefault(m, str(n.value_pos or n.pos))
-    return out
 
 
 def _check_given(tree: Any, given: Dict[str, Any], path: str) -> None:
