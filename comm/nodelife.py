@@ -32,7 +32,7 @@ import time
 from typing import Any, Callable, Dict, Iterator, List, Optional
 
 __all__ = ["Interrupts", "StopSignals", "registering", "stop_requested", "leave_graph", "bound_master_questions",
-           "shut_rospy_down", "LEAVE_BOUND"]
+           "shut_rospy_down", "before_topics_close", "LEAVE_BOUND"]
 
 log = logging.getLogger("bmtree.nodelife")
 
@@ -248,6 +248,11 @@ def _first_preshutdown_hook(hook: Callable[[str], None]) -> None:
         if hook in hooks:
             hooks.remove(hook)
             hooks.insert(0, hook)
+
+
+#: ``before_topics_close(hook)``: ``hook(reason)`` runs when rospy shuts down, after its ``on_shutdown`` hooks and
+#: before it closes the node's topics (what it publishes still goes out); in the thread that shuts rospy down
+before_topics_close = _first_preshutdown_hook
 
 
 def stop_requested() -> bool:

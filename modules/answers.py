@@ -11,7 +11,7 @@ from comm.messages import CallStatus, FunctionResult
 from modules.basicmodule import Failure
 from modules.errortext import bounded, place_of, raised_text, said, which_call, wire_text
 
-__all__ = ["Answers", "CANCELLED_TEXT", "NOT_RETURNED"]
+__all__ = ["Answers", "CANCELLED_TEXT", "NOT_RETURNED", "stopped_text"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -19,6 +19,16 @@ CANCELLED_TEXT = "cancelled by the coordinator"
 #: in the ``cancelled`` answer of a call whose code did not return within the cancel's grace: the coordinator
 #: tells its user that the call may go on moving the robot
 NOT_RETURNED = "its code has not returned"
+
+
+def stopped_text(why: str, still_running: float = 0.0, returned: bool = False) -> str:
+    """The ``cancelled`` answer of a call in flight when its module's node stops (``why``: ``the module's
+    node /bm_arm is stopping (SIGINT)``): its code ``returned`` after the cancel, or ``still_running``
+    after that grace (the node stops without it: what it drives may not have stopped)."""
+    if still_running:
+        return "%s, but %s %gs after the cancel: the node stops without it, and what it drives may not have " \
+               "stopped" % (why, NOT_RETURNED, still_running)
+    return "%s; its code returned after the cancel" % why if returned else why
 
 
 def _size(text: str) -> int:
@@ -119,7 +129,11 @@ class Answers:
         return text
 
     def cancelled(self, call: Any, still_running: float = 0.0) -> FunctionResult:
-        """``still_running``: the grace after which the call's code still runs (it does not look at its cancel)."""
+        """``still_running``: the grace after which the call's code still runs (it does not look at its cancel).
+        A call its node's stop cancelled (``call.stopping``) says so instead of naming the coordinator."""
+        why = getattr(call, "stopping", "")
+        if why:
+            return self.result(call, CallStatus.CANCELLED, stopped_text(why, still_running, returned=True))
         return self.result(call, CallStatus.CANCELLED, "%s, but %s after %gs: it goes on running" % (
             CANCELLED_TEXT, NOT_RETURNED, still_running) if still_running else CANCELLED_TEXT)
 

@@ -38,6 +38,7 @@ from modules.classfile import load_class, where_raised
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
 from modules.errortext import raised_text, said
+from modules.nodestop import stop_with_node
 from modules.runtime import BasicModule, BindingError, ModuleServer
 
 __all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "make_parser", "main", "renamed_by_argument",
@@ -236,6 +237,7 @@ class ModuleNode:
                                    max_bytes=self.max_bytes)
         self.server.faults = faults
         self.server.on_death = _die
+        stop_with_node(self.server)  # a stop cancels and answers its calls in flight, before the topics close
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard,

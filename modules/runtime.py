@@ -49,7 +49,7 @@ log = logging.getLogger("bmtree.module")
 class _Call:
     """One accepted call and where it stands: its code running, answered, holding the module."""
 
-    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent", "cancelled_at")
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent", "cancelled_at", "stopping")
 
     def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
         self.ctx = ctx
@@ -61,6 +61,7 @@ class _Call:
         self.late = False         # cancelled, and its code still ran when the grace was over
         self.sent = False         # its answer was handed to the publisher
         self.cancelled_at: Optional[float] = None   # on the module's clock
+        self.stopping = ""        # why its node's stop cancelled it (modules.nodestop), "" otherwise
 
 
 class ModuleServer:
@@ -103,6 +104,8 @@ class ModuleServer:
         self._calls: Dict[str, _Call] = {}
         self._exclusive: Optional[_Call] = None
         self._waiting: Optional[_Call] = None  # the next exclusive call, while the holder is being cancelled
+        #: why the node stops (:meth:`stop`), "" while it serves: a call that comes meanwhile is refused
+        self.stopping = ""
         #: a :class:`comm.liveness.Watchdog` over the callers (a node sets it): a call whose caller's
         #: process is gone is cancelled, not left running the hardware and holding the module
         self.callers: Optional[Any] = None
@@ -209,13 +212,14 @@ class ModuleServer:
         call = _Call(CallContext(call_id, fname), fn, inputs, not self._is_concurrent(fn))
         waits = False
         with self._lock:
-            busy = self._exclusive if call.exclusive else None
+            stopping = self.stopping  # under the lock that stop() takes: no call starts after its sweep
+            busy = self._exclusive if call.exclusive and not stopping else None
             stuck = busy is not None and self._stuck(busy)
             if busy is not None and busy.ctx.cancelled.is_set() and self._waiting is None and not stuck:
                 busy, waits, self._waiting = None, True, call  # its code is stopping: run this one next
             elif busy is not None and self._waiting is not None:
                 busy = self._waiting
-            if busy is None:
+            if busy is None and not stopping:
                 if call.exclusive and not waits:
                     self._exclusive = call
                 if call_id is not None:
@@ -223,6 +227,9 @@ class ModuleServer:
         if busy is not None:
             self._reject(call_id, fname, self._stuck_text(busy) if stuck else "busy with call %s (%s)" % (
                 busy.ctx.call_id, busy.ctx.function))
+            return
+        if stopping:
+            self._reject(call_id, fname, "%s: the call was not run" % stopping)
             return
         if self.callers is not None and caller and call_id is not None:
             self.callers.call_sent(call_id, caller)
@@ -281,6 +288,14 @@ class ModuleServer:
             return
         if req.basic_mod == self.definition.name:
             self.cancel(req.call_id)
+
+    def stop(self, why: str, grace: Optional[float] = None) -> List[str]:
+        """The module's node stops (``why`` says so, in the answers): cancel every call in flight as a
+        coordinator's cancel would, wait up to ``grace`` (the cancel grace) for their code to return, answer
+        each; the log lines said (:func:`modules.nodestop.stop_calls`)."""
+        from modules.nodestop import stop_calls
+
+        return stop_calls(self, why, self.cancel_grace if grace is None else grace)
 
     def cancel(self, call_id: str) -> bool:
         """Cancel a call as a cancel request would (its caller went away); False if it is not running

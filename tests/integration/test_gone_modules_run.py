@@ -77,11 +77,13 @@ def _calls(out):
 
 def test_a_call_with_no_time_limit_to_a_module_that_stopped_ends_and_never_runs_later(ros_graph, tmp_path):
     """The audit's follower: stopped mid-call, the tree's next call (timeout: none) sat pending until the
-    node was started again 40 s later, and then ran. It ends module_lost at once now; the node started
-    again takes the calls made after it is back."""
+    node was started again 40 s later, and then ran. It ends module_lost at once now (the call running when
+    the node stopped is answered cancelled by the stopping node); the node started again takes the calls
+    made after it is back."""
     proc = start_probe(ros_graph)
     run = _Run(tmp_path, "  sequence:\n"
                          "    - force_success: {call: probe.work, inputs: {seconds: 100, tag: first}, timeout: none}\n"
+                         "    - wait: 1\n"  # the stopped node answers the first call, then leaves the graph
                          "    - force_success: {call: probe.work, inputs: {seconds: 0.1, tag: second}, timeout: none}\n"
                          "    - wait: 5\n"
                          "    - call: probe.echo\n      inputs: {tag: third}\n      timeout: none\n",
@@ -96,7 +98,9 @@ def test_a_call_with_no_time_limit_to_a_module_that_stopped_ends_and_never_runs_
     assert waited is not None and waited - stopped < 3.0, out
     assert run.proc.returncode == 0, out
     first, second, third = _calls(out)
-    assert first[3] == "module_lost" and second[3] == "module_lost" and float(second[4][:-1]) < 2.0, out
+    assert first[3] == "cancelled" and second[3] == "module_lost" and float(second[4][:-1]) < 2.0, out
+    assert ("the module's node /bm_probe is stopping (SIGINT); its code returned after the cancel"
+            in " ".join(first)), out
     assert "module probe lost: node /bm_probe stopped (its process is gone)" in " ".join(second), out
     assert third[2:4] == ["probe.echo", "succeeded"], out
     assert "answered" not in out and "NOTICE" not in out, out  # no late answer: the second call never ran
