@@ -194,10 +194,11 @@ class Watchdog:
         for key in set(self._lines) - set(self._known):
             self._lines.pop(key).close()
         for key in busy:
-            reason = self._lost(key)
-            if reason is None:
+            lost = self._lost(key)
+            if lost is None:
                 continue
-            node = self._known.pop(key, ("?", "", 0))[0]
+            node, reason = lost
+            self._known.pop(key, None)
             with self._lock:
                 if key == BLACKBOARD:
                     ids = sorted(self._requests)
@@ -231,8 +232,8 @@ class Watchdog:
             self._lines.pop(key).close()
             raise
 
-    def _lost(self, key: str) -> Optional[str]:
-        """Why the node of ``key`` is lost, or None while it lives (or cannot be told)."""
+    def _lost(self, key: str) -> Optional[Tuple[str, str]]:
+        """(its node, why) when the node of ``key`` is lost, or None while it lives (or cannot be told)."""
         known = self._known.get(key)
         if known is None:
             node = self.resolve(key)
@@ -243,20 +244,20 @@ class Watchdog:
             except OSError:
                 return None
             if not uri:  # for a caller: perhaps a restarted master it has not registered with again yet
-                return "node %s is not registered with the master" % node if self.unregistered_lost else None
+                return (node, "node %s is not registered with the master" % node) if self.unregistered_lost else None
             gone = self._gone.get(key) if key != BLACKBOARD else None
             if gone is not None and gone[0] == uri and self.registered(node):   # not started again (yet)
                 waited = self._oldest_wait(key, gone[1])
                 if waited < self.restart_grace:
                     return None
-                return "node %s stopped (its process is gone) and was not started again within %gs" % (
+                return node, "node %s stopped (its process is gone) and was not started again within %gs" % (
                     node, self.restart_grace)
             self._gone.pop(key, None)
             try:
                 pid = self._ask(key, uri)
             except OSError:
                 self._gone[key] = (uri, time.monotonic())
-                return "node %s stopped (its process is gone)" % node
+                return node, "node %s stopped (its process is gone)" % node
             if pid is not None:
                 self._known[key] = (node, uri, pid)
             return None
@@ -275,12 +276,12 @@ class Watchdog:
         except OSError:
             new_uri = None
         if now == -1 and new_uri and new_uri != uri:
-            return "node %s was restarted (it cannot know the calls sent to its previous process)" % node
+            return node, "node %s was restarted (it cannot know the calls sent to its previous process)" % node
         if now == -1:
             if new_uri == uri:
                 self._gone[key] = (uri, time.monotonic())
-            return "node %s stopped (its process is gone)" % node
-        return "node %s was restarted (pid %d, was %d)" % (node, now, pid)
+            return node, "node %s stopped (its process is gone)" % node
+        return node, "node %s was restarted (pid %d, was %d)" % (node, now, pid)
 
     def _oldest_wait(self, key: str, found: float) -> float:
         """How long the oldest call owed by ``key`` has waited since its process was found gone (0: none)."""

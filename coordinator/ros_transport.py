@@ -396,7 +396,7 @@ class RosTransport(Transport):
     def _gone_text(self, module: str, node: str) -> str:
         """``node %s stopped (its process is gone) 3.2 s ago`` when the watchdog found it so, else ''."""
         since = self.watchdog.gone_since(module)
-        return "" if since is None else self.whereabouts.explain("node %s stopped %s %.1f s ago" % (node, GONE, since))
+        return "" if since is None else self.whereabouts.explain(node, "node %s stopped %s %.1f s ago" % (node, GONE, since))
 
     def unsent_note(self, call_id: str) -> str:
         for module, route in list(self._routes.items()):
@@ -428,7 +428,7 @@ class RosTransport(Transport):
         """A lost module's dead connection is closed before the run hears of it: a retry then waits
         for the restarted node instead of going into the old socket."""
         if isinstance(item, ModuleLost):
-            item.reason = self.whereabouts.explain(item.reason)  # why it ended, when known (--sim)
+            item.reason = self.whereabouts.explain(item.node, item.reason)  # why it ended, when known (--sim)
             self.screen.ended(item.call_ids)
             route = self._routes.get(item.module)
             if route is not None:

@@ -11,7 +11,6 @@ last address (refused: gone) instead of being taken for one not started yet.
 """
 from __future__ import annotations
 
-import re
 import threading
 from typing import Callable, Dict, Optional
 
@@ -26,7 +25,6 @@ __all__ = ["LIVENESS_QUESTION", "GONE", "Whereabouts", "node_of", "uri_of"]
 
 LIVENESS_QUESTION = 2.0  # s a liveness lookup may wait for the master (then: not known now)
 GONE = "(its process is gone)"  # what a lost node's reason says of its process when nothing more is known
-_STOPPED = re.compile(r"node (\S+) stopped " + re.escape(GONE))
 
 
 def node_of(module: str) -> Optional[str]:
@@ -121,15 +119,13 @@ class Whereabouts:
                 return uri
             return self._uris.get(node)
 
-    def explain(self, reason: str) -> str:
+    def explain(self, node: str, reason: str) -> str:
         """``reason`` (``node /bm_gripper stopped (its process is gone)``) with what :attr:`ended` says of
-        the node it names instead of :data:`GONE` (``… stopped (its process exited with code 7)``); as it
-        is otherwise."""
-        found = _STOPPED.search(reason) if self.ended is not None else None
-        if found is None or self.ended is None:
+        ``node`` instead of :data:`GONE` (``… stopped (its process exited with code 7)``); as it is otherwise."""
+        if self.ended is None or GONE not in reason:
             return reason
         try:
-            why = self.ended(found.group(1))
+            why = self.ended(node)
         except Exception:  # a reason is never lost for want of a better one
             return reason
         return reason.replace(GONE, "(%s)" % why, 1) if why else reason
