@@ -46,6 +46,8 @@ class ModuleLost:
     node: str
     reason: str
     call_ids: List[str] = field(default_factory=list)
+    #: seconds its node had not answered, when that (not a process found gone) is why: ``unanswered``
+    unanswered: float = 0.0
 
 
 @dataclass
@@ -74,6 +76,10 @@ class Watchdog:
             master still has the dead process (killed outright or crashed: it stays registered until its
             successor registers, and the call would be lost on the old one). A node stopped cleanly
             unregistered: a call to it is lost at once.
+        unanswered: seconds after which a node that does not answer (its machine cannot be reached, or
+            its process is stopped) is lost as well, its calls then delivered with ``unanswered`` set;
+            0: never (its calls' own timeouts cover it). Its node is then asked every period, also over a
+            kept connection (which a dropped link leaves open for the ~11 s of keepalive probes).
 
     A module node uses one over the callers of its running calls (keys are then node names):
     a call whose caller's process is gone is cancelled.
@@ -83,7 +89,7 @@ class Watchdog:
                  lookup: Callable[[str], Optional[str]], period: float = DEFAULT_PERIOD,
                  ping_timeout: float = 0.5, line: Callable[[str, float, str], Any] = PidLine, say: bool = True,
                  unregistered_lost: bool = True, restart_grace: float = 0.0,
-                 registered: Callable[[str], bool] = lambda node: True):
+                 registered: Callable[[str], bool] = lambda node: True, unanswered: float = 0.0):
         self.deliver = deliver
         self.say = say  # log each loss (a module node watching its callers says it in its own words)
         self.unregistered_lost = unregistered_lost
@@ -100,6 +106,8 @@ class Watchdog:
         self.restart_grace = restart_grace
         self.registered = registered
         self._gone: Dict[str, Tuple[str, float]] = {}  # key -> (URI of a process found gone, when found)
+        self.unanswered = unanswered
+        self._heard: Dict[str, float] = {}  # key -> when its node last answered (or was first asked)
         self._stop = threading.Event()
         self._owing = threading.Event()  # set while something is owed (and on stop): an idle watchdog sleeps
         self._thread: Optional[threading.Thread] = None
@@ -191,14 +199,20 @@ class Watchdog:
         # it must not be taken for one that forgot a call.
         for key in set(self._known) - owing:
             del self._known[key]
+        for key in set(self._heard) - owing:
+            del self._heard[key]
         for key in set(self._lines) - set(self._known):
             self._lines.pop(key).close()
         for key in busy:
             lost = self._lost(key)
+            silent = 0.0
+            if lost is None and self.unanswered > 0:
+                lost, silent = self._silent(key)
             if lost is None:
                 continue
             node, reason = lost
             self._known.pop(key, None)
+            self._heard.pop(key, None)
             with self._lock:
                 if key == BLACKBOARD:
                     ids = sorted(self._requests)
@@ -215,7 +229,7 @@ class Watchdog:
             else:
                 if self.say:
                     log.warning("module %s (node %s) lost: %s", key, node, reason)
-                self.deliver(ModuleLost(module=key, node=node, reason=reason, call_ids=ids))
+                self.deliver(ModuleLost(module=key, node=node, reason=reason, call_ids=ids, unanswered=silent))
 
     def _ask(self, key: str, uri: str) -> Optional[int]:
         """The pid of the node of ``key`` at ``uri``, over the connection kept to it (made if needed).
@@ -226,11 +240,30 @@ class Watchdog:
         line = self._lines.get(key)
         if line is None:
             line = self._lines[key] = self._line(uri, self.ping_timeout, "/bmtree_liveness")
+        now = time.monotonic()
+        self._heard.setdefault(key, now)
         try:
-            return line.ask()
+            pid = line.ask()
         except OSError:
             self._lines.pop(key).close()
             raise
+        if pid is not None:
+            self._heard[key] = now
+        return pid
+
+    def _silent(self, key: str) -> Tuple[Optional[Tuple[str, str]], float]:
+        """((its node, why), for how long) when the node of ``key``, alive as far as is known, has not
+        answered for :attr:`unanswered` seconds; (None, 0) otherwise."""
+        since = self._heard.get(key)  # set once its node was asked
+        if since is None or time.monotonic() - since < self.unanswered:
+            return None, 0.0
+        known = self._known.get(key)
+        node = known[0] if known is not None else self.resolve(key)
+        if node is None:
+            return None, 0.0
+        silent = time.monotonic() - since
+        return (node, "node %s has not answered for %.0fs (its machine cannot be reached, or its process is "
+                "stopped)" % (node, silent)), silent
 
     def _lost(self, key: str) -> Optional[Tuple[str, str]]:
         """(its node, why) when the node of ``key`` is lost, or None while it lives (or cannot be told)."""
@@ -263,7 +296,7 @@ class Watchdog:
             return None
         node, uri, pid = known
         line = self._lines.get(key)
-        if line is not None and line.kept:
+        if line is not None and line.kept and not self.unanswered:
             return None  # its connection stays open: its process lives
         try:
             now = self._ask(key, uri)

@@ -130,10 +130,15 @@ class Answers:
 
     def cancelled(self, call: Any, still_running: float = 0.0) -> FunctionResult:
         """``still_running``: the grace after which the call's code still runs (it does not look at its cancel).
-        A call its node's stop cancelled (``call.stopping``) says so instead of naming the coordinator."""
+        A call its node's stop cancelled (``call.stopping``), or the module because its caller could not be
+        reached (``call.cancel_why``), says so instead of naming the coordinator."""
         why = getattr(call, "stopping", "")
         if why:
             return self.result(call, CallStatus.CANCELLED, stopped_text(why, still_running, returned=True))
+        why = getattr(call, "cancel_why", "")
+        if why:
+            return self.result(call, CallStatus.CANCELLED, "%s, but %s %gs after the cancel: it goes on running" % (
+                why, NOT_RETURNED, still_running) if still_running else why)
         return self.result(call, CallStatus.CANCELLED, "%s, but %s after %gs: it goes on running" % (
             CANCELLED_TEXT, NOT_RETURNED, still_running) if still_running else CANCELLED_TEXT)
 

@@ -384,6 +384,7 @@ def make_bridge(definition: ModuleDefinition, **options: Any) -> CppBridge:
 
 def make_parser() -> argparse.ArgumentParser:
     from coordinator.cliutil import path_arg, seconds  # the type= of every command's options
+    from modules.callers import unreachable_seconds
 
     p = argparse.ArgumentParser(prog="bmtree-bridge", description="Serve a C++ basic module (manual §4.3) as a "
                                 "bmtree module: wire protocol v2 outside, the original C++ protocol inside.")
@@ -399,6 +400,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="seconds to wait after BM_output for output values still in flight (default 1)")
     p.add_argument("--wait", type=seconds("do not wait"), default=30.0,
                    help="seconds to wait at start-up for the C++ node's connections (default 30)")
+    p.add_argument("--unreachable-caller", type=unreachable_seconds, default=None, metavar="SECONDS",
+                   help="cancel the calls of a caller that has not answered for this long (the C++ node gets the "
+                        "cancel): its machine cannot be reached or its process is stopped (default 0: never; or "
+                        "~unreachable_caller)")
     return p
 
 
@@ -422,7 +427,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    return run_module(definition, impl, args.node_name, {BridgeError: 3}, name_format="%s_bridge")
+    return run_module(definition, impl, args.node_name, {BridgeError: 3}, name_format="%s_bridge",
+                      unreachable_caller=args.unreachable_caller)
 
 
 if __name__ == "__main__":

@@ -25,15 +25,15 @@ from comm import TOPIC_CALL, TOPIC_CANCEL, TOPIC_EVENT, TOPIC_RESULT, sync_publi
 from comm.address import warn_own_address
 from comm.addressing import PING_FUNCTION, RecentIds, call_topic, cancel_topic, surely_not_for
 from comm.errors import ProtocolError
-from comm.liveness import Watchdog
 from comm.masterwatch import watch_master
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, FunctionResult, load_payload, new_id
 from comm.nodelife import StopSignals
 from comm.nodeopts import count, node_name, node_params, parse_node_args
 from comm.replies import ReplyPublisher, caller_of
 from comm.roslog import log_to_rosout
-from comm.rpc import MASTER_TIMEOUT, master_api
+from comm.rpc import master_api
 from comm.startup import patiently
+from modules.callers import CallerWatch, unreachable_seconds
 from modules.classfile import load_class, where_raised
 from modules.definition import DefinitionError, ModuleDefinition, load_definition
 from modules.discovery import PARAM_ROOT, announcement, node_alive
@@ -45,9 +45,6 @@ __all__ = ["CallInbox", "ModuleNode", "DuplicateModule", "make_parser", "main", 
            "run_module", "serving_line"]
 
 log = logging.getLogger("bmtree.module")
-
-CALLER_PERIOD = 0.5  # seconds: a call's caller is watched once the call is this old, then at once on its death
-
 
 class CallInbox:
     """How any bmtree module node takes calls and cancels, before running them.
@@ -163,13 +160,17 @@ class CallInbox:
 class ModuleNode:
     """Wires a :class:`ModuleServer` to ROS; call :meth:`start` after ``rospy.init_node``."""
 
-    def __init__(self, definition: ModuleDefinition, impl: BasicModule, max_bytes: Optional[int] = None):
+    def __init__(self, definition: ModuleDefinition, impl: BasicModule, max_bytes: Optional[int] = None,
+                 unreachable_caller: Optional[float] = None):
         self.definition = definition
         self.impl = impl
         self.max_bytes = max_bytes  # None: the private parameter ~max_bytes, else 1 MiB
+        #: seconds after which the calls of a caller that does not answer are cancelled (0: never); None:
+        #: the private parameter ~unreachable_caller, else 0
+        self.unreachable_caller = unreachable_caller
         self.server: Optional[ModuleServer] = None
         self.inbox: Optional[CallInbox] = None
-        self.callers: Optional[Watchdog] = None
+        self.callers: Optional[CallerWatch] = None
         #: what the class's ``setup()`` may raise to say a start-up problem itself (run_module's exit codes);
         #: anything else it raises is the author's bug, said as a BindingError
         self.start_failures: Tuple[type, ...] = (BindingError, DuplicateModule)
@@ -213,6 +214,12 @@ class ModuleNode:
                 raise BindingError("parameter ~max_bytes must be a whole number of at least %d, got %.80r" % (
                     MIN_MAX_BYTES, value))
             self.max_bytes = value
+        if self.unreachable_caller is None:
+            value = patiently(lambda: rospy.get_param("~unreachable_caller", 0))
+            try:
+                self.unreachable_caller = unreachable_seconds(value)
+            except argparse.ArgumentTypeError as exc:
+                raise BindingError("parameter ~unreachable_caller: %s" % exc)
         if name != self.definition.name:
             try:
                 self.definition = self.definition.renamed(name)
@@ -242,10 +249,7 @@ class ModuleNode:
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard,
                                ping_note=self.server.stuck_note)
-        self.callers = Watchdog(self._orphaned, lambda node: node, _uri_of, period=CALLER_PERIOD, say=False,
-                                unregistered_lost=False)
-        self.server.callers = self.callers
-        self.callers.start()
+        self.callers = CallerWatch(self.server, self.definition.name, self.unreachable_caller).start()
         self.inbox.subscribe()
         try:
             self.impl.setup(self)
@@ -261,15 +265,6 @@ class ModuleNode:
         injected = _injected(self.definition.name, self.impl, faults)
         if injected:
             log.info("%s", injected)
-
-    def _orphaned(self, lost: Any) -> None:
-        """The node that sent these calls is gone (killed, crashed): nobody waits for their answers,
-        and running on they would drive the hardware and hold the module. Cancel them (a call its
-        coordinator cancelled already is not cancelled again, nor reported as cancelled here)."""
-        for call_id in lost.call_ids:
-            if self.server is not None and self.server.cancel(call_id):
-                log.warning("cancelled call %s of module %s: its caller %s is gone (%s)", call_id,
-                            self.definition.name, lost.module, lost.reason)
 
     def stop(self) -> None:
         self.unregister()
@@ -375,18 +370,6 @@ def _injected(module: str, impl: BasicModule, faults: Dict[str, Any]) -> str:
     return describe_faults(module, every)
 
 
-def _uri_of(node: str) -> Optional[str]:
-    """A node's XML-RPC URI from the master (None once it is no longer registered). Bounded: a
-    master that does not answer raises OSError (the caller's liveness is not known now), and never
-    holds the watch over the callers, which then cannot cancel the call of a caller that is gone."""
-    import rosgraph
-
-    try:
-        return master_api("/bmtree_callers", MASTER_TIMEOUT).lookupNode(node)
-    except rosgraph.masterapi.MasterError:
-        return None
-
-
 class DuplicateModule(Exception):
     """Another live node already serves this module."""
 
@@ -419,7 +402,7 @@ def renamed_by_argument(definition: ModuleDefinition, argv: Optional[List[str]] 
 
 def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optional[str] = None,
                failures: Optional[Dict[type, int]] = None, name_format: str = "bm_%s",
-               max_bytes: Optional[int] = None) -> int:
+               max_bytes: Optional[int] = None, unreachable_caller: Optional[float] = None) -> int:
     """Init a ROS node, serve until SIGINT/SIGTERM or ROS shutdown, clean up. Exit code.
 
     The node is ``node_name``, else ``name_format`` of the module's name (after ``_basic_mod:=``).
@@ -440,7 +423,7 @@ def run_module(definition: ModuleDefinition, impl: BasicModule, node_name: Optio
         stop.leave()
         return 0
     log_to_rosout()
-    node = ModuleNode(definition, impl, max_bytes)
+    node = ModuleNode(definition, impl, max_bytes, unreachable_caller)
     node.start_failures = tuple(codes)
     try:
         try:
@@ -465,6 +448,10 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--node-name", type=node_name, help="ROS node name (default bm_<module>)")
     p.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"),
                    help="largest payload accepted (bytes; default %d, or ~max_bytes)" % DEFAULT_MAX_BYTES)
+    p.add_argument("--unreachable-caller", type=unreachable_seconds, metavar="SECONDS",
+                   help="cancel the calls of a caller that has not answered for this long: its machine cannot be "
+                        "reached (a dropped link) or its process is stopped (default 0: never; or "
+                        "~unreachable_caller)")
     return p
 
 
@@ -501,7 +488,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     except BindingError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    code = run_module(definition, impl, args.node_name, max_bytes=args.max_bytes)
+    code = run_module(definition, impl, args.node_name, max_bytes=args.max_bytes,
+                      unreachable_caller=args.unreachable_caller)
     _leave_without_threads(code)
     return code
 

@@ -49,7 +49,8 @@ log = logging.getLogger("bmtree.module")
 class _Call:
     """One accepted call and where it stands: its code running, answered, holding the module."""
 
-    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent", "cancelled_at", "stopping")
+    __slots__ = ("ctx", "fn", "inputs", "exclusive", "running", "answered", "late", "sent", "cancelled_at", "stopping",
+                 "cancel_why")
 
     def __init__(self, ctx: CallContext, fn: FunctionDefinition, inputs: Dict[str, Any], exclusive: bool):
         self.ctx = ctx
@@ -62,6 +63,7 @@ class _Call:
         self.sent = False         # its answer was handed to the publisher
         self.cancelled_at: Optional[float] = None   # on the module's clock
         self.stopping = ""        # why its node's stop cancelled it (modules.nodestop), "" otherwise
+        self.cancel_why = ""      # why the module itself cancelled it (its caller cannot be reached), "" otherwise
 
 
 class ModuleServer:
@@ -297,13 +299,15 @@ class ModuleServer:
 
         return stop_calls(self, why, self.cancel_grace if grace is None else grace)
 
-    def cancel(self, call_id: str) -> bool:
+    def cancel(self, call_id: str, why: str = "") -> bool:
         """Cancel a call as a cancel request would (its caller went away); False if it is not running
-        or was cancelled already (so nobody reports a second cancel as the one that stopped it)."""
+        or was cancelled already (so nobody reports a second cancel as the one that stopped it).
+        ``why``: the answer's text, when someone may read it (its caller cannot be reached now)."""
         with self._lock:
             call = self._calls.get(call_id)
             if call is None or call.ctx.cancelled.is_set():
                 return False
+            call.cancel_why = why
             queued = self._waiting is call
             if queued:  # never started: nothing to stop
                 self._waiting = None

@@ -260,14 +260,13 @@ def test_a_call_cancelled_already_is_not_reported_cancelled_when_its_caller_goes
     """The coordinator cancelled the call and exited (Ctrl-C): the module said "cancelled call …: its
     caller … is gone", as if it had cancelled it, and would run the grace a second time."""
     from comm.liveness import ModuleLost
-    from modules.node import ModuleNode
+    from modules.callers import CallerWatch
 
-    node = ModuleNode(arm.server.definition, arm.server.impl)
-    node.server = arm.server
+    node = CallerWatch(arm.server, "arm")
     call_id = arm.send("hang")
     time.sleep(0.05)
     arm.server.handle_cancel(CancelRequest(call_id, "arm", "hang").encode())
-    node._orphaned(ModuleLost(module="/bmtree_run", node="/bmtree_run", reason="its process is gone",
+    node.orphaned(ModuleLost(module="/bmtree_run", node="/bmtree_run", reason="its process is gone",
                               call_ids=[call_id]))
     assert not [rec.getMessage() for rec in caplog.records if "its caller" in rec.getMessage()]
     assert arm.server.cancel(call_id) is False
@@ -278,7 +277,7 @@ def test_a_call_cancelled_already_is_not_reported_cancelled_when_its_caller_goes
     arm.server.impl._release.clear()
     other = arm.send("hang")
     time.sleep(0.05)
-    node._orphaned(ModuleLost(module="/bmtree_run", node="/bmtree_run", reason="its process is gone",
+    node.orphaned(ModuleLost(module="/bmtree_run", node="/bmtree_run", reason="its process is gone",
                               call_ids=[other]))
     assert any("cancelled call %s of module arm: its caller /bmtree_run is gone" % other in rec.getMessage()
                for rec in caplog.records)
