@@ -121,6 +121,21 @@ class CallRecord:
     cancel_sent: bool = False   # the tree stopped it (halted, timed out): its module was asked to cancel it
     cancel_answer: str = ""     # the module's ``cancelled`` answer to that (its text)
 
+    def __repr__(self) -> str:
+        """What a failed ``assert run.calls(...) == ...`` shows of it: target, status, times, inputs, outputs
+        or error (not its definition and ROS messages, which buried the difference)."""
+        said = "%s %s at %.3fs" % (self.target, self.status, self.started)
+        if self.duration is not None:
+            said += " for %.3fs" % self.duration
+        said += " inputs=%r" % (self.inputs,)
+        if self.output_messages:
+            said += " outputs=%r" % (self.outputs,)
+        if self.error:
+            said += " error=%r" % (self.error,)
+        if self.late_status is not None:
+            said += " late=%s" % self.late_status
+        return "<CallRecord %s>" % said
+
     @property
     def maybe_running(self) -> str:
         """Why a call the tree stopped may still run on its module ('' when it is known to have ended): no

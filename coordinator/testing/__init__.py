@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from coordinator.testing.inprocess import InProcessTransport
-from coordinator.testing.kit import Coverage, TreeRun, TreeTest
+from coordinator.testing.kit import Coverage, RunStatus, TreeRun, TreeTest, UnscriptedWarning
 from coordinator.testing.limits import TickLimitError
 from coordinator.testing.mocks import (
     FunctionMock,
@@ -20,5 +20,5 @@ from coordinator.testing.mocks import (
 )
 
 __all__ = ["Coverage", "FunctionMock", "InProcessTransport", "MockError", "MockModule", "Mocks", "Outcome",
-           "OutcomeKind", "TickLimitError", "TreeRun", "TreeTest", "die", "fail", "hang", "reject", "respond",
-           "succeed"]
+           "OutcomeKind", "RunStatus", "TickLimitError", "TreeRun", "TreeTest", "UnscriptedWarning", "die", "fail",
+           "hang", "reject", "respond", "succeed"]

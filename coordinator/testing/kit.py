@@ -11,6 +11,7 @@ frames are hidden from pytest (``__tracebackhide__``).
 """
 from __future__ import annotations
 
+import warnings
 from collections import defaultdict
 from typing import Any, Callable, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
@@ -35,20 +36,48 @@ from coordinator.testing.limits import (
     TickGuard,
     TickLimitError,
 )
-from coordinator.testing.mocks import Mocks
+from coordinator.testing.mocks import MockError, Mocks
 from coordinator.treeast import TreeFile, TreeNode, top_of, walk
 from modules.definition import DefinitionError, ModuleDefinition
 from modules.search import default_definitions
 
-__all__ = ["TreeTest", "TreeRun", "Coverage"]
+__all__ = ["TreeTest", "TreeRun", "Coverage", "RunStatus", "UnscriptedWarning"]
+
+
+class UnscriptedWarning(UserWarning):
+    """A run's calls were answered without a script, with empty outputs the tree may have used (pytest
+    lists it under "warnings summary"; ``filterwarnings`` can make it an error or hide it)."""
+
+
+class RunStatus(str):
+    """How a kit run ended, as ``bmtree run`` prints it (``"SUCCESS"``, ``"FAILURE"``, ``"INVALID"``), and
+    equal to py_trees' :class:`~py_trees.common.Status` member as well: ``run.status == "FAILURE"`` and
+    ``run.status == Status.FAILURE`` both hold (the first failed, comparing an enum to its text)."""
+
+    def __eq__(self, other: object) -> bool:
+        return str.__eq__(self, other.value if isinstance(other, Status) else other)
+
+    def __ne__(self, other: object) -> bool:
+        return not self == other
+
+    __hash__ = str.__hash__
+
+    @property
+    def value(self) -> str:
+        """Its text, as ``Status.value`` gives it."""
+        return str(self)
 
 
 class TreeRun:
     """What happened in one run: final status, calls in order, blackboard, node statuses."""
 
-    def __init__(self, result: RunResult, transport: InProcessTransport):
+    def __init__(self, result: RunResult, transport: InProcessTransport,
+                 unscripted: Optional[Dict[str, int]] = None):
         self.result = result
-        self.status: Status = result.status
+        self.status = RunStatus(result.status.value)
+        #: ``module.function`` -> its calls answered without a script (success, empty text, zero
+        #: positions), for functions whose outputs say more than ``success``
+        self.unscripted: Dict[str, int] = dict(unscripted or {})
         self.reason = result.reason
         self.duration = result.duration
         self.transport = transport
@@ -69,6 +98,8 @@ class TreeRun:
             said += "; cleanup (root %s): %s" % (self.result.ended, self.cleanup_status or "did not run")
             if self.result.cleanup_reason:
                 said += ": %s" % self.result.cleanup_reason
+        if self.unscripted:
+            said += "; answered without a script (success, empty outputs): %s" % unscripted_text(self.unscripted)
         return "<TreeRun %s>" % said
 
     @property
@@ -278,11 +309,14 @@ class TreeTest:
         coverage: a :class:`Coverage` to record into (the pytest plugin passes one).
         modules: more definition files or folders (your own modules), as ``--modules`` of the CLI;
             added to ``definitions`` (or to the default ones).
+        strict: a call to a function the test did not script fails the test (``mocks.strict``); by
+            default it succeeds with empty outputs, and ``TreeRun.unscripted`` lists those that say more
+            than ``success``.
     """
 
     def __init__(self, path: str, definitions: Optional[Mapping[str, ModuleDefinition]] = None,
                  inputs: Optional[Dict[str, Any]] = None, coverage: Optional[Coverage] = None,
-                 modules: Sequence[str] = ()):
+                 modules: Sequence[str] = (), strict: bool = False):
         __tracebackhide__ = True
         self.path = path
         self.inputs = dict(inputs or {})
@@ -301,9 +335,14 @@ class TreeTest:
             # the message says where (file:line:column); the loader's frames would only bury it
             raise exc.with_traceback(None)
         self.mocks = Mocks(self.definitions)
+        self.mocks.strict = strict
         self.coverage = coverage
         if coverage is not None:
             coverage.add_tree(self.tree)
+
+    warn_unscripted = True
+    """Warn (:class:`UnscriptedWarning`) of a run's calls answered without a script (``bmtree test``'s
+    scenario files, written from runs, do not)."""
 
     raise_limits_with = KIT_RAISE_WITH
     """How a tick limit's error says to raise it (``bmtree test`` names its scenario keys instead)."""
@@ -327,12 +366,31 @@ class TreeTest:
         visitors = [self.coverage.visitor(self.tree)] if self.coverage is not None else []
         guard = TickGuard(max_ticks, max_ticks_per_instant, self.raise_limits_with)
         del self.mocks.errors[:]
+        before = self.mocks.unscripted(every=True)
         with now_from(clock.now):  # a time given as `now` is the simulated time: the same on every run
-            result = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=[guard, *observers],
-                                tree=self.tree).run(max_duration, stop_when, guard, kill_at)
+            runner = TreeRunner(root, ctx, record_history=True, visitors=visitors, observers=[guard, *observers],
+                                tree=self.tree)
+            result = runner.run(max_duration, stop_when, guard, kill_at)
+            if kill_at is None or not result.reason.startswith("killed after"):
+                runner.confirm_cancels()  # the answers to the cancels of its last tick, as `bmtree run` waits
         if self.mocks.errors:  # a respond() gave outputs that break the definition: the test's bug
             raise self.mocks.errors[0]
-        run = TreeRun(result, transport)
+        unscripted = {t: n - before.get(t, 0) for t, n in self.mocks.unscripted(every=True).items()
+                      if n > before.get(t, 0)}
+        if unscripted and self.mocks.strict:
+            first = sorted(unscripted)[0]
+            raise MockError("calls to functions without a script (strict mocks; answered failed): %s; script them, "
+                            "e.g. mocks[%r].succeed(...) or .fail(...)" % (unscripted_text(unscripted), first))
+        says_more = self.mocks.unscripted()
+        unscripted = {t: n for t, n in unscripted.items() if t in says_more}
+        run = TreeRun(result, transport, unscripted)
+        if unscripted and self.warn_unscripted:
+            first = sorted(unscripted)[0]
+            warnings.warn(UnscriptedWarning(
+                "%s: calls answered without a script (success, empty text, zero numbers): %s; script them "
+                "(mocks[%r].succeed(...)), or make such calls fail the test: TreeTest(..., strict=True), or the "
+                "pytest ini key bmtree_strict_mocks = true" % (self.path, unscripted_text(unscripted), first)),
+                stacklevel=2)
         stopped = [r for r in (result.reason, result.cleanup_reason) if guard.hit and r.startswith(guard.hit)]
         if stopped:   # stopped by it (root, or a cleanup that livelocked); the reason adds the running node
             where = stopped[0][len(guard.hit):]
@@ -356,6 +414,11 @@ class TreeTest:
                              "inputs={%s}); in a scenario file, the scenario's inputs: {%s}" % (
                                  self.path, "s" if len(missing) > 1 else "", ", ".join(repr(m) for m in missing),
                                  example, example, ", ".join("%s: ..." % m for m in missing)))
+
+
+def unscripted_text(unscripted: Mapping[str, int]) -> str:
+    """``speech.listen ×2, vision.find_object``: calls answered without a script, by function."""
+    return ", ".join("%s ×%d" % (t, n) if n > 1 else t for t, n in sorted(unscripted.items()))
 
 
 def _where(b: Any) -> str:

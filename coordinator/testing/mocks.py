@@ -170,6 +170,7 @@ class FunctionMock:
         self.calls: List[Dict[str, Any]] = []
         self._default: Optional[Outcome] = None
         self.ignores_cancel = False   # every outcome ignores cancels (see ignoring_cancels)
+        self.unscripted = 0   # calls answered by the default (no script): success, empty outputs
 
     def _check(self, outcome: Outcome) -> Outcome:
         """Complete a succeed's outputs with the defaults of :func:`_zero` and check them against the definition."""
@@ -223,6 +224,7 @@ class FunctionMock:
 
     def next_outcome(self) -> Outcome:
         if not self.outcomes:  # unscripted: succeed with zero outputs (checked once)
+            self.unscripted += 1
             if self._default is None:
                 self._default = self._check(succeed())
             return self._default
@@ -236,12 +238,22 @@ class FunctionMock:
         self.ignores_cancel = True
         return self
 
-    def answer(self, inputs: Dict[str, Any], errors: List[MockError]) -> Outcome:
+    @property
+    def says_more(self) -> bool:
+        """The function has outputs besides a ``success`` flag: its default answer (empty text, zeros) is
+        a value the tree may use, not just "it worked"."""
+        return any(not (p.name == "success" and p.rostype == "std_msgs/Bool") for p in self.fn.outputs)
+
+    def answer(self, inputs: Dict[str, Any], errors: List[MockError], strict: bool = False) -> Outcome:
         """Record a call (its inputs as plain data) and give its outcome; a respond's function
         gets the plain inputs, and its outputs are completed and checked like a succeed's (a
-        MockError, also noted in ``errors``, and the runtime answers ``failed``)."""
+        MockError, also noted in ``errors``, and the runtime answers ``failed``). ``strict``: an
+        unscripted call is answered ``failed`` (and counted: the test fails, see :meth:`Mocks.unscripted`)."""
         plain_inputs = {k: plain(v) for k, v in inputs.items()}
         self.calls.append(plain_inputs)
+        if strict and not self.outcomes:   # the kit fails the test once the run is over, naming every one
+            self.unscripted += 1
+            return fail("not scripted (strict mocks)")
         outcome = self.next_outcome()
         if self.ignores_cancel:
             outcome = dataclasses.replace(outcome, ignores_cancel=True)
@@ -271,6 +283,9 @@ class Mocks:
         # events tied to a call: (module.function, which of its calls from 1, seconds after it started, module, event, params)
         self.call_events: List[Tuple[str, int, float, str, str, Dict[str, Any]]] = []
         self.errors: List[MockError] = []
+        #: a call to a function without a script fails the test (MockError) instead of succeeding with
+        #: empty outputs (the pytest ini key ``bmtree_strict_mocks``, ``TreeTest(strict=True)``)
+        self.strict = False
         # values the Blackboard node held before the run: one list per stored() call, oldest first
         self.stored_values: List[List[StoredEntry]] = []
 
@@ -286,6 +301,12 @@ class Mocks:
                 raise MockError(str(exc)) from None
             self._fns[target] = FunctionMock(fn)
         return self._fns[target]
+
+    def unscripted(self, every: bool = False) -> Dict[str, int]:
+        """``module.function`` -> how many of its calls were answered without a script (success, empty
+        outputs; under ``strict``, failed), for the functions whose outputs say more than ``success`` (a
+        test may pass on them while the tree used an empty text or a zero position), or ``every`` one."""
+        return {t: f.unscripted for t, f in sorted(self._fns.items()) if f.unscripted and (every or f.says_more)}
 
     def stored(self, values: Mapping[str, Any]) -> Mocks:
         """Values the Blackboard node held before the run (stored by earlier runs), so that a
@@ -406,6 +427,6 @@ def mock_module(mocks: Mocks, module: str) -> MockModule:
 
 def _scripted(target: str, name: str) -> Callable[..., Outcome]:
     def method(self: MockModule, **inputs: Any) -> Outcome:
-        return self._mocks[target].answer(inputs, self._mocks.errors)
+        return self._mocks[target].answer(inputs, self._mocks.errors, self._mocks.strict)
     method.__name__ = name
     return method

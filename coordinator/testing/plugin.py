@@ -3,8 +3,10 @@
 Fixtures:
     bmtree_tree: ``bmtree_tree("trees/x.yaml", inputs={...}, modules=["modules/gripper.json"])`` -> a TreeTest
         (mocked modules, simulated clock); ``inputs`` must give every tree input without a default (else a
-        UsageError there); ``modules`` adds your definitions, as does the ini key ``bmtree_modules``. An
-        invalid tree fails the test at that line with its ``file:line:column`` errors, without the kit's frames.
+        UsageError there); ``modules`` adds your definitions, as does the ini key ``bmtree_modules``;
+        ``strict=True`` (or the ini key ``bmtree_strict_mocks = true``) fails a test whose tree calls a
+        function it did not script. An invalid tree fails the test at that line with its ``file:line:column``
+        errors, without the kit's frames.
     ros_master: a real ``rosmaster --core`` on a free port for the session (its own ROS_HOME); yields the URI.
     ros_graph: start nodes as processes against that master; they are stopped (by pid) after the test.
     ros_probe: publish/collect topics from the test process (one rospy node per session).
@@ -32,6 +34,9 @@ def pytest_addoption(parser: Any) -> None:
     group = parser.getgroup("bmtree")
     group.addoption("--bmtree-coverage", action="store_true", default=False,
                     help="report which nodes of the tested trees ran and which outcomes they reached")
+    parser.addini("bmtree_strict_mocks", type="bool", default=False,
+                  help="a call to a mocked function the test did not script fails the test (default: it "
+                       "succeeds with empty outputs, and a warning lists those whose outputs say more)")
     parser.addini("bmtree_modules", type="linelist", default=[],
                   help="module definition files or folders every bmtree_tree gets (your own modules), "
                        "relative to the ini file; '#' starts a comment")
@@ -95,15 +100,19 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
 
 @pytest.fixture
 def bmtree_tree(request: Any) -> Callable[..., TreeTest]:
-    """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=())`` -> TreeTest; ``inputs``
-    gives the tree's inputs (every one without a default); ``modules`` come after the ini key ``bmtree_modules``'s."""
+    """Factory: ``bmtree_tree(path, definitions=None, inputs=None, modules=(), strict=None)`` -> TreeTest;
+    ``inputs`` gives the tree's inputs (every one without a default); ``modules`` come after the ini key
+    ``bmtree_modules``'s; ``strict`` (default: the ini key ``bmtree_strict_mocks``): an unscripted call fails."""
     cov = _coverage(request.config)
     configured = configured_modules(request.config)
+    strict = bool(request.config.getini("bmtree_strict_mocks"))
 
     def make(path: str, **kwargs: Any) -> TreeTest:
         __tracebackhide__ = True
         given = configured + [os.path.abspath(m) for m in kwargs.get("modules") or ()]
         kwargs["modules"] = list(dict.fromkeys(given))  # a file given both ways is loaded once
+        if kwargs.get("strict") is None:
+            kwargs["strict"] = strict
         try:
             found = tree_path(path, request.config, str(getattr(request.node, "path", None) or request.node.fspath))
         except UsageError as exc:

@@ -131,6 +131,7 @@ def _scenario(sc: Any, i: int, at: Pos, tree_path: str, defs: Dict[str, ModuleDe
         if len(out.errors) == before:   # the tree is valid (checked before), its inputs given
             test = TreeTest(tree_path, definitions=defs, inputs=dict(inputs), coverage=coverage)
             test.raise_limits_with = SCENARIO_RAISE_WITH
+            test.warn_unscripted = False   # a scenario written from a run scripts what the run answered
     mocked = test.mocks if test is not None else Mocks(defs)
     stored = sm.stored(sc, at, defs, out)
     if stored:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import os
 
+import pytest
+
 from tests.conftest import TREES
 
 pytest_plugins = ["pytester"]
@@ -166,3 +168,27 @@ def test_a_tree_path_is_found_wherever_pytest_is_started(pytester, monkeypatch):
     out = " ".join(result.stdout.str().split())
     assert ("UsageError: bmtree_tree('trees/nowhere.yaml'): no such file; tried %s, %s, %s" % (
         elsewhere / "trees/nowhere.yaml", pytester.path / "trees/nowhere.yaml", tests / "trees/nowhere.yaml")) in out, out
+
+
+UNSCRIPTED_TEST = '''
+TREE = %r
+
+def test_unscripted(bmtree_tree):
+    run = bmtree_tree(TREE).run()
+    assert run.succeeded
+'''
+
+
+@pytest.mark.filterwarnings("default::coordinator.testing.kit.UnscriptedWarning")  # this suite ignores it
+def test_unscripted_calls_are_in_the_warnings_summary_and_fail_with_the_ini_key(pytester):
+    pytester.makepyfile(test_user=UNSCRIPTED_TEST % os.path.join(TREES, "find_apple.yaml"))
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1, warnings=1)
+    result.stdout.fnmatch_lines(["*warnings summary*", "*UnscriptedWarning: *find_apple.yaml: calls answered without "
+                                 "a script (success, empty text, zero numbers): navigation.approach, navigation.go_to, "
+                                 "vision.find_object; script them*"])
+    pytester.makeini("[pytest]\nbmtree_strict_mocks = true\n")
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*MockError: calls to functions without a script (strict mocks; answered failed): "
+                                 "speech.say*"])

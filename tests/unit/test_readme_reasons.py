@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 
+from coordinator.testing import succeed
 from coordinator.testing.kit import TreeTest
 from tests.conftest import ROOT
 
@@ -45,3 +46,20 @@ def test_the_readmes_topic_and_service_module_is_the_example_files():
         return kept.split()
 
     assert tokens(shown) == tokens(code)
+
+
+def test_the_readmes_task_example_checks_and_runs(tmp_path, sim_defs):
+    """The tree of "Writing a task" is valid against the simulated robot's definitions, and does what its
+    comments say once its functions are scripted."""
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+        section = fh.read().split("## Writing a task\n", 1)[1].split("\n## ", 1)[0]
+    path = tmp_path / "serve_drink.yaml"
+    path.write_text(section.split("```yaml\n", 1)[1].split("```", 1)[0])
+    t = TreeTest(str(path), definitions=sim_defs, strict=True)
+    t.mocks["navigation.go_to"].succeed(room="kitchen")
+    t.mocks["vision.find_object"].script(succeed(position={"x": 0.0}), succeed(position={"x": 1.5}))
+    t.mocks["speech.listen"].succeed(text="lemonade")
+    t.mocks["speech.say"].succeed()
+    run = t.run()
+    assert run.succeeded, run
+    assert len(run.calls("vision.find_object")) == 2 and run.said() == ["One lemonade, coming.", "Done (succeeded)."]
