@@ -11,7 +11,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple
 
 from comm.errors import did_you_mean
 from comm.textfile import read_text, text_pos
-from coordinator import parsehints
+from coordinator import othernames, parsehints
 from coordinator.bounds import shown
 from coordinator.cleanupparse import CLEANUP_TOP_KEYS, parse_cleanup, reserved_key_problems
 from coordinator.dataflow import check_flow, check_types
@@ -304,6 +304,7 @@ class Parser:
         if first is not None:
             self.err(raw.key_pos[first], "unknown node kind %r%s" % (
                 first, kind_hint(first, self.definitions) or did_you_mean(first, REGISTRY)))
+            othernames.check_inside(self, raw, first)
         else:
             self.err(raw.pos, "node has no kind (one of: %s)" % ", ".join(REGISTRY))
 
@@ -344,8 +345,11 @@ class Parser:
 
     # helpers for the kinds -------------------------------------------------------------
     def child(self, node: TreeNode, raw: Any, at: Pos) -> None:
-        if raw.__class__ is LList:   # child: [a, b]
+        if raw.__class__ is LList:   # child: [a, b]: one error, and each of a and b checked all the same
             self.err(at, one_child(node.kind, "child" in _OPTION_NAMES[node.kind], len(raw)))
+            for item in raw:
+                if item.__class__ is LMap:
+                    self.node(item, item.pos)
             return
         c = self.node(raw, at)
         if c is not None:

@@ -7,11 +7,11 @@ Fallback is bmtree's selector)``. Only kinds of the registry are named (a test h
 from __future__ import annotations
 
 import re
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
-from coordinator.yamlsrc import LMap
+from coordinator.yamlsrc import LList, LMap
 
-__all__ = ["CONDITIONS", "OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "foreign_option", "kind_hint",
+__all__ = ["check_inside", "CONDITIONS", "OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "foreign_option", "kind_hint",
            "one_child", "option_hint", "takes", "top_key_hint"]
 
 _BT, _PT, _SM = "BehaviorTree.CPP", "py_trees", "SMACH"
@@ -290,3 +290,34 @@ def decorator_mapping(p: Any, outer: LMap, kind: str, nk: Any, allowed: Tuple[st
                 else "each on a line of its own", kind) if options else ""))
     merged[kind], merged.key_pos[kind], merged.val_pos[kind] = value, outer.key_pos[kind], at
     return merged
+
+
+def check_inside(p: Any, raw: LMap, key: str) -> None:
+    """The nodes written inside a node of unknown kind ``key`` (``Fallback: [...]``, ``RetryUntilSuccessful:
+    {num_attempts: 3, child: …}``, ``children:`` beside it) are checked as nodes all the same, so that every
+    problem is reported at once, not one more after each renaming. Only what is plainly a node is: a
+    mapping in a list, or under ``child``/``children``; a bare value (``Timeout: 5``) is not."""
+    found: List[LMap] = []
+
+    def take(value: Any) -> None:
+        if value.__class__ is LList:
+            found.extend(item for item in value if item.__class__ is LMap)
+        elif value.__class__ is LMap:
+            found.append(value)
+
+    value = raw.get(key)
+    if value.__class__ is LList:
+        take(value)
+    elif value.__class__ is LMap:
+        for inner in ("children", "child"):
+            take(value.get(inner))
+    for inner in ("children", "child"):
+        if inner != key:
+            take(raw.get(inner))
+    p.depth += 1   # they are one level down: the depth limit counts the unknown node too
+    try:
+        for item in found:
+            p.node(item, item.pos)
+    finally:
+        p.depth -= 1
+
