@@ -203,7 +203,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     user_modules = [_user_module(spec) for spec in (getattr(args, "module", None) or [])]
     if user_modules and not args.sim:
         raise UsageError("--module starts your module beside the simulated robot: it needs --sim "
-                         "(without --sim, start it with bmtree-module and run against the live graph)")
+                         "(without --sim, start it with bmtree-module, or a C++ module's node with its bmtree-bridge, and "
+                         "run against the live graph)")
     for option, value, what in (("--world", getattr(args, "world", None), "chooses the simulated robot's world"),
                                 ("--ros-ip", getattr(args, "ros_ip", None), "is the simulated robot's address")):
         if value and not args.sim:
@@ -460,13 +461,19 @@ def _check_record(record: str) -> None:
 
 
 def _user_module(spec: str) -> Any:
-    """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``) for ``run --sim --module``."""
+    """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``), or ``DEFINITION.json=EXECUTABLE`` (no
+    ``:``: a C++ module's node, :mod:`coordinator.simcpp`) for ``run --sim --module``."""
+    from coordinator.simcpp import check_executable
     from coordinator.simgraph import UserModule
     from modules.definition import load_definition
 
     definition, sep, cls = spec.partition("=")
+    if sep and definition and cls and ":" not in cls:
+        loaded = load_definition(definition)
+        return UserModule(os.path.abspath(definition), "", loaded, check_executable(cls, loaded))
     if not sep or not definition or ":" not in cls:
-        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS, got %s" % _shown(spec))
+        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS or DEFINITION.json=EXECUTABLE, got %s"
+                         % _shown(spec))
     where = cls.rsplit(":", 1)[0]
     if where.endswith(".py"):
         if not os.path.isfile(where):

@@ -23,10 +23,12 @@ REAP_WAIT = 1.0  # s a process found gone (its port refuses) may take to be reap
 
 #: what ``modules.node._die`` logs before a ``die`` fault kills the node (its wording is read here)
 _DIED = re.compile(r"the node dies \(an injected fault\) with \d+ call\(s\) in flight: (.*)$")
-_ROSPY = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[\d.]+\]: ")  # rospy's prefix of a log line
+_ROSPY = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[\d.]+\]: ")  # rospy's (and roscpp's) prefix of a log line
 _DUMP = re.compile(r"^(  File |Current thread 0x|Thread 0x|Stack \(most recent|Extension modules: |  <no Python frame>)")
 _FRAME = re.compile(r'^  File "(.*)", line (\d+) in (.*)$')
-_ERROR = re.compile(r"^(\[(ERROR|FATAL)\] |Fatal Python error: |error: |[A-Za-z_][\w.]*(Error|Exception|Exit)(: |$))")
+_ERROR = re.compile(r"^(\[(ERROR|FATAL)\] |Fatal Python error: |error: |terminate called |"
+                    r"[A-Za-z_][\w.]*(Error|Exception|Exit)(: |$))")
+_WHAT = "  what():"  # after a C++ program's "terminate called after throwing …": the exception's text
 
 
 def cut(text: str, width: int = LINE_WIDTH) -> str:
@@ -49,11 +51,12 @@ def log_tail(path: str, lines: int = 5, width: int = LINE_WIDTH) -> List[str]:
 
 
 def last_error(path: str, within: int = 50) -> str:
-    """The last error line among the last ``within`` lines of the log at ``path`` (rospy's ``[ERROR]``
-    and ``[FATAL]``, ``error: …``, an exception's last traceback line, ``Fatal Python error: …``),
-    without rospy's level and time, cut; "" for none. The threads' stacks that follow a ``Fatal Python
-    error`` (``PYTHONFAULTHANDLER``) are not counted, and the innermost frame of its thread outside
-    Python's own library is said with it (``… (at gripper.py:16 in grasp)``)."""
+    """The last error line among the last ``within`` lines of the log at ``path`` (rospy's and roscpp's
+    ``[ERROR]`` and ``[FATAL]``, ``error: …``, an exception's last traceback line, ``Fatal Python error: …``,
+    a C++ ``terminate called …`` with its ``what()``), without ROS's level and time, cut; "" for none.
+    The threads' stacks that follow a ``Fatal Python error`` (``PYTHONFAULTHANDLER``) are not counted, and
+    the innermost frame of its thread outside Python's own library is said with it (``… (at
+    gripper.py:16 in grasp)``)."""
     lines = log_tail(path, 5000, 10 * LINE_WIDTH)
     counted = 0
     for i in range(len(lines) - 1, -1, -1):
@@ -61,6 +64,8 @@ def last_error(path: str, within: int = 50) -> str:
         if _DUMP.match(line):
             continue
         if _ERROR.match(line):
+            if line.startswith("terminate called") and i + 1 < len(lines) and lines[i + 1].startswith(_WHAT):
+                line += " (what(): %s)" % lines[i + 1][len(_WHAT):].strip()
             return cut(_ROSPY.sub("", line) + (_where(lines[i + 1:]) if line.startswith("Fatal Python") else ""))
         counted += 1
         if counted >= within:
@@ -160,18 +165,29 @@ def process_ends(graph: Any, wait: float = REAP_WAIT) -> Callable[[str], str]:
     """For :attr:`coordinator.rosliveness.Whereabouts.ended`: ``node`` -> :func:`ended_text` of its process
     in ``graph`` (a :class:`~coordinator.graph.RosGraph`), once it has ended (waited for up to ``wait``
     seconds, once per process: one whose port refuses may not be reaped yet); "" for a node the graph did
-    not start, or whose process still runs."""
+    not start, or whose process still runs. A bridge that bmtree ended because its C++ node ended
+    (``graph.ended_with``, :func:`coordinator.simcpp.watch_pair`) is said by that node's end: ``its C++ node
+    /gripper stopped: its process was killed by SIGSEGV``."""
     waited: Set[int] = set()  # pids waited for once already: asked again, they are only looked at
 
-    def ended(node: str) -> str:
+    def code_of(node: str) -> Optional[int]:
         proc: Optional[subprocess.Popen] = graph.procs.get(node)
         if proc is None:
-            return ""
+            return None
         try:
-            code = proc.wait(0 if proc.pid in waited else wait)
+            return proc.wait(0 if proc.pid in waited else wait)
         except subprocess.TimeoutExpired:
-            return ""
+            return None
         finally:
             waited.add(proc.pid)
+
+    def ended(node: str) -> str:
+        code = code_of(node)
+        if code is None:
+            return ""
+        what, first = getattr(graph, "ended_with", {}).get(node, ("", ""))
+        first_code = code_of(first) if first else None
+        if first_code is not None:
+            return "%s %s stopped: %s" % (what, first, ended_text(first_code, graph.log_path(first)))
         return ended_text(code, graph.log_path(node))
     return ended
