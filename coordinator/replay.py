@@ -359,7 +359,8 @@ def cmd_replay(args: Any) -> int:
         at = args.at
         while replay.index < len(log.records) and float(log.records[replay.index].get("t") or 0.0) <= at:
             replay.next()
-        out.write("at %.3fs:\n" % at)
+        lived = log.last_alive
+        out.write("at %.3fs%s:\n" % (at, " (past the run's end at %.3fs: its last state)" % lived if at > lived else ""))
         replay.snapshot(out)
         _events(replay.events, out, "events received by %.3fs:" % at, MOMENT_EVENTS)
         return 0

@@ -275,8 +275,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             sim = [m for m in SIM_MODULES if m not in mine]
             absent = sorted(set(mods) - set(sim) - mine)
             if absent:
-                raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS"
-                                 % (args.tree, ", ".join(absent), ", ".join(SIM_MODULES), absent[0]))
+                raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS "
+                                 "(or =EXECUTABLE for a C++ module)" % (args.tree, ", ".join(absent),
+                                                                        ", ".join(SIM_MODULES), absent[0]))
             print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
                 sim + ["%s (yours)" % m for m in sorted(mine)]))
             sys.stdout.flush()

@@ -275,6 +275,7 @@ class Speech(SimModule):
 
     def say(self, text: Any) -> Dict[str, Any]:
         self.said.append(text.data)
+        log.info("says %r", text.data)   # what the robot said, in bm_speech.out of a --sim run
         if self._said_pub is not None:
             from std_msgs.msg import String
 
@@ -287,7 +288,10 @@ class Speech(SimModule):
             if person.room == room and person.answers:
                 i = self._heard.get(person.name, 0)
                 self._heard[person.name] = i + 1
-                return {"success": True, "text": person.answers[min(i, len(person.answers) - 1)]}
+                heard = person.answers[min(i, len(person.answers) - 1)]
+                log.info("hears %s say %r", person.name, heard)
+                return {"success": True, "text": heard}
         self.context.sleep(min(float(seconds.data), 0.2))
+        log.info("hears nobody in %s", room)
         return {"success": False, "text": ""}
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -201,3 +202,12 @@ def test_a_lone_surrogate_in_a_record_does_not_stop_the_log(sim_defs, tmp_path):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__]))
+
+
+def test_replay_at_past_the_runs_end_says_so(sim_defs, tmp_path, capsys):
+    """``replay --at 99`` of a 0.3 s run printed ``at 99.000s:`` and the last state, as if the run lived on."""
+    path, _lines, _live, _run = _recorded(sim_defs, tmp_path)
+    code, out, _ = _main(["replay", path, "--at", "99"], capsys)
+    assert code == 0 and re.search(r"^at 99\.000s \(past the run's end at \d+\.\d{3}s: its last state\):$", out, re.M), out
+    code, out, _ = _main(["replay", path, "--at", "0"], capsys)
+    assert code == 0 and "\nat 0.000s:\n" in out and "past the run's end" not in out

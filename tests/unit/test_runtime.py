@@ -284,3 +284,23 @@ def test_a_function_that_returns_early_on_cancel_is_answered_cancelled_without_a
     finally:
         logging.getLogger("bmtree.module").removeHandler(kept)
     assert not [m for m in kept.messages if "invalid outputs" in m], kept.messages
+
+
+def test_the_simulated_speech_logs_what_it_says_and_hears(sim_defs, monkeypatch):
+    """Under --sim nothing showed what the robot said (only replay --at did): bm_speech.out now does."""
+    from modules.sim import robot
+
+    said = []
+
+    class Log:
+        @staticmethod
+        def info(text, *args):
+            said.append(text % args)
+
+    monkeypatch.setattr(robot, "log", Log)
+    world = World.from_dict(dict(rooms={"a": {"x": 0, "y": 0}, "b": {"x": 1, "y": 0}}, start="a",
+                                 people={"Bob": {"room": "a", "x": 0, "y": 0, "answers": ["lemonade"]}}))
+    s = Served(sim_defs["speech"], Speech(world))
+    s.result(s.call("say", text="Here is your lemonade, Bob."))
+    s.result(s.call("listen", seconds=1.0))
+    assert said == ["says 'Here is your lemonade, Bob.'", "hears Bob say 'lemonade'"]
