@@ -18,14 +18,15 @@ import threading
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, TextIO, Tuple, cast
 
-from comm.liveness import NodeWatch
 from comm.nodelife import StopSignals, leave_graph
 from comm.nodeopts import PORT
 from coordinator.cliutil import bind_address, seconds
 from coordinator.runevents import terminal_text
 from coordinator.runrecords import parse_record
 from coordinator.runstream import to_json
-from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchlive import END_TICKS_GRACE, RunLiveness
+from coordinator.watchsinks import SnapshotSink
+from coordinator.watchstate import WatchState
 from coordinator.watchterm import Keys, LiveView, key_reader, keys_help
 from coordinator.watchview import LinePrinter, TimeOrderedLines
 
@@ -36,8 +37,6 @@ WATCH_CHANNELS = ("tree", "snapshot", "status", "calls", "events", "blackboard",
 #: after the run's end, ``watch --web`` serves until a page got the end (and one second more, for
 #: the other pages polling), and at most this long (s); the page keeps showing the last state
 END_GRACE = 5.0
-#: seconds ``watch --plain`` waits after the end for the run's last ticks (queued on another topic)
-END_TICKS_GRACE = 1.0
 
 
 class RosWatcher:
@@ -121,79 +120,6 @@ def run_view(transport: Any, quiet: bool, namespace: str = STREAM_NS) -> Tuple[O
     if not quiet and sys.stdout.isatty():
         view = LiveView(sink.state, footer="Ctrl-C stops the run", title="bmtree run").start()
     return view, [sink]
-
-
-def gone_record(state: WatchState, node: str, reason: str, alive: Optional[float] = None) -> Dict[str, Any]:
-    """The watch's own ``end`` of a run whose process is gone before its end (killed outright, crashed):
-    status ``UNFINISHED``, ``gone`` true; never on the run stream, which that run can no longer write.
-    ``alive``: the run's time when its process was found gone (:meth:`WatchState.now` then), its
-    ``duration`` (else the time of its last record); the last tick is the run's last tick record's
-    (a snapshot carries it as ``tick_t``), not the time the watch caught up."""
-    started = state.tree.get("started")
-    wall = ""
-    if isinstance(started, (int, float)):
-        wall = " (%s)" % time.strftime("%H:%M:%S", time.localtime(started + state.tick_t))
-    lived = max(state.t, alive if alive is not None else state.t)
-    return {"v": 1, "type": "end", "run": state.run, "t": round(lived, 6), "status": "UNFINISHED", "gone": True,
-            "reason": "the run (pid %s, node %s) is gone, its last tick (%d) at %.3fs%s, found gone at about %.1fs: "
-                      "%s; it did not stop its calls" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t,
-                                                         wall, lived, reason),
-            "ticks": state.tick, "duration": round(lived, 6), "calls": state.calls_total}
-
-
-class RunLiveness:
-    """Ends the view of a run whose process is gone: a run killed outright (``kill -9``) never
-    publishes its end. The run's node (the publisher of its tree record) is watched as the run
-    watches modules (:class:`comm.liveness.NodeWatch`: its ``getPid`` over one kept connection,
-    waited on, never polled); when it is gone and no end came within :data:`END_TICKS_GRACE`,
-    the view gets :func:`gone_record`."""
-
-    def __init__(self, watcher: RosWatcher):
-        self.watcher = watcher
-        self.state = watcher.state
-        self.node_watch = NodeWatch(self._node, self._uri_of, self._gone, period=0.5, dead_is_gone=True,
-                                    caller="/bmtree_watch_liveness")
-
-    def start(self) -> RunLiveness:
-        self.node_watch.start()
-        return self
-
-    def stop(self) -> None:
-        self.node_watch.stop()
-
-    def _node(self) -> Optional[str]:
-        """The node of the run shown, while it has not ended."""
-        with self.state.lock:
-            if not self.state.nodes or self.state.end is not None:
-                return None
-            return self.watcher.nodes.get(self.state.run)
-
-    @staticmethod
-    def _uri_of(node: str) -> Optional[str]:
-        """The run node's URI; a master that does not answer raises OSError after a bounded wait (the
-        watch tries again later) rather than holding the liveness thread, and the watch's exit, for ever."""
-        import rosgraph
-
-        from comm.rpc import master_api
-        from coordinator.rosliveness import LIVENESS_QUESTION
-
-        try:
-            return master_api("/bmtree_watch_liveness", LIVENESS_QUESTION).lookupNode(node)
-        except rosgraph.masterapi.MasterError:
-            return None
-
-    def _gone(self, node: str, reason: str) -> None:
-        with self.state.lock:
-            run = self.state.run
-            if self.watcher.nodes.get(run) != node:
-                return
-            alive = self.state.now()  # its process is found gone now, not at its last record
-        # an ending run leaves right after its (latched) end: give it the time to arrive
-        if self.state.wait(lambda s: s.end is not None or s.run != run, END_TICKS_GRACE):
-            return
-        with self.state.lock:
-            if self.state.end is None and self.state.run == run:
-                self.watcher.apply(gone_record(self.state, node, reason, alive))
 
 
 def no_run_message(namespace: str, waited: float, only: str = "", others: Optional[List[Dict[str, Any]]] = None,
@@ -298,7 +224,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
                 client = ControlClient()
         except KeyboardInterrupt:  # a stop signal while registering ends the watch as one later does
             return EXIT_OK
-        liveness = RunLiveness(watcher).start()
+        liveness = RunLiveness(watcher, on_change=(lambda: printer.notes(state)) if printer else None).start()
         to = watcher.node
 
         def steer(cmd: Dict[str, Any]) -> Dict[str, Any]:

@@ -22,13 +22,17 @@ from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from coordinator.runevents import IncludeArgs, cleanup_said, status_word
 from coordinator.runrecords import parse_record, record_problem, version_problem
-from coordinator.runstream import VERSION, Sink, to_json
+from coordinator.runstream import VERSION
 from coordinator.watchruns import OtherRuns, run_matches
 from coordinator.watchstops import StopCalls, run_stop_status
 
-__all__ = ["WatchState", "SnapshotSink", "StateSink", "SNAPSHOT_VERSION"]
+__all__ = ["WatchState", "SNAPSHOT_VERSION", "SILENT_AFTER", "SILENCE_NOTES"]
 
 SNAPSHOT_VERSION = 1
+#: seconds without an answer from the run's node after which every view says that what it shows may be stale
+SILENT_AFTER = 3.0
+SILENCE_NOTES = ("run_silent", "run_answers")  # the watch's own notices of it (``what``)
+_WHY_SILENT = "its machine unreachable, or its process stopped"
 KEEP = 200  # finished calls, events and control actions kept (the latest)
 OUTCOMES = ("SUCCESS", "FAILURE")
 
@@ -71,8 +75,12 @@ class WatchState:
         self.ncalls = 0  # calls finished in the run, also the ones before a late watch and past KEEP
         #: for_each nodes' positions (id -> [element, of]), from the ticks' ``loops``
         self.loops: Dict[int, List[int]] = {}
-        #: the watch's own notices (another run started on this master): not the run's records
+        #: the watch's own notices (another run started on this master, its node silent): not the run's records
         self.notes: List[Dict[str, Any]] = []
+        self.notes_made = 0  # how many, also those past KEEP (``--plain`` prints each once)
+        #: the run's node and when it last answered the watch's question (or was first asked), monotonic
+        self.asked: Optional[Tuple[str, float]] = None
+        self.silent = False  # it has not answered for SILENT_AFTER s (said once, until it answers)
         self.events: List[Dict[str, Any]] = []
         self.control: List[Dict[str, Any]] = []
         self.blackboard: Dict[str, Any] = {}
@@ -233,10 +241,14 @@ class WatchState:
     def _aside(self, run: str, rec: Dict[str, Any]) -> None:
         """A tree record of a run not shown: kept aside, and the first one a notice of the watch's own."""
         if self.others.tree(run, rec) and self.nodes and not self.only:
-            self.notes.append({"v": VERSION, "type": "notice", "what": "other_run", "run": self.run,
-                               "t": round(self.now(), 6),
-                               "watch": True, "text": self.others.notice(run, str(self.tree.get("name") or "?"))})
-            del self.notes[:-KEEP]
+            self._note("other_run", self.others.notice(run, str(self.tree.get("name") or "?")))
+
+    def _note(self, what: str, text: str) -> None:
+        self.notes.append({"v": VERSION, "type": "notice", "what": what, "run": self.run, "t": round(self.now(), 6),
+                           "watch": True, "text": text})
+        del self.notes[:-KEEP]
+        self.notes_made += 1
+
     def _write(self, key: str, value: Any) -> None:
         self.blackboard[key] = value
         if key in self.written:
@@ -272,6 +284,46 @@ class WatchState:
             self.end = rec["end"]
         self.caught_up = True
 
+    def heard(self, node: str, answered: bool, now: Optional[float] = None) -> bool:
+        """Whether the run's node answered the watch's question (about once a second,
+        :meth:`coordinator.watchlive.RunLiveness.ask`): an idle run sends no records either, only the
+        question tells a dropped link or a stopped process from it. True when a silence of
+        :data:`SILENT_AFTER` s began or ended: a notice of the watch's own says so."""
+        with self.lock:
+            now = time.monotonic() if now is None else now
+            if self.end is not None or not self.nodes:
+                return False
+            if self.asked is None or self.asked[0] != node:  # first asked: silent from now on, if it is
+                self.asked, self.silent = (node, now), False
+                return False
+            quiet = now - self.asked[1]
+            if answered:
+                self.asked = (node, now)
+                if not self.silent:
+                    return False
+                self.silent = False
+                self._note("run_answers", "the run's node %s answers again after %d s: what is shown is current "
+                                          "again" % (node, quiet))
+            elif self.silent or quiet < SILENT_AFTER:
+                return False
+            else:
+                self.silent = True
+                self._note("run_silent", "the run's node %s has not answered for %d s (%s): what is shown may be "
+                                         "stale" % (node, quiet, _WHY_SILENT))
+            self.version += 1
+            self.changed.notify_all()
+            return True
+
+    def silence(self, now: Optional[float] = None) -> str:
+        """While the run's node has not answered for :data:`SILENT_AFTER` s or more (and the run has not
+        ended), what every view says, its seconds counting; else ''."""
+        with self.lock:
+            if not self.silent or self.asked is None or self.end is not None:
+                return ""
+            quiet = (time.monotonic() if now is None else now) - self.asked[1]
+            return "no answer from the run's node %s for %d s (%s): what is shown may be stale" % (
+                self.asked[0], quiet, _WHY_SILENT)
+
     # reading ----------------------------------------------------------------------------
     def snapshot(self, calls: int = 50, events: int = 50) -> Dict[str, Any]:
         """The present state as a versioned ``snapshot`` record (what a late watcher loads)."""
@@ -292,7 +344,8 @@ class WatchState:
     def view(self) -> Dict[str, Any]:
         """Everything a view draws, as plain data (the web page's JSON): the snapshot, with the
         watch's own notices among the events (``watch``: true), ``calls_total``, the calls as shown
-        (:meth:`shown_calls`) and each node's shown status (``words``, :meth:`label`)."""
+        (:meth:`shown_calls`), each node's shown status (``words``, :meth:`label`) and ``silent``
+        (:meth:`silence`)."""
         with self.lock:
             snap = self.snapshot(calls=KEEP, events=KEEP)
             snap.update(tree={k: v for k, v in self.tree.items() if k in ("name", "path", "run", "started", "control")},
@@ -300,7 +353,7 @@ class WatchState:
                         calls=self.shown_calls(), words={str(n.get("id")): self.label(n.get("id")) for n in self.nodes},
                         calls_total=self.calls_total, others=self.others.summary(),
                         labels={str(i): self.name(i) for i in self.args.values if self.name(i) != self._node_name(i)},
-                        pending_title=self.pending_title(),
+                        pending_title=self.pending_title(), silent=self.silence(),
                         cleanup=cleanup_said((self.end or {}).get("cleanup")),
                         now=round(self.now(), 6))   # a page opened in a long call counts from here, not from t
             return snap
@@ -435,86 +488,3 @@ class WatchState:
                     return False
                 self.changed.wait(min(left, 0.5))
             return True
-
-
-class StateSink(Sink):
-    """Feeds the run's own records to a :class:`WatchState` (the run's terminal view)."""
-
-    def __init__(self, state: WatchState):
-        self.state = state
-
-    def write(self, channel: str, text: str) -> None:
-        self.state.apply_text(text)
-
-
-class SnapshotSink(StateSink):
-    """Keeps the run's state and publishes it as a ``snapshot`` record through ``publish``
-    (a latched topic) at the end of a tick, at most every ``interval`` seconds, and at the end.
-
-    A tick that comes too soon after the last snapshot is published ``interval`` later by a
-    timer: the engine is event-driven, so while a long call runs there may be no next tick, and
-    the latched snapshot must not stay behind the run (a watcher attaching then would load it).
-
-    A snapshot is stamped with the run's time when it is taken (``clock`` is the run's clock:
-    its ``tree`` record, on the ``tree`` channel, is the run's time 0), not with its last record's:
-    a watcher attaching 3 s into a 5 s wait sees the state of that moment."""
-
-    def __init__(self, publish: Callable[[str], None], interval: float = 0.5,
-                 clock: Callable[[], float] = time.monotonic):
-        super().__init__(WatchState())
-        self.publish = publish
-        self.interval = interval
-        self.clock = clock
-        self._zero: Optional[float] = None  # clock() at the run's tree record (its t 0)
-        self._last = 0.0
-        self._lock = threading.Lock()
-        self._timer: Optional[threading.Timer] = None
-        self._closed = False
-
-    def snapshot(self) -> Dict[str, Any]:
-        """The run's state now, as a ``snapshot`` record whose ``t`` is the run's time now
-        (the time of the end for an ended run)."""
-        with self.state.lock:
-            snap = self.state.snapshot()
-            if self._zero is not None and self.state.end is None:
-                snap["t"] = max(float(snap["t"]), round(self.clock() - self._zero, 6))
-            return snap
-
-    def write(self, channel: str, text: str) -> None:
-        if channel == "tree":
-            self._zero = self.clock()
-        super().write(channel, text)
-        if channel == "control":  # while paused there are no ticks: publish now
-            with self._lock:
-                self._last = 0.0
-            self.flush()
-
-    def _publish_now(self) -> None:  # with self._lock held
-        self._last = time.monotonic()
-        self.publish(to_json(self.snapshot()))
-
-    def flush(self) -> None:
-        with self._lock:
-            if self._closed:
-                return
-            wait = self._last + self.interval - time.monotonic()
-            if wait <= 0:
-                self._publish_now()
-            elif self._timer is None:
-                self._timer = threading.Timer(wait, self._trailing)
-                self._timer.daemon = True
-                self._timer.start()
-
-    def _trailing(self) -> None:
-        with self._lock:
-            self._timer = None
-            if not self._closed:
-                self._publish_now()
-
-    def close(self) -> None:
-        with self._lock:
-            self._closed = True
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            self._publish_now()

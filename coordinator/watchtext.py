@@ -11,7 +11,7 @@ import textwrap
 from typing import Any, Dict, List, Optional
 
 from coordinator.runevents import cleanup_at, cleanup_said, status_word, steered_lines, terminal_text
-from coordinator.watchstate import WatchState
+from coordinator.watchstate import SILENCE_NOTES, WatchState
 
 __all__ = ["brief", "values_text", "cut", "share", "where_text", "pending_text", "call_text", "result_text",
            "wrap", "summary_lines"]
@@ -181,6 +181,7 @@ def summary_lines(state: WatchState) -> List[str]:
             if end.get("gone"):
                 out.append("the run did not finish (exit 3): nobody stopped its calls (a bmtree module cancels "
                            "the calls of a caller that is gone; other modules may run them to their end)")
-        for note in state.notes:
-            out.append(str(note.get("text")))
+        for note in state.notes:  # the other runs (the run's node silent for a while is over: it ended)
+            if note.get("what") not in SILENCE_NOTES:
+                out.append(str(note.get("text")))
     return [terminal_text(line) for line in out]

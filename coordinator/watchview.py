@@ -127,7 +127,8 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
     ``result``: the result line wrapped to at most a sixth of the height (``wrap``), whole
     (``full``) or left out (``none``: the watch prints it after the view); ``footer_wrap``: the footer
     (an answer to a command: a refusal lists the nodes a shared name may mean) wrapped over at most a
-    sixth of the height."""
+    sixth of the height. While the run's node does not answer the watch (:meth:`WatchState.silence`), a
+    line under the header says that what is shown may be stale."""
     with state.lock:
         name = state.tree.get("name") or "(waiting for a run on the run stream)"
         # between records the run's clock moves on: a long call makes no record until it ends
@@ -139,6 +140,9 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
             head.append("  PAUSED", style="bold magenta")
         if state.end:
             head.append("  %s" % status_word(state.end.get("status")), style=STYLE.get(str(state.end.get("status")), ""))
+        # the run's node does not answer the watch (a link down, its process stopped): over two lines at most
+        silent = state.silence()
+        stale = [Text(line, style="bold yellow") for line in wrap(silent, width, 2)] if silent else []
         pending = list(state.pending.values())
         tw = max([16] + [len(str(c.get("target"))) for c in pending])
         plines = [Text(pending_text(state, c, t_now, width, min(24, tw)),
@@ -175,7 +179,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         # budget: header, footer, result; the panels get a share, the tree the rest, and the lines
         # the tree leaves unused go back to the panels that were cut
         foot = [] if not footer else [footer] if not footer_wrap else wrap(footer, width, max(1, height // 6))
-        fixed = 1 + len(foot) + len(end)
+        fixed = 1 + len(stale) + len(foot) + len(end)
         room = max(4, height - fixed)
         sizes = [len(plines), len(written), len(ev), len(calls)]
         share = max(1, room // 3 // len(sizes)) if height < 30 else max(2, room // 2 // len(sizes))
@@ -191,7 +195,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
                 + _panel("tree blackboard", board(takes[1]), len(written), "empty")
                 + _panel("last events", ev[len(ev) - takes[2]:], len(ev), "none")
                 + _panel("call log", calls[len(calls) - takes[3]:], max(len(calls), state.calls_total), "none"))
-        out = [head] + tree + body + end + [Text(line, style="dim") for line in foot]
+        out = [head] + stale + tree + body + end + [Text(line, style="dim") for line in foot]
     out = [_safe(line) for line in out[:height]]
     for line in out:
         line.no_wrap = True
@@ -262,6 +266,20 @@ class LinePrinter:
             self.out.write(terminal_text(line) + "\n")
         self.out.flush()
 
+    def _note_lines(self, state: WatchState) -> List[str]:
+        """The watch's own notices not printed yet (another run started, the run's node silent)."""
+        if state.notes_made < self._noted:  # another run shown (--follow): its notes start anew
+            self._noted = 0
+        new = min(state.notes_made - self._noted, len(state.notes))
+        self._noted = state.notes_made
+        return ["[%7.3fs] notice    %s" % (float(n.get("t") or 0.0), n.get("text"))
+                for n in (state.notes[-new:] if new > 0 else [])]
+
+    def notes(self, state: WatchState) -> None:
+        """Print the watch's own notices that came between records (the run's node stopped answering:
+        no record comes then). Called with ``state.lock`` held."""
+        self._write(self._note_lines(state))
+
     def record(self, rec: Dict[str, Any], state: WatchState) -> None:
         kind = rec.get("type")
         t = float(rec.get("t") or 0.0)
@@ -270,10 +288,7 @@ class LinePrinter:
         def name(i: Any) -> Any:  # an include with the values of its arguments, as the other views show it
             return state.name(i) if i in plain else plain.get(i, i)
 
-        lines = []
-        self._noted = min(self._noted, len(state.notes))  # another run shown (--follow): its notes start anew
-        lines += ["[%7.3fs] notice    %s" % (float(n.get("t") or 0.0), n.get("text")) for n in state.notes[self._noted:]]
-        self._noted = len(state.notes)
+        lines = self._note_lines(state)
         if rec.get("run") and state.run and rec.get("run") != state.run:
             kind = None  # another run's record: the state keeps it aside, the notice above said so
         if not state.nodes and kind not in (None, "tree"):

@@ -3,11 +3,12 @@ by the standard library's http.server from a thread; the page (``coordinator/web
 in the package, no CDN) long-polls ``/state`` and draws the tree as an SVG graph.
 
 Live, ``/state?since=V`` answers when the :class:`WatchState` passes version V (or after
-a few seconds). For a recorded run, ``/state?at=SECONDS`` is the state at that moment of
-the log (``at=end``: its end; the page shows a timeline slider), with what the page needs to
-know of the whole run (``replay``: killed or not, when last seen alive, the failure that ended
-it). ``/control`` (POST) hands a command to the ``control`` callable, when there is one, and
-answers with its reply.
+a few seconds; every second while the run's node does not answer: its ``silent`` says for how
+long). For a recorded run, ``/state?at=SECONDS`` is the state at that moment of the log
+(``at=end``: its end; the page shows a timeline slider), with what the page needs to know of the
+whole run (``replay``: killed or not, when last seen alive, the failure that ended it).
+``/control`` (POST) hands a command to the ``control`` callable, when there is one, and answers
+with its reply.
 
 A page that goes away mid-answer (a tab closed during a long poll) is no error: nothing is
 printed. ``watch --web`` keeps serving the run's end after it, while no page has been sent it
@@ -161,7 +162,8 @@ class WebServer:
             return data
         assert self.state is not None
         since = int((q.get("since") or ["-1"])[0])
-        self.state.wait(lambda s: s.version != since, self.poll_wait)
+        # while the run's node does not answer, every second: the page says for how long
+        self.state.wait(lambda s: s.version != since, 1.0 if self.state.silence() else self.poll_wait)
         data = self.state.view()
         data.update(mode="live", steer=self.control is not None and (data.get("tree") or {}).get("control") is not False)
         if data.get("end"):

@@ -109,7 +109,8 @@ function drawTree(s) {
   let depth = 0;
   for (const k in pos) depth = Math.max(depth, pos[k][1]);
   // depth goes right, siblings go down: a behaviour tree reads like an outline
-  const stale = s.end && s.end.status === "UNFINISHED";
+  // a killed run, or one whose node does not answer the watch now: what runs is only what it was when last seen
+  const stale = (s.end && s.end.status === "UNFINISHED") || !!s.silent;
   const svg = el("svg", { width: (depth + 1) * (W + GY) + GX, height: cols * (H + GX) + GX, id: "tree",
     class: stale ? "stale" : "" });
   const xy = (i) => [GX + pos[i][1] * (W + GY), GX + pos[i][0] * (H + GX)];
@@ -240,11 +241,14 @@ const controlAnswer = (c) => "by " + (c.by || "?") + ": " + (c.ok === false ? "r
 
 function noticeClass(e) {
   const what = String(e.what || "");
-  return "notice" + (/_down$/.test(what) || what === "cleanup_failed" ? " down" : /_back$/.test(what) ? " back" : "");
+  const down = /_down$/.test(what) || what === "cleanup_failed" || what === "run_silent";
+  return "notice" + (down ? " down" : /_back$/.test(what) || what === "run_answers" ? " back" : "");
 }
 
 // a notice is about the ROS graph (the master went away...), or about the tree's cleanup
-const noticeOf = (e) => (e.what === "cleanup" || e.what === "cleanup_failed" ? "cleanup" : "ROS graph");
+// (or, the watch's own, about the run's node not answering it)
+const noticeOf = (e) => (e.what === "cleanup" || e.what === "cleanup_failed" ? "cleanup"
+  : e.what === "run_silent" || e.what === "run_answers" ? "watch" : "ROS graph");
 
 function graphAlert(s) {
   // what of the ROS graph is down now (a *_down notice not followed by its *_back), for the header
@@ -284,6 +288,10 @@ function draw(s) {
   r.textContent = s.end ? "result: " + statusWord(s.end.status) + (s.end.status === "UNFINISHED" ? "" : " in " + sec(s.end.duration))
     + (s.end.reason ? " (" + s.end.reason + ")" : "") + (s.cleanup ? "; " + s.cleanup : "")
     + (Array.isArray(s.end.steered) && s.end.steered.length ? "; steered: " + s.end.steered.join("; ") : "") : "";
+  // the run's node has not answered the watch for a while (its link down, its process stopped); the
+  // watch says it again every second, its seconds counting
+  $("stale").hidden = !s.silent || mode === "replay";
+  $("stale").textContent = s.silent || "";
   const down = graphAlert(s);
   $("alert").hidden = !down;
   $("alert").textContent = down;
@@ -349,6 +357,7 @@ function setGone(g) {
   // the watch has ended (with its run) or is unreachable: the page keeps the last state it got
   gone = g;
   $("gone").hidden = !g;
+  if (g) $("stale").hidden = true; // its seconds would stand still: the watch is what no longer answers
   if (last) $("controls").hidden = !last.steer || g;
 }
 

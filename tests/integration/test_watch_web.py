@@ -85,7 +85,7 @@ def with_a_notice(env, tmp_path):
 
 def test_the_page_follows_a_sim_run_and_scrubs_its_recording(tmp_path):
     driver = browser(tmp_path)  # first: its start-up is slow, the trip is not endless
-    run = SimRun(tmp_path, tree=LONG_TREE, world=slow_world(tmp_path, speed=0.3))
+    run = SimRun(tmp_path, tree=LONG_TREE, world=slow_world(tmp_path, speed=0.4))  # ~22 s of its 30
     web = None
     try:
         run.out.wait_for("RUNNING   go to the kitchen")

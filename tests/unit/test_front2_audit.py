@@ -13,7 +13,8 @@ import pytest
 from coordinator.cli import main
 from coordinator.errors import TreeErrors
 from coordinator.testing.scenario import load_scenario_file, run_scenarios
-from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchsinks import SnapshotSink
+from coordinator.watchstate import WatchState
 from coordinator.watchview import LinePrinter
 from modules.sim.world import DEFAULT_WORLD, World, WorldError
 from tests.conftest import DATA, ROOT

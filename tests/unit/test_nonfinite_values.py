@@ -13,7 +13,8 @@ import pytest
 from coordinator.runlog import read_log
 from coordinator.runrecords import parse_record
 from coordinator.runstream import NONFINITE, to_json
-from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchsinks import SnapshotSink
+from coordinator.watchstate import WatchState
 from coordinator.watchtext import brief, values_text
 from coordinator.webview import WebServer, replay_states
 from tests.unit.test_recording import recorded

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from coordinator.watch import RunLiveness
+from coordinator.watchlive import RunLiveness
 
 
 def test_the_watch_asks_a_silent_master_for_a_node_with_a_time_limit(monkeypatch):

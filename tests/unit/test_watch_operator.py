@@ -13,8 +13,10 @@ import types
 from rich.console import Console
 
 from coordinator.runstream import RunStream, Sink
-from coordinator.watch import RosWatcher, gone_record
-from coordinator.watchstate import SnapshotSink, StateSink, WatchState
+from coordinator.watch import RosWatcher
+from coordinator.watchlive import gone_record
+from coordinator.watchsinks import SnapshotSink, StateSink
+from coordinator.watchstate import WatchState
 from coordinator.watchview import LinePrinter, render
 from tests.conftest import DATA
 

@@ -7,7 +7,8 @@ import json
 
 from rich.console import Console
 
-from coordinator.watchstate import SnapshotSink, WatchState
+from coordinator.watchsinks import SnapshotSink
+from coordinator.watchstate import WatchState
 from coordinator.watchview import LinePrinter, render, tree_lines
 
 
