@@ -448,10 +448,12 @@ def make_parser() -> argparse.ArgumentParser:
     rp.add_argument("--bind", type=bind_address, default="127.0.0.1", help="address of the page with --web (default loopback)")
     rp.add_argument("--port", type=PORT, default=8765, help="port of the page with --web (0: any free one)")
     rp.set_defaults(func=cmd_replay)
+    from coordinator.btimport import add_import_parser
     from coordinator.watch import add_control_parser, add_watch_parser
 
     add_watch_parser(sub)
     add_control_parser(sub)
+    add_import_parser(sub)
     return p
 
 

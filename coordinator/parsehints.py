@@ -106,8 +106,9 @@ def nest_hint(raw: LMap, first: str, second: str) -> str:
     return "nest the %s%s under %s" % (inner, " and its %s" % ", ".join(moved) if moved else "", where)
 
 
-XML_HINT = ("this looks like BehaviorTree.CPP XML (<root BTCPP_format=…>); bmtree trees are YAML: see trees/README.md "
-            "(its 'Nodes' section names what each BehaviorTree.CPP node is in bmtree)")
+XML_HINT = ("this looks like BehaviorTree.CPP XML (<root BTCPP_format=…>); bmtree trees are YAML: 'bmtree import "
+            "FILE.xml -o FILE.yaml' converts it, and trees/README.md's 'Nodes' section names what each BehaviorTree.CPP "
+            "node is in bmtree")
 
 
 def looks_like_xml(text: str) -> bool:

@@ -106,8 +106,9 @@ def test_a_behaviortree_cpp_xml_file_is_named_as_such(tmp_path, capsys):
     path.write_text('<?xml version="1.0"?>\n<root BTCPP_format="4">\n  <BehaviorTree ID="Main"/>\n</root>\n')
     assert bmtree(["check", str(path)]) == 2
     assert capsys.readouterr().err.splitlines() == [
-        "t.xml:1:1: this looks like BehaviorTree.CPP XML (<root BTCPP_format=…>); bmtree trees are YAML: see "
-        "trees/README.md (its 'Nodes' section names what each BehaviorTree.CPP node is in bmtree)"]
+        "t.xml:1:1: this looks like BehaviorTree.CPP XML (<root BTCPP_format=…>); bmtree trees are YAML: 'bmtree "
+        "import FILE.xml -o FILE.yaml' converts it, and trees/README.md's 'Nodes' section names what each "
+        "BehaviorTree.CPP node is in bmtree"]
 
 
 @pytest.mark.parametrize("written", ['"{obj_pos}"', '"$obj_pos"', "{obj_pos}"])

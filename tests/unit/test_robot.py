@@ -449,11 +449,13 @@ def test_launch_file_path_args_resolve_with_roslaunch_substitution(monkeypatch):
 
     # module.launch: the options on the command line (a node respawned after a master restart finds no parameters)
     assert values("module", module="g", definition="defs/g.json", **{"class": "g.py:G"}) == [
-        "--definition '/home/me/robot/defs/g.json' --class '/home/me/robot/g.py:G' --max-bytes 1048576 _basic_mod:=g",
-        "--definition '/home/me/robot/defs/g.json' _basic_mod:=g "]
-    assert values("module", module="g", definition="/opt/g.json", bridge_args="-x 1", **{"class": "my.g:G"}) == [
-        "--definition '/opt/g.json' --class 'my.g:G' --max-bytes 1048576 _basic_mod:=g",  # a module: as given
-        "--definition '/opt/g.json' _basic_mod:=g -x 1"]
+        "--definition '/home/me/robot/defs/g.json' --class '/home/me/robot/g.py:G' --max-bytes 1048576 "
+        "--unreachable-caller 0 _basic_mod:=g",
+        "--definition '/home/me/robot/defs/g.json' --unreachable-caller 0 _basic_mod:=g "]
+    assert values("module", module="g", definition="/opt/g.json", bridge_args="-x 1", unreachable_caller="5",
+                  **{"class": "my.g:G"}) == [
+        "--definition '/opt/g.json' --class 'my.g:G' --max-bytes 1048576 --unreachable-caller 5 _basic_mod:=g",
+        "--definition '/opt/g.json' --unreachable-caller 5 _basic_mod:=g -x 1"]   # a module: as given
     assert "--class '/opt/g.py:G'" in values("module", module="g", definition="g.json", **{"class": "/opt/g.py:G"})[0]
     assert resolved("run", tree="trees/t.yaml", set="object=book", modules="defs") == {
         "coordinator args": "run -q /home/me/robot/trees/t.yaml --set object=book", "modules value": "/home/me/robot/defs"}
