@@ -10,19 +10,23 @@ type does not have (``coordinator.values.follow``); a count, duration or ``for_e
 that cannot be one (``coordinator.nodes.base.param_type_errors``). A key is typed only when all its
 writers give one type: a node's definition gives it, or the reference whose value it copies (a ``set``
 or an include argument of ``$pose``, ``for_each``'s element: the list's element type); a tree input, a
-literal or an expression gives none. A tree input that nothing else writes is checked, as a count,
-duration or list, with the literals it is given (its default, the includes' arguments), and in the call
-inputs it is passed to with those literals (:mod:`coordinator.inputvalues`).
+literal or an expression gives none. What a ``set`` of a literal, a template or an expression writes has a
+kind (a number, text...), which the expressions are checked with when every writer of the key agrees on it
+(:mod:`coordinator.keykinds`; a tree input may be given any value). A tree input that nothing else writes
+is checked, as a count, duration or list, with the literals it is given (its default, the includes'
+arguments), and in the call inputs it is passed to with those literals (:mod:`coordinator.inputvalues`).
 """
 from __future__ import annotations
 
 from typing import Any, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
 from coordinator.errors import Pos, TreeError
+from coordinator.exprtypes import static_kind
+from coordinator.keykinds import copied_kind
 from coordinator.nodes.base import SET_ARG, Flow
-from coordinator.refs import Computed, Ref
+from coordinator.refs import Computed, Ref, kind_of
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode, kinds_in, nodes_of, top_of
-from coordinator.values import Binding, KeyTypes, Template, ref_type
+from coordinator.values import Binding, ExprValue, KeyTypes, Template, ref_kind, ref_type
 
 __all__ = ["check_flow", "check_types", "key_types"]
 
@@ -51,16 +55,18 @@ def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]], given: Froze
     """:func:`key_types`, with the nodes that bind a file's inputs (includes) and the writers of the keys
     that are inputs of a file; ``values``: those the run gives (``--set``), bound as such."""
     types = KeyTypes((k, {None}) for k in tree.inputs)
+    kinds = types.kinds   # for each writer that gives no ROS type, one entry: the kind of its value, or None
+    kinds.update((k, {None}) for k in tree.inputs)   # (any value may be given)
     nodes = nodes_of(top_of(tree)) if nodes is None else nodes
-    kinds = kinds_in(nodes)
-    binders = [n for n in nodes if n.nodekind.own_binds] if any(nk.own_binds for nk in kinds) else []
+    node_kinds = kinds_in(nodes)
+    binders = [n for n in nodes if n.nodekind.own_binds] if any(nk.own_binds for nk in node_kinds) else []
     inputs = set(tree.inputs)   # the keys that are inputs of a file
     for b in binders:
         bound = b.nodekind.binds(b)
         inputs.update(bound[0].inputs if bound is not None else ())
     writers: Dict[str, List[TreeNode]] = {}   # of those keys
-    copies: List[Tuple[str, Ref]] = []
-    if any(nk.own_writes for nk in kinds):
+    copies: List[Tuple[str, Any]] = []
+    if any(nk.own_writes for nk in node_kinds):
         for n in nodes:
             nk = n.nodekind
             written = nk.writes(n) if nk.own_writes else None   # the base writes nothing
@@ -68,11 +74,13 @@ def _key_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]], given: Froze
                 continue
             like = nk.copies(n) if nk.own_copies else None
             for key, rostype in written.items():
-                if like and key in like:
+                if like and key in like and isinstance(like[key], (Ref, ExprValue)):
                     copies.append((key, like[key]))
                     types.setdefault(key, set())
                 else:
                     types.setdefault(key, set()).add(rostype)
+                    if rostype is None:
+                        kinds.setdefault(key, set()).add(_literal_kind(like[key]) if like and key in like else None)
                 if key in inputs:
                     writers.setdefault(key, []).append(n)
         if copies:
@@ -115,27 +123,49 @@ class _Choices:
         return why[0][len(said):] if why[0].startswith(said) else why[0]
 
 
-def _settle(types: KeyTypes, copies: List[Tuple[str, Ref]]) -> None:
-    """Add the type each copy gives its key: the type its reference holds. A reference into a key only
-    copies write waits until one of them gave a type (a loop of copies of one value holds its type);
-    keys that still have none at the end (copies of each other only) are not known."""
+def _settle(types: KeyTypes, copies: List[Tuple[str, Any]]) -> None:
+    """Add the type each copy gives its key: the type its reference holds (with, when it has none, the kind
+    of the key it reads), or for an expression the kind of its value. A copy of a key only copies write waits
+    until one of them gave a type (a loop of copies of one value holds its type); keys that still have none at
+    the end (copies of each other only) are not known. An expression of no known kind with an operand of the
+    wrong kind (an error of the tree) fails when it runs: it gives nothing (``who + 1`` after ``who: ana``)."""
+    kinds = types.kinds
     while True:
         changed = True
         while changed:
             changed = False
-            for key, ref in copies:
-                source = types.get(ref.key)
-                if source is not None and not source:
+            for key, value in copies:
+                reads = [value] if isinstance(value, Ref) else value.refs
+                if any(types.get(r.key) is not None and not types[r.key] for r in reads):
                     continue
-                t = ref_type(types, ref)
-                if t not in types[key]:
+                if isinstance(value, Ref):
+                    t = ref_type(types, value)
+                    kind = copied_kind(types, value) if t is None else None
+                else:
+                    errors: List[Tuple[int, str]] = []
+                    t, kind = None, static_kind(value.expr.tree, lambda r: ref_kind(types, r), errors)
+                    if kind is None and errors:
+                        continue
+                    kind = None if kind == "null" else kind
+                if t not in types[key] or (t is None and kind not in kinds.get(key, ())):
                     types[key].add(t)
+                    if t is None:
+                        kinds.setdefault(key, set()).add(kind)
                     changed = True
         stuck = [key for key, _ in copies if not types[key]]
         if not stuck:
             return
         for key in stuck:
             types[key].add(None)
+            kinds.setdefault(key, set()).add(None)
+
+
+def _literal_kind(value: Any) -> Optional[str]:
+    """The kind of a literal or a ``{…}`` template a ``set`` writes (None for a mapping and null: not checked)."""
+    if isinstance(value, Template):
+        return "string"
+    kind = None if isinstance(value, Computed) else kind_of(value)
+    return kind if kind in ("number", "string", "bool", "list") else None
 
 
 def _literal(value: Any) -> bool:

@@ -15,6 +15,10 @@ from comm.errors import did_you_mean
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import Expr, ExprError, check_text_size, text_of
 from coordinator.exprtypes import never_true
+from coordinator.keykinds import KIND_WORDS, agreed_kind, kind_of_type
+from coordinator.keykinds import NUMBERS as _NUMBERS  # (coordinator.inputvalues reads them here)
+from coordinator.keykinds import field_type as _field_type
+from coordinator.keykinds import stands_for as _stands_for
 from coordinator.refs import Computed, Ref, RefError, parse_ref, refs_in
 
 __all__ = ["Binding", "ExprValue", "KeyTypes", "Template", "at_value_errors", "expr_errors", "follow", "held", "literal", "loose_dollars",
@@ -221,66 +225,21 @@ def loose_dollars(value: Any) -> List[str]:
     return []
 
 
-# static kinds -------------------------------------------------------------------------------
-_NUMBERS = {"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32", "float64",
-            "byte", "char"}
-
-
-def _kind_of_type(t: str) -> Optional[str]:
-    from comm.rostypes import resolve_type
-
-    if t.endswith("]"):
-        return "list"
-    if t in _NUMBERS:
-        return "number"
-    if t == "string":
-        return "string"
-    if t == "bool":
-        return "bool"
-    cls = resolve_type(t)
-    if cls is None:
-        return None
-    if len(cls.__slots__) == 1:
-        return _kind_of_type(cls._slot_types[0])
-    return "message"
-
-
-def _field_type(t: str, step: Any) -> Optional[str]:
-    from comm.rostypes import resolve_type
-
-    if isinstance(step, int):
-        return t[:t.rindex("[")] if t.endswith("]") else None
-    cls = resolve_type(t)
-    if cls is None or step not in cls.__slots__:
-        return None
-    return cls._slot_types[list(cls.__slots__).index(step)]
-
-
-def _stands_for(t: str) -> str:
-    """The type a value of type ``t`` is indexed as: a one-field message stands for its field (as
-    :func:`coordinator.refs.unwrap` makes it when running)."""
-    from comm.rostypes import resolve_type
-
-    for _ in range(8):
-        cls = resolve_type(t)
-        if cls is None or len(cls.__slots__) != 1:
-            break
-        t = cls._slot_types[0]
-    return t
-
-
 Binding = Tuple[Any, str, Optional[Pos]]
 """A literal a tree input is given: the value, the include argument's name ('' for the input's default),
 and where the include that gives it is (None: the default of the tree checked)."""
 
 
 class KeyTypes(dict):  # type: ignore[type-arg]
-    """For each tree key, the ROS types written to it (None: not known statically); and ``bound``: for a
-    key that only its files' inputs give (no node but an include of that file writes it), the literals
-    it starts with in each file, by the path of the file (``coordinator.dataflow.key_types``)."""
+    """For each tree key, the ROS types written to it (None: not known statically); ``kinds``: for a key
+    some writers of which give no ROS type, what each of those gives (a ``set``: the kind of its value; see
+    :mod:`coordinator.keykinds`); and ``bound``: for a key that only its files' inputs give (no node but an
+    include of that file writes it), the literals it starts with in each file, by the path of the file
+    (``coordinator.dataflow.key_types``)."""
 
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
+        self.kinds: Dict[str, Set[Optional[str]]] = {}
         self.bound: Dict[str, Dict[str, List[Binding]]] = {}
         # why_not(key, text, contains): why $key can never be (contain) that text, '' when it may or is not
         # known (a call's status: coordinator.dataflow.key_types), for the comparisons of expressions
@@ -309,11 +268,16 @@ def follow(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Tuple[Optional[str
     type its key holds ('' when it can, or when that is not known).
 
     Only what surely fails when running is said: a field that the message type does not have, a field of
-    text, a number or a list, an index into a message that is not a list; a key whose writers do not
-    all give one known type, or a type not known here (``time``, a message not installed), is left alone.
+    text, a number or a list, an index into a message that is not a list (also of a key only ``set`` writes,
+    whose values are of one kind); a key whose writers do not all give one known type, or a type not known
+    here (``time``, a message not installed), is left alone.
     """
     known = types.get(ref.key)
     if not known or len(known) != 1 or None in known:
+        if ref.path and known == {None}:
+            kind, plain = agreed_kind(types, ref.key)
+            if plain and kind is not None:
+                return None, _plain_path(kind, ref)
         return None, ""
     t: str = next(iter(known))
     if not ref.path:
@@ -338,8 +302,7 @@ def _follow(t: str, ref: Ref) -> Tuple[Optional[str], str]:
                 t = inner[:inner.rindex("[")]
                 continue
             if inner in _NUMBERS or inner == "bool" or _message(inner):
-                return None, "reads %s, but %s holds %s, which is not a list" % (_shown(ref, i + 1), _shown(ref, i),
-                                                                                   held(t))
+                return None, _not_a_list(ref, i, held(t))
             return None, ""   # text (indexed by character), time, a type not known here
         cls = _message(t)
         if cls is not None:
@@ -355,14 +318,28 @@ def _follow(t: str, ref: Ref) -> Tuple[Optional[str], str]:
                                                  " (it has no fields)")
             return None, "reads %s, but %s holds %s, which has no field %r%s" % (
                 _shown(ref, i + 1), _shown(ref, i), held(t), step, hint)
-        if t.endswith("]"):
-            return None, "reads %s, but %s holds %s, which has no fields (an element is %s[0])" % (
-                _shown(ref, i + 1), _shown(ref, i), held(t), _shown(ref, i))
-        if t in _NUMBERS or t in ("string", "bool"):
-            return None, "reads %s, but %s holds %s, which has no fields" % (_shown(ref, i + 1), _shown(ref, i),
-                                                                             held(t))
+        if t.endswith("]") or t in _NUMBERS or t in ("string", "bool"):
+            return None, _no_fields(ref, i, held(t), t.endswith("]"))
         return None, ""   # time, duration, a type not known here
     return t, ""
+
+
+def _plain_path(kind: str, ref: Ref) -> str:
+    """Why the first step of ``ref``'s path cannot be followed in a plain value of ``kind`` ('' when it can,
+    or what it reaches is not known: a character of text, an element of a list)."""
+    said = KIND_WORDS.get(kind, "")
+    if isinstance(ref.path[0], int):
+        return _not_a_list(ref, 0, said) if kind in ("number", "bool") else ""
+    return _no_fields(ref, 0, said, kind == "list") if kind in ("number", "bool", "string", "list") else ""
+
+
+def _not_a_list(ref: Ref, i: int, said: str) -> str:
+    return "reads %s, but %s holds %s, which is not a list" % (_shown(ref, i + 1), _shown(ref, i), said)
+
+
+def _no_fields(ref: Ref, i: int, said: str, a_list: bool) -> str:
+    return "reads %s, but %s holds %s, which has no fields%s" % (
+        _shown(ref, i + 1), _shown(ref, i), said, " (an element is %s[0])" % _shown(ref, i) if a_list else "")
 
 
 def _message(t: str) -> Any:
@@ -378,28 +355,32 @@ def ref_type(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Optional[str]:
 
 
 def ref_kind(types: Dict[str, Set[Optional[str]]], ref: Ref) -> Optional[str]:
-    """What a reference will hold (number, string, bool, list, message), when the definitions say."""
+    """What a reference will hold (number, string, bool, list, message), when the definitions or the values
+    ``set`` writes say: the kind of its ROS type, or, for a key whose writers give several types or none, the
+    kind they all agree on (:func:`coordinator.keykinds.agreed_kind`)."""
     t = ref_type(types, ref)
-    return _kind_of_type(t) if t is not None else None
+    if t is not None:
+        return kind_of_type(t)
+    return None if ref.path else agreed_kind(types, ref.key)[0]
 
 
 def value_kind(types: Dict[str, Set[Optional[str]]], value: Any) -> Tuple[Optional[str], str]:
     """What a parameter's value (a reference or an expression) will hold, when the definitions say:
     its kind (number, string, bool, list, message, null) and how to say it (``$answer holds text
-    (std_msgs/String)``, ``$(a + "s") is text``); (None, '') when not known."""
+    (std_msgs/String)``, ``$(a + "s") is text``, ``$n holds a number`` after ``set: {n: 0}``); (None, '')
+    when not known."""
     if isinstance(value, Ref):
         t = ref_type(types, value)
-        return (_kind_of_type(t), "%s holds %s" % (value, held(t))) if t is not None else (None, "")
+        if t is not None:
+            return kind_of_type(t), "%s holds %s" % (value, held(t))
+        k = ref_kind(types, value)
+        return (k, "%s holds %s" % (value, KIND_WORDS.get(k, "a " + k))) if k is not None else (None, "")
     if isinstance(value, ExprValue):
         k = value.expr.kind(lambda r: ref_kind(types, r))
-        return (k, "%s is %s" % (value, _KIND_WORDS.get(k, "a " + k))) if k is not None else (None, "")
+        return (k, "%s is %s" % (value, KIND_WORDS.get(k, "a " + k))) if k is not None else (None, "")
     if isinstance(value, Template):
         return "string", "%r is text" % value.text
     return None, ""
-
-
-_KIND_WORDS = {"number": "a number", "string": "text", "bool": "true or false", "list": "a list",
-               "message": "a message", "null": "null"}
 
 
 def ref_errors(refs: List[Ref], offsets: List[int], types: Dict[str, Set[Optional[str]]]) -> List[Tuple[int, str]]:

@@ -124,8 +124,9 @@ def param_type_errors(value: Any, where: Any, types: Dict[str, set], type_name: 
     reference or an expression whose type the definitions give (``$answer`` after ``speech.listen``
     wrote it: text, not seconds); and a constant expression worked out when the tree loaded
     (``$(2.5)``: not a count). A tree input ``$key`` that nothing but its default or its includes'
-    arguments writes is checked with those literals (``tries: {default: three}``: not a count); another
-    value whose type is not known (a key a ``set`` of a literal writes) is left to :func:`run_param`.
+    arguments writes is checked with those literals (``tries: {default: three}``: not a count); a key that
+    only ``set`` writes, by its kind (``set: {n: two}``: text, not a count); another value (a number a ``set``
+    writes: 0 is no count) is left to :func:`run_param`.
 
     ``where``: the value's position, or a function that makes it (read only when there is an error);
     ``limit``: the most elements a tree input's literal list may have (``for_each``'s ``max``)."""
@@ -377,9 +378,11 @@ class NodeKind(abc.ABC):
         """Tree keys written on SUCCESS, each with its ROS type when known (for the type checks)."""
         return {}
 
-    def copies(self, node: TreeNode) -> Dict[str, Ref]:
-        """Keys among ``writes`` given the value of a reference the node reads, each with that reference
-        (a ``set`` of ``$pose``, ``for_each``'s element ``$list[0]``): the key holds the type it holds."""
+    def copies(self, node: TreeNode) -> Dict[str, Any]:
+        """Keys among ``writes`` given a value written in the tree, each with that value: a reference the node
+        reads (a ``set`` of ``$pose``, ``for_each``'s element ``$list[0]``), the key holds the type it holds; a
+        ``set``'s literal, template or expression, the key holds a value of its kind
+        (``coordinator.dataflow``)."""
         return {}
 
     def binds(self, node: TreeNode) -> Optional[Tuple[TreeFile, Dict[str, Any]]]:

@@ -17,6 +17,7 @@ from comm.rostypes import resolve_type
 from comm.typewords import ValueMisfit, misfit_text, said_of, type_words
 from coordinator.context import SUCCESS_FALSE, CallRecord, RecordStatus, success_false_said
 from coordinator.errors import Pos, TreeError
+from coordinator.keykinds import kind_misfit
 from coordinator.nodes.base import (
     Flow,
     NodeKind,
@@ -341,6 +342,9 @@ class CallKind(NodeKind):
             try:
                 sample = resolve(value, lambda key: _sample(types, key))
             except (_Unknown, RefError):
+                said = kind_misfit(q.rostype, value, types)   # a key only `set` writes: its kind is known
+                if said:
+                    errors.append(TreeError(at, "input %r %s" % (q.name, said)))
                 continue
             try:
                 q.convert(sample)

@@ -2,7 +2,8 @@
 references into a key's fields (``$g.positon`` after ``g`` got a ``geometry_msgs/Pose``), counts,
 durations and ``for_each`` lists given as references or expressions (``wait: $answer`` after
 ``speech.listen`` wrote text), and ``recall`` names (``arm/pick/grasp_pos``), whose outputs also
-give the recalled keys their types. Keys whose type is not known (tree inputs, ``set``) stay unchecked."""
+give the recalled keys their types. Keys whose type is not known (tree inputs) stay unchecked; what a ``set``
+writes has a kind (``tests/unit/test_check_set_kinds.py``)."""
 from __future__ import annotations
 
 import json
@@ -213,6 +214,8 @@ def test_a_call_whose_input_misses_a_field_fails_with_did_you_mean_when_running(
     ("- timeout: $(1 - 1)\n  child: {wait: 0}",
      "t.yaml:14:16: duration of timeout is 0, not a positive number of seconds"),
     ("- for_each: $(\"abc\")\n  as: a\n  child: {wait: 0}", "t.yaml:14:17: for_each is 'abc', not a list"),
+    # what a set writes has a kind (coordinator.keykinds)
+    ("- set: {n: two}\n- retry: $n\n  child: {wait: 0}", "t.yaml:15:14: count of retry $n holds text, not an integer >= 1"),
 ])
 def test_a_count_duration_or_list_of_a_known_wrong_type_is_an_error(tmp_path, defs, node, expected):
     assert found(tmp_path, defs, node) == [expected]
@@ -226,7 +229,6 @@ def test_a_count_duration_or_list_of_a_known_wrong_type_is_an_error(tmp_path, de
     "- for_each: $js.name\n  as: joint\n  child: {wait: 0}",
     "- for_each: [$answer, $g.position.x]\n  as: v\n  child: {wait: 0}",
     "- retry: $(6 / 2)\n  child: {wait: 0}",                 # 3.0: taken as 3
-    "- set: {n: two}\n- retry: $n\n  child: {wait: 0}",      # set: type not known (the run says it)
     "- wait: $pose_in",                                       # a tree input: type not known
     "- for_each: $(pose_in)\n  as: v\n  child: {wait: 0}",
 ])
