@@ -50,7 +50,7 @@ class Stopper(BasicModule):
 '''
 
 
-def _setup(tmp_path, ros_graph):
+def _setup(tmp_path, ros_graph, *options):
     out = [{"Name": "success", "Data-type": "std_msgs/Bool", "Description": "done"}]
     fns = [{"Name": "work", "Exec-condition": "", "Description": "sleeps, then stops the motors",
             "Input-params": [{"Name": "seconds", "Data-type": "std_msgs/Float64", "Description": "s"}],
@@ -63,7 +63,7 @@ def _setup(tmp_path, ros_graph):
     (tmp_path / "stopper.py").write_text(STOPPER_PY)
     marker = tmp_path / "marker.txt"
     proc = ros_graph.start_node(["-m", "modules.node", "--definition", str(definition), "--class",
-                                 str(tmp_path / "stopper.py") + ":Stopper"], "/bm_stopper",
+                                 str(tmp_path / "stopper.py") + ":Stopper", *options], "/bm_stopper",
                                 env={"STOPPER_MARKER": str(marker)})
     wait_announced("stopper")
     return proc, definition, marker

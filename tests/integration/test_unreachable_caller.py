@@ -14,31 +14,11 @@ import re
 import signal
 
 from tests.conftest import until
-from tests.integration.conftest import wait_announced
-from tests.integration.test_module_stop_midcall import STOPPER_PY, _Run
-
-
-def _start(tmp_path, ros_graph, *options):
-    out = [{"Name": "success", "Data-type": "std_msgs/Bool", "Description": "done"}]
-    fns = [{"Name": "work", "Exec-condition": "", "Description": "sleeps, then stops the motors",
-            "Input-params": [{"Name": "seconds", "Data-type": "std_msgs/Float64", "Description": "s"}],
-            "Output-params": out},
-           {"Name": "stuck", "Exec-condition": "", "Description": "ignores its cancel", "Input-params": [],
-            "Output-params": out}]
-    definition = tmp_path / "stopper.json"
-    definition.write_text(json.dumps({"Basic Module": "stopper", "Brief Description": "stops mid-call",
-                                      "Hardware Required": [], "Functions": fns}))
-    (tmp_path / "stopper.py").write_text(STOPPER_PY)
-    marker = tmp_path / "marker.txt"
-    ros_graph.start_node(["-m", "modules.node", "--definition", str(definition), "--class",
-                          str(tmp_path / "stopper.py") + ":Stopper", *options], "/bm_stopper",
-                         env={"STOPPER_MARKER": str(marker)})
-    wait_announced("stopper")
-    return definition, marker
+from tests.integration.test_module_stop_midcall import _Run, _setup
 
 
 def test_the_call_of_a_coordinator_that_stopped_answering_is_cancelled_and_said_why(tmp_path, ros_graph):
-    definition, marker = _start(tmp_path, ros_graph, "--unreachable-caller", "2")
+    _proc, definition, marker = _setup(tmp_path, ros_graph, "--unreachable-caller", "2")
     run = _Run(tmp_path, definition, "stopper.work\n  inputs: {seconds: 30}")
     log = ros_graph.log_path("/bm_stopper")
     try:
