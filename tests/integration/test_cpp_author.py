@@ -118,6 +118,7 @@ class Author : public bmtree::BasicModule {
         elsewhere = std::this_thread::get_id() != me;
         ++calls;
       });
+      ROS_INFO("author: hooked hook set");  // a cancel before this runs the hook here, at once
       // stops on the hook alone: a driver's own loop that never looks at cancelled()
       while (calls.load() == 0 && since(start) < seconds.data) {
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -380,7 +381,7 @@ def test_on_cancel_runs_once_in_the_cancel_thread_and_call_id_names_the_call(fak
     bridge, log = fake_bridge
     bridge.value(10.0)
     bridge.call("hooked", ["/author/float64"], "hook-1")
-    log.wait("author: hooked started")
+    log.wait("author: hooked hook set")   # (a cancel that came before would run the hook in the call's thread)
     bridge.cancel("hook-1")
     time.sleep(0.1)
     bridge.cancel("hook-1")  # a cancel sent twice: the callback still runs once
