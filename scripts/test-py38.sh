@@ -26,7 +26,7 @@ if [ ! -f "$stamp" ] || [ setup.py -nt "$stamp" ] || [ scripts/test-py38.sh -nt 
   echo "py38: installing py_trees 2.2.x and the test dependencies"
   # the package's own requirements (setup.py), py_trees held at the oldest supported 2.2.x
   "$V/bin/python" -m pip install -q --disable-pip-version-check "py_trees>=2.2,<2.3" -e . \
-    pytest rospkg catkin_pkg defusedxml 2>&1 | grep -v "^WARNING: Location" || true
+    pytest pytest-xdist rospkg catkin_pkg defusedxml 2>&1 | grep -v "^WARNING: Location" || true
   touch "$stamp"
 fi
 site=$("$V/bin/python" -c 'import site; print(site.getsitepackages()[0])')
@@ -38,4 +38,9 @@ for p in catkin genmsg genpy roscpp rosgraph rosgraph_msgs roslaunch rosmaster r
 done
 echo "$ros" > "$site/bmtree-ros.pth"
 "$V/bin/python" -c 'import sys, py_trees.version as v; print("py38: Python %s, py_trees %s" % (sys.version.split()[0], v.__version__))'
-exec "$V/bin/python" -m pytest -q -p no:cacheprovider tests/unit
+# on both cores, as the Python 3.11 suite (TEST_WORKERS=0: serially)
+workers=${TEST_WORKERS:-2}
+if [ "$workers" = 0 ]; then
+  exec "$V/bin/python" -m pytest -q -p no:cacheprovider tests/unit
+fi
+exec "$V/bin/python" -m pytest -q -p no:cacheprovider -n "$(( workers < 2 ? workers : 2 ))" tests/unit
