@@ -172,7 +172,8 @@ class Converter:
         n = len(el.children)
         if n < least or (most and n > most):
             want = ("%d" % least if least == most else "%d or %d" % (least, most)) if most else "at least %d" % least
-            self.err(el.pos, "%s takes %s child%s, it has %d" % (kind, want, "" if most == 1 else "ren", n))
+            one = (most or least) == 1   # "exactly 1", "at least 1": one child; otherwise children
+            self.err(el.pos, "%s takes %s child%s, it has %d" % (kind, want, "" if one else "ren", n))
             return None
         kids = [c for c in done if c is not None]
         return kids if len(kids) == n else None

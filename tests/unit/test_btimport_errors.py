@@ -150,3 +150,10 @@ def test_cli_writes_only_a_checked_tree(tmp_path, capsys):
     assert capsys.readouterr().err.endswith("--map takes ID=module.function (e.g. --map GoTo=navigation.go_to), "
                                             "got 'Grab'\n")
     assert main(["import", str(tmp_path / "none.xml")]) == 2
+
+
+def test_a_count_of_children_is_said_in_words_that_fit_it(tmp_path, sim_defs):
+    xml = ('<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence><Sequence/><Inverter/>'
+           '<Inverter><Sequence/></Inverter></Sequence></BehaviorTree></root>')
+    said = [m for _l, _c, m in problems(tmp_path, xml, sim_defs)]
+    assert "Sequence takes at least 1 child, it has 0" in said and "Inverter takes 1 child, it has 0" in said
