@@ -149,16 +149,24 @@ class Converter:
             return None
         return self.action(el, kind, scope)
 
+    def skipped(self, el: Element, k: str, what: str) -> bool:
+        """True for an attribute that is not a port: Groot's bookkeeping (ignored), or a pre/post condition
+        (reported: not converted)."""
+        if k in _IGNORED:
+            return True
+        if k.lower() in CONDITIONS:
+            self.err(el.at(k), "%s of %s (a BehaviorTree.CPP pre/post condition) is not converted: write %s"
+                     % (k, what, CONDITIONS[k.lower()]))
+            return True
+        return False
+
     def attrs(self, el: Element, kind: str, allowed: Tuple[str, ...]) -> Dict[str, str]:
         """The attributes of a built-in node, each not in ``allowed`` reported."""
         out = {}
         for k, v in el.attrs.items():
-            if k in _IGNORED:
+            if self.skipped(el, k, kind):
                 continue
-            if k.lower() in CONDITIONS:
-                self.err(el.at(k), "%s of %s (a BehaviorTree.CPP pre/post condition) is not converted: write %s"
-                         % (k, kind, CONDITIONS[k.lower()]))
-            elif k not in allowed:
+            if k not in allowed:
                 self.err(el.at(k), "%s has no attribute %r (%s)%s" % (
                     kind, k, "it takes %s" % ", ".join(allowed) if allowed else "it takes only name",
                     did_you_mean(k, allowed)))
@@ -233,11 +241,7 @@ class Converter:
         outputs: Dict[str, str] = {}
         said = "%s %r (%s)" % (word, node_id, fn.qualified)
         for k, v in el.attrs.items():
-            if k in _IGNORED:
-                continue
-            if k.lower() in CONDITIONS:
-                self.err(el.at(k), "%s of %s (a BehaviorTree.CPP pre/post condition) is not converted: write %s"
-                         % (k, node_id, CONDITIONS[k.lower()]))
+            if self.skipped(el, k, node_id):
                 continue
             p_in, p_out, ref = fn.input(k), fn.output(k), key_ref(v)
             if p_in is None and p_out is None:
