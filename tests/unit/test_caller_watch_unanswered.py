@@ -39,7 +39,7 @@ def _watching(node, unanswered):
 def test_a_caller_that_stops_answering_is_lost_after_the_limit_saying_so(node):
     dog, got = _watching(node, 1.0)
     try:
-        node.proc.send_signal(signal.SIGSTOP)
+        node.stop()
         stopped = time.monotonic()
         until(lambda: got, timeout=10.0)
         waited = time.monotonic() - stopped
@@ -65,7 +65,7 @@ def test_a_caller_that_answers_over_its_kept_connection_is_asked_every_period_an
 def test_without_a_limit_a_silent_caller_is_not_lost(node):
     dog, got = _watching(node, 0.0)
     try:
-        node.proc.send_signal(signal.SIGSTOP)
+        node.stop()
         time.sleep(1.5)   # what would be past a limit of 1 s
         assert got == []
     finally:
@@ -76,9 +76,9 @@ def test_a_caller_silent_for_a_while_then_answering_again_starts_the_count_again
     dog, got = _watching(node, 1.5)
     try:
         for _ in range(3):   # silent for less than the limit, three times: never 1.5 s in a row
-            node.proc.send_signal(signal.SIGSTOP)
+            node.stop()
             time.sleep(0.7)
-            node.proc.send_signal(signal.SIGCONT)
+            node.resume()
             resumed = time.monotonic()
             until(lambda t=resumed: dog._heard.get("/bmtree_run", 0.0) > t)  # an answer came back
         assert got == []

@@ -5,8 +5,6 @@ is merely idle (its node answers) shows nothing."""
 from __future__ import annotations
 
 import io
-import os
-import signal
 import time
 
 from rich.console import Console
@@ -149,12 +147,12 @@ def test_the_watch_asks_the_run_node_and_a_stopped_process_does_not_answer(tmp_p
         assert changes == [] and node.questions() == 2
         with state.lock:
             state.asked = (NODE, state.asked[1] - SILENT_AFTER)  # its last answer 3 s ago
-        os.kill(node.proc.pid, signal.SIGSTOP)
+        node.stop()
         try:
             liveness.ask()  # no answer within a second
             assert state.silent and changes and changes[-1].startswith("no answer from the run's node " + NODE)
         finally:
-            os.kill(node.proc.pid, signal.SIGCONT)
+            node.resume()
         liveness.ask()
         assert not state.silent and changes[-1] == "" and state.notes[-1]["what"] == "run_answers"
     finally:

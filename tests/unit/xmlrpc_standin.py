@@ -6,10 +6,12 @@ connections as a dead node or master does.
 """
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
 import sys
+import time
 
 __all__ = ["StandIn", "free_port"]
 
@@ -28,6 +30,16 @@ server.register_function(getPid)
 print("ready", flush=True)
 server.serve_forever()
 """
+
+
+def _all_stopped(pid):
+    """Every thread of process ``pid`` is stopped (state T in /proc)."""
+    tasks = os.listdir("/proc/%d/task" % pid)
+    for tid in tasks:
+        with open("/proc/%d/task/%s/stat" % (pid, tid)) as fh:
+            if fh.read().rsplit(")", 1)[1].split()[0] != "T":
+                return False
+    return bool(tasks)
 
 
 def free_port():
@@ -51,6 +63,18 @@ class StandIn:
     def kill(self):
         self.proc.send_signal(signal.SIGKILL)
         self.proc.wait(5)
+
+    def stop(self, timeout=10.0):
+        """SIGSTOP, and wait until every thread of the process is stopped: kill() returns before a thread
+        running on another core has stopped, and such a thread could still answer a question sent now."""
+        self.proc.send_signal(signal.SIGSTOP)
+        end = time.monotonic() + timeout
+        while not _all_stopped(self.proc.pid):
+            assert time.monotonic() < end, "the stand-in (pid %d) did not stop" % self.proc.pid
+            time.sleep(0.005)
+
+    def resume(self):
+        self.proc.send_signal(signal.SIGCONT)
 
     def questions(self):
         try:
