@@ -7,6 +7,7 @@ namespaces, which are created and deleted by name (each test file gives its own 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -125,6 +126,7 @@ class Hosts:
     def close(self) -> None:
         """SIGINT to all at once, then wait: a node cut off from the master cannot unregister in time."""
         end_processes(self.procs, 10)
+        shutil.rmtree(self.home, ignore_errors=True)
 
 
 def bmtree(*args: str) -> List[str]:
