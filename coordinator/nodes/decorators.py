@@ -16,6 +16,7 @@ from coordinator.nodes.base import (
     NodeKind,
     Option,
     fixed,
+    join,
     meet,
     param_keys,
     param_type_errors,
@@ -24,8 +25,10 @@ from coordinator.nodes.base import (
 from coordinator.nodes.timeouts import long_seconds
 from coordinator.treeast import TreeNode
 from coordinator.values import read_at
+from coordinator.yamlsrc import bool_hint
 
-__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec", "once"]
+__all__ = ["CHILD", "Counted", "Guarded", "KINDS", "Retry", "RetrySpec", "Timeout", "TimesSpec", "SecondsSpec",
+           "INDEX_HELP", "index_option", "once"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,7 @@ class RetrySpec:
     times: Any
     delay: Any = None  # seconds between a failed attempt and the next (a number or a reference)
     delay_pos: Optional[Pos] = None
+    index: str = ""    # the tree key each attempt's number is written to (none if "")
 
 
 class Guarded(py_trees.decorators.Decorator):
@@ -81,6 +85,11 @@ class Guarded(py_trees.decorators.Decorator):
     def holding(self) -> bool:
         """True while the child is not to be ticked (a retry waiting out its delay)."""
         return False
+
+    def number(self, key: str, n: int) -> None:
+        """Write run ``n`` (0 for the first) to the loop's ``index`` key, if it has one, before the run starts."""
+        if key:
+            self.ctx.write(key, n)
 
     def rerun(self, message: str) -> Status:
         """Run the child again from the start, at once (not at the next period)."""
@@ -125,10 +134,12 @@ class Retry(Guarded):
     """Re-run a failing child, at most ``times`` attempts in all, ``delay`` seconds apart (on the
     run's clock; the child is not ticked meanwhile)."""
 
-    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: Any, ctx: Any, delay: Any = None):
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, times: Any, ctx: Any, delay: Any = None,
+                 index: str = ""):
         super().__init__(name, child, ctx)
         self.times_param = times
         self.delay_param = delay
+        self.index = index
         self.resume_at: Optional[float] = None
 
     def initialise(self) -> None:
@@ -138,12 +149,15 @@ class Retry(Guarded):
         self.delay = 0.0
         if self.times is not None and self.delay_param is not None:
             self.delay = self.param(self.delay_param, "seconds0", "delay of retry")
+        if self.early is None:
+            self.number(self.index, 0)
 
     def holding(self) -> bool:
         if self.resume_at is None:
             return False
         if self.ctx.clock.now() >= self.resume_at:
             self.resume_at = None  # the next attempt starts in this tick
+            self.number(self.index, self.runs)
             return False
         return True
 
@@ -155,6 +169,7 @@ class Retry(Guarded):
             if self.runs < self.times:
                 said = "run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value)
                 if not self.delay:
+                    self.number(self.index, self.runs)
                     return self.rerun(said)
                 why = _failure_of(self.decorated)
                 said += " (%s)" % why if why else ""
@@ -184,6 +199,23 @@ def forever(p: Any, node: TreeNode, value: Any, at: Any) -> bool:
                                 "give the most %s it may take (%s: 100); see 'Every loop is bounded' in "
                                 "trees/README.md" % (node.kind, value, runs, node.kind))
     return True
+
+
+INDEX_HELP = ("a tree key the number of the %s is written to before it starts (0 for the first): "
+              "`check: %s > 0` tells a later %s from the first")
+
+
+def index_option(p: Any, raw: Any, other: Optional[str] = None) -> str:
+    """A loop's ``index`` key ('' when none, or after reporting why it cannot be one); ``other``: the
+    ``as`` key of a ``for_each``, which it may not be."""
+    if "index" not in raw:
+        return ""
+    index = raw["index"]
+    if not isinstance(index, str) or not index.isidentifier() or index == other:
+        p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier)%s, got %r%s" % (
+            "" if other is None else " other than 'as'", index, bool_hint(index)))
+        return ""
+    return index
 
 
 def once(times: Any) -> bool:
@@ -244,7 +276,8 @@ class RetryKind(Counted):
     label = "count"
     summary = "re-run the child while it fails"
     options = (CHILD, Option("delay", "seconds0", "seconds between a failed attempt and the next (a module "
-                                                 "restarting, a door opening)", shown="`0`"))
+                                                 "restarting, a door opening)", shown="`0`"),
+               Option("index", "key", INDEX_HELP % ("attempt", "attempt", "attempt"), shown="none"))
     behaviour = Retry
     lasts = "a retry is RUNNING between its attempts"
 
@@ -256,19 +289,24 @@ class RetryKind(Counted):
         delay = p.opt(node, raw, self.option("delay"))
         if "delay" in raw:
             long_seconds(p, delay, raw.val_pos["delay"], "delay of retry")
-        return RetrySpec(times, delay, raw.val_pos.get("delay"))
+        return RetrySpec(times, delay, raw.val_pos.get("delay"), index_option(p, raw))
 
     def reads(self, node: TreeNode) -> Iterable[str]:
         return param_keys(node.spec.times, node.spec.delay)
 
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """Succeeds when an attempt does; fails when the last attempt failed, or at once when its count
-        or delay (a reference) cannot be used."""
+        or delay (a reference) cannot be used. Each attempt is given its ``index`` first."""
         f.need(node, self.reads(node), avail)
         if not node.children:
             return frozenset(), frozenset()
-        cs, cf = f.outcome(node.children[0], avail)
+        key = frozenset([node.spec.index]) if node.spec.index else frozenset()
+        cs, cf = f.outcome(node.children[0], avail | key)
+        cs, cf = join(key, cs), join(key, cf)
         return cs, cf if fixed(node.spec.times, node.spec.delay) else meet((cf, frozenset()))
+
+    def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
+        return {node.spec.index: None} if node.spec.index else {}
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         super().check_types(node, types, errors)
@@ -282,7 +320,7 @@ class RetryKind(Counted):
                                                else None)
 
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
-        return Retry(node.name, child(node.children[0]), node.spec.times, ctx, node.spec.delay)
+        return Retry(node.name, child(node.children[0]), node.spec.times, ctx, node.spec.delay, node.spec.index)
 
 
 class TimeoutKind(Counted):

@@ -26,7 +26,16 @@ from coordinator.nodes.base import (
     param_keys,
     param_type_errors,
 )
-from coordinator.nodes.decorators import CHILD, Counted, Guarded, TimesSpec, forever, once
+from coordinator.nodes.decorators import (
+    CHILD,
+    INDEX_HELP,
+    Counted,
+    Guarded,
+    TimesSpec,
+    forever,
+    index_option,
+    once,
+)
 from coordinator.refs import Computed, Ref, RefError, refs_in, resolve, unwrap
 from coordinator.treeast import TreeNode
 from coordinator.values import expr_errors, read_at
@@ -64,6 +73,7 @@ class RepeatSpec(TimesSpec):
     mode: str = ""                  # '' (N runs), 'until' or 'while'
     cond: Optional[Expr] = None
     cond_pos: Optional[Pos] = None
+    index: str = ""                 # the tree key each run's number is written to (none if "")
 
 
 class Repeat(Guarded):
@@ -76,6 +86,8 @@ class Repeat(Guarded):
     def initialise(self) -> None:
         self.runs = 0
         self.times = self.param(self.spec.times, "count", "count of repeat")
+        if self.times is not None:
+            self.number(self.spec.index, 0)   # (before ``while`` is checked: it may read it)
         if self.times is not None and self.spec.mode == "while":
             holds = self._holds()
             if holds is None:
@@ -102,7 +114,10 @@ class Repeat(Guarded):
         if not mode:
             if self.runs >= self.times:
                 return Status.SUCCESS
+            self.number(self.spec.index, self.runs)
             return self.rerun("run %d of %d succeeded" % (self.runs, self.times))
+        if mode == "while":   # the next run's number, which its condition may read
+            self.number(self.spec.index, self.runs)
         holds = self._holds()
         if holds is None:
             return Status.FAILURE
@@ -115,6 +130,8 @@ class Repeat(Guarded):
                 self.times, self.spec.cond.text, "was still false" if mode == "until" else "still held",
                 self.spec.cond.values_read(self.ctx.lookup))
             return Status.FAILURE
+        if mode == "until":
+            self.number(self.spec.index, self.runs)
         return self.rerun("run %d of at most %d: %s %s not yet" % (self.runs, self.times, mode, self.spec.cond.text))
 
 
@@ -126,7 +143,9 @@ class RepeatKind(Counted):
                "holds / while it holds; the maximum reached is FAILURE")
     options = (CHILD,
                Option("until", "expr", "checked after each successful run: SUCCESS once it is true"),
-               Option("while", "expr", "checked before each run: SUCCESS once it is false (maybe no run)"))
+               Option("while", "expr", "checked before each run: SUCCESS once it is false (maybe no run)"),
+               Option("index", "key", INDEX_HELP % ("run", "run", "run") + "; `while` reads the number of the "
+                                      "run it is checked before", shown="none"))
     lasts = "a repeat is RUNNING between its runs"
 
     def lasting(self, node: TreeNode) -> str:
@@ -141,7 +160,7 @@ class RepeatKind(Counted):
         cond = expr_option(p, raw, mode) if mode else None
         if "child" in raw:
             p.child(node, raw["child"], raw.val_pos["child"])
-        return RepeatSpec(times, mode, cond, raw.val_pos[mode] if mode else None)
+        return RepeatSpec(times, mode, cond, raw.val_pos[mode] if mode else None, index_option(p, raw))
 
     def default_name(self, node: TreeNode) -> str:
         s = node.spec
@@ -155,16 +174,22 @@ class RepeatKind(Counted):
         successful run), or at once when its count (a reference) cannot be used."""
         s = node.spec
         f.need(node, param_keys(s.times), avail)
+        key = frozenset([s.index]) if s.index else frozenset()
         if s.mode == "while" and s.cond is not None:
-            f.need(node, s.cond.keys, avail)
+            f.need(node, s.cond.keys, avail | key)
         nothing: FrozenSet[str] = frozenset()
-        ok, failed = f.outcome(node.children[0], avail) if node.children else (nothing, nothing)
+        ok, failed = f.outcome(node.children[0], avail | key) if node.children else (nothing, nothing)
+        ok, failed = join(key, ok), join(key, failed)
         if s.mode == "until" and s.cond is not None:
             f.need(node, s.cond.keys, avail | ok)   # (NEVER is empty: never evaluated, still checked)
             failed = meet((failed, ok))
-        if s.mode == "while":
-            return nothing, nothing
+        if s.mode == "while":   # maybe no run: only its index (written before the condition) is sure
+            sure = key if fixed(s.times) else nothing
+            return sure, sure
         return ok, failed if fixed(s.times) else meet((failed, nothing))
+
+    def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
+        return {node.spec.index: None} if node.spec.index else {}
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         super().check_types(node, types, errors)
@@ -287,11 +312,7 @@ class ForEachKind(NodeKind):
         if "as" in raw and (not isinstance(key, str) or not key.isidentifier()):
             p.err(raw.val_pos["as"], "'as' must be a tree key (an identifier), got %r%s" % (key, bool_hint(key)))
             key = None
-        index = raw.get("index")
-        if "index" in raw and (not isinstance(index, str) or not index.isidentifier() or index == key):
-            p.err(raw.val_pos["index"], "'index' must be a tree key (an identifier) other than 'as', got %r%s" % (
-                index, bool_hint(index)))
-            index = None
+        index = index_option(p, raw, key or "")
         spec = ForEachSpec(items, key or "", check_choice(p, raw, "policy", ("all", "one"), "all", _GO_ON), limit,
                            raw.val_pos["max"] if "max" in raw else None, index or "")
         if "child" in raw:

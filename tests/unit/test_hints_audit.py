@@ -63,7 +63,7 @@ root:
       outputs: {text: heard}
 """)
     assert status == 2
-    assert "t.yaml:7:7: unknown option 'inputs' for retry (retry takes child, delay, name): 'inputs' is an " \
+    assert "t.yaml:7:7: unknown option 'inputs' for retry (retry takes child, delay, index, name): 'inputs' is an " \
            "option of the call at line 6: indent it under that call" in lines
     assert "t.yaml:9:7: unknown option 'outputs' for sequence (sequence takes memory, name): 'outputs' is an " \
            "option of call, wait_event or include: indent it under the node it is for" in lines
