@@ -28,7 +28,7 @@ from comm.rostypes import resolve_type, single_field, to_message
 from coordinator.context import plain
 
 __all__ = ["Difference", "ExpectedCall", "calls_diff", "difference", "expect_calls", "expect_calls_in_order",
-           "expect_duration", "expected_message", "legacy_times", "shown", "want_form"]
+           "expect_duration", "expected_message", "legacy_times", "shown", "want_form", "ENDING_KEYS", "ending_of"]
 
 _NANOSECONDS = re.compile(r"^-?[0-9]+$")
 _TIMES = ("time", "duration")
@@ -205,14 +205,31 @@ def _as_time(want: Any, like: Any) -> Any:
     return (t.secs, t.nsecs)
 
 
+ENDING_KEYS = ("status", "error")
+"""What an expected call may say of how it ended, beside its ``module.function`` key."""
+
+
 def want_form(c: Any) -> bool:
-    """An expected call: ``module.function`` or ``{module.function: {input: value}}``."""
-    return isinstance(c, str) or (isinstance(c, dict) and len(c) == 1 and isinstance(next(iter(c)), str)
-                                  and isinstance(next(iter(c.values())), (dict, type(None))))
+    """An expected call: ``module.function`` or ``{module.function: {input: value}}``, the mapping maybe
+    with ``status:`` and ``error:`` beside it (how the call ended)."""
+    if isinstance(c, str):
+        return True
+    if not isinstance(c, dict):
+        return False
+    targets = [k for k in c if k not in ENDING_KEYS]
+    return len(targets) == 1 and isinstance(targets[0], str) and isinstance(c[targets[0]], (dict, type(None)))
 
 
 def _want(want: Any) -> Any:
-    return (want, {}) if isinstance(want, str) else next(iter(want.items()))
+    if isinstance(want, str):
+        return want, {}
+    target = next(k for k in want if k not in ENDING_KEYS)
+    return target, want[target]
+
+
+def ending_of(call: Any) -> str:
+    """How a made call ended, as a diff line shows it: ``failed: blocked``."""
+    return "%s: %s" % (call.status, call.error) if call.error else str(call.status)
 
 
 class ExpectedCall:
@@ -224,6 +241,26 @@ class ExpectedCall:
         self.target, inputs = _want(raw)
         self.inputs: Dict[str, Any] = dict(inputs or {})
         self.built: Dict[str, Any] = {}  # input -> the value as a message of the input's type, or the ProtocolError
+        ending = raw if isinstance(raw, dict) else {}
+        self.status: Optional[str] = None if ending.get("status") is None else str(ending["status"])
+        self.error: Optional[str] = None if ending.get("error") is None else str(ending["error"])  # text it contains
+
+    @property
+    def ending(self) -> str:
+        """What it says of how the call ended, as a diff line shows it ('' when nothing)."""
+        parts = ([str(self.status)] if self.status is not None else []) + (
+            ["error containing %s" % json.dumps(self.error, ensure_ascii=False)] if self.error is not None else [])
+        return ", ".join(parts)
+
+    def ending_difference(self, call: Any) -> str:
+        """How the made ``call`` ended otherwise than this one says ('' when it did not)."""
+        said = []
+        if self.status is not None and str(call.status) != self.status:
+            said.append("it ended %s, expected %s" % (ending_of(call), self.status))
+        if self.error is not None and self.error not in (call.error or ""):
+            said.append("its error is %s, expected one containing %s" % (
+                json.dumps(call.error or "", ensure_ascii=False), json.dumps(self.error, ensure_ascii=False)))
+        return "; ".join(said)
 
     def difference(self, name: str, got: Any) -> Optional[Difference]:
         """How the made call's input ``name`` (a message) differs from this one's, if it does."""
@@ -237,16 +274,26 @@ class ExpectedCall:
     def matches(self, call: Any) -> bool:
         """The made ``call`` (a CallRecord) is this one."""
         return call.target == self.target and all(
-            k in call.messages and self.difference(k, call.messages[k]) is None for k in self.inputs)
+            k in call.messages and self.difference(k, call.messages[k]) is None for k in self.inputs
+        ) and not self.ending_difference(call)
+
+    def show(self) -> str:
+        return _show(self.target, self.inputs, self.ending)
 
 
-def _show(target: str, inputs: Any) -> str:
+def _show(target: str, inputs: Any, ending: str = "") -> str:
     """A call on a diff line: the inputs in name order, each as written or as plain data (times
-    ``{"secs": S, "nsecs": N}``), so an expected and a made call read alike."""
-    if not inputs:
-        return target
-    return "%s %s" % (target, json.dumps({k: inputs[k] for k in sorted(inputs, key=str)}, ensure_ascii=False,
-                                         default=str))
+    ``{"secs": S, "nsecs": N}``), so an expected and a made call read alike; then how it ended, when
+    the expected calls say it (``(failed: blocked)``)."""
+    shown = target
+    if inputs:
+        shown += " " + json.dumps({k: inputs[k] for k in sorted(inputs, key=str)}, ensure_ascii=False, default=str)
+    return shown + (" (%s)" % ending if ending else "")
+
+
+def _made(call: Any, want: List[ExpectedCall]) -> str:
+    """A made call on a diff line: with how it ended when an expected call says how one must."""
+    return _show(call.target, call.inputs, ending_of(call) if any(w.ending for w in want) else "")
 
 
 def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
@@ -271,19 +318,19 @@ def calls_diff(expected: List[Any], actual: List[Any]) -> List[str]:
                 lcs[i][j] = lcs[i + 1][j + 1] + 1
             else:
                 lcs[i][j] = max(lcs[i + 1][j], lcs[i][j + 1])
-    out = ["  = %s" % _show(w.target, w.inputs) for w in want[:head]]
+    out = ["  = %s" % w.show() for w in want[:head]]
     i, j = 0, 0
     while i < n2 or j < m2:
         if i < n2 and j < m2 and same[i][j]:
-            out.append("  = %s" % _show(mid_w[i].target, mid_w[i].inputs))
+            out.append("  = %s" % mid_w[i].show())
             i, j = i + 1, j + 1
         elif j < m2 and (i == n2 or lcs[i][j + 1] >= lcs[i + 1][j]):
-            out.append("  + %s" % _show(mid_a[j].target, mid_a[j].inputs))
+            out.append("  + %s" % _made(mid_a[j], want))
             j += 1
         else:
-            out.append("  - %s" % _show(mid_w[i].target, mid_w[i].inputs))
+            out.append("  - %s" % mid_w[i].show())
             i += 1
-    out.extend("  = %s" % _show(w.target, w.inputs) for w in want[n - tail:])
+    out.extend("  = %s" % w.show() for w in want[n - tail:])
     return out
 
 
@@ -304,6 +351,9 @@ def expect_calls(run: Any, expected: List[ExpectedCall]) -> List[str]:
             d = want.difference(k, got.messages[k])
             if d is not None:
                 problems.append("call %d (%s): %s" % (i + 1, want.target, d.said("input %s" % k)))
+        ended = want.ending_difference(got)
+        if ended:
+            problems.append("call %d (%s): %s" % (i + 1, want.target, ended))
     if problems:
         problems.append("calls changed (- expected only, + made only, = both):")
         problems.extend(calls_diff(expected, actual))
@@ -318,7 +368,7 @@ def _first_difference(want: ExpectedCall, call: Any) -> str:
         d = want.difference(k, call.messages[k])
         if d is not None:
             return d.said("input %s" % k)
-    return ""
+    return want.ending_difference(call)
 
 
 def _not_found(k: int, expected: List[ExpectedCall], actual: List[Any], after: Optional[int],
@@ -326,12 +376,11 @@ def _not_found(k: int, expected: List[ExpectedCall], actual: List[Any], after: O
     """Why ``expected[k]`` was not found after the made call ``after`` (None: from the start), with
     what the run did instead: its calls of that function after, or only before, that call."""
     want = expected[k]
-    head = "calls in order: expected call %d of %d, %s, not found " % (k + 1, len(expected),
-                                                                      _show(want.target, want.inputs))
+    head = "calls in order: expected call %d of %d, %s, not found " % (k + 1, len(expected), want.show())
     if after is None:
         return [head + "from the start of the run"] + _instead(want, actual, 0, matched)
     got = actual[after]
-    head += "after call %d, %s (which matched expected call %d)" % (after + 1, _show(got.target, got.inputs), matched[after] + 1)
+    head += "after call %d, %s (which matched expected call %d)" % (after + 1, _made(got, expected), matched[after] + 1)
     return [head] + _instead(want, actual, after + 1, matched)
 
 
@@ -382,10 +431,10 @@ def expect_calls_in_order(run: Any, expected: List[ExpectedCall]) -> List[str]:
         return []
     problems.append("calls made (= matched an expected call; - an expected call not found after the call above; "
                     "the others may come between):")
-    lines = ["  - %s" % _show(expected[k].target, expected[k].inputs) for k in missing.get(None, [])]
+    lines = ["  - %s" % expected[k].show() for k in missing.get(None, [])]
     for i, c in enumerate(actual):
-        lines.append("  %s %d %s" % ("=" if i in matched else " ", i + 1, _show(c.target, c.inputs)))
-        lines.extend("  - %s" % _show(expected[k].target, expected[k].inputs) for k in missing.get(i, []))
+        lines.append("  %s %d %s" % ("=" if i in matched else " ", i + 1, _made(c, expected)))
+        lines.extend("  - %s" % expected[k].show() for k in missing.get(i, []))
     return problems + lines
 
 

@@ -22,6 +22,7 @@ import yaml
 from comm.errors import ProtocolError, did_you_mean
 from comm.typewords import said_of
 from coordinator.bounds import finite_number, shown
+from coordinator.context import RecordStatus
 from coordinator.errors import Pos
 from coordinator.testing.expected import ExpectedCall, expected_message, want_form
 from coordinator.yamlsrc import LList, LMap, pos_of
@@ -36,6 +37,7 @@ Add = Callable[[Pos, str], None]
 DURATION_KEYS = ("at_least", "at_most")
 CALLS_FORMS = ("in_order",)
 _CALL = "module.function or {module.function: {input: value}}"
+ENDINGS = tuple(str(s) for s in RecordStatus if s is not RecordStatus.RUNNING)
 
 
 def function_of(defs: Mapping[str, ModuleDefinition], target: Any) -> Tuple[Any, str]:
@@ -144,6 +146,7 @@ def expected_calls(expect: Any, at: Pos, defs: Mapping[str, ModuleDefinition], a
         c_at = calls.item_pos[j] if isinstance(calls, LList) else pos_of(holder, key, at)
         want = ExpectedCall(c)
         found.append(want)
+        _check_ending(c, c_at, add)
         fn, why = function_of(defs, want.target)
         if fn is None:
             add(c.key_pos.get(want.target, c_at) if isinstance(c, LMap) else c_at, "expected call: %s" % why)
@@ -162,6 +165,18 @@ def expected_calls(expect: Any, at: Pos, defs: Mapping[str, ModuleDefinition], a
                 add(inputs.val_pos[name] if isinstance(inputs, LMap) else c_at,
                     said_of("%s input %r" % (fn.qualified, name), exc))
     return found
+
+
+def _check_ending(c: Any, at: Pos, add: Add) -> None:
+    """An expected call's ``status:`` (one a call ends with) and ``error:`` (text)."""
+    if not isinstance(c, dict):
+        return
+    if "status" in c and str(c["status"]) not in ENDINGS:
+        add(c.val_pos["status"] if isinstance(c, LMap) else at, "status of an expected call is how it ended: one of "
+            "%s, got %r%s" % (", ".join(ENDINGS), c["status"], did_you_mean(str(c["status"]), ENDINGS)))
+    if "error" in c and not isinstance(c["error"], str):
+        add(c.val_pos["error"] if isinstance(c, LMap) else at, "error of an expected call is a text its error must "
+            "contain (\"blocked\"), got %r" % (c["error"],))
 
 
 # events -----------------------------------------------------------------------------------------------
