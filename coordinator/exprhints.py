@@ -16,10 +16,9 @@ _QUOTED = re.compile(r'"(?:[^"\\]|\\.)*"|\'(?:[^\'\\]|\\.)*\'')
 _KEY = re.compile(r"\{\s*([^\W\d]\w*)\s*\}|\$([^\W\d]\w*)")
 
 
-def quoted_key_warnings(expr: Optional[Expr], at: Optional[Pos], keys: Collection[str],
-                        event: str = "") -> List[TreeError]:
+def quoted_key_warnings(expr: Optional[Expr], at: Optional[Pos], keys: Collection[str]) -> List[TreeError]:
     """A warning at each ``{key}``/``$key`` inside a quoted text of ``expr`` whose ``key`` is one of the tree's
-    ``keys``; ``event``: the expression is that ``wait_event``'s ``where:`` (its names are the event's params)."""
+    ``keys``."""
     if expr is None or at is None or ("{" not in expr.text and "$" not in expr.text):
         return []
     out = []
@@ -28,11 +27,7 @@ def quoted_key_warnings(expr: Optional[Expr], at: Optional[Pos], keys: Collectio
             key = m.group(1) or m.group(2)
             if key not in keys:
                 continue
-            if event:
-                fix = ("where: reads only the params of %s; to compare one with a tree key, take the event into "
-                       "outputs: and check it (a repeat … until: around the wait_event)" % event)
-            else:
-                fix = "an expression reads a key by its name, unquoted (%s)" % key
+            fix = "an expression reads a key by its name, unquoted (%s)" % key
             off = quoted.start() + m.start()
             out.append(TreeError(Pos(at.file, at.line, at.column + off), "warning: %s inside a quoted text is that text, "
                                  "not the value of %s: %s" % (m.group(0), key, fix)))

@@ -50,7 +50,7 @@ _TABLE: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
     ("Iterator", (_SM,), ("for_each",), "for_each: LIST, with as: KEY and child: beside it"),
     ("SimpleActionState", (_SM,), ("call",), "call: module.function"),
     ("ServiceState", (_SM,), ("call",), "call: module.function"),
-    ("MonitorState", (_SM,), ("wait_event",), "wait_event: module.event, with where: 'expression' on its params"),
+    ("MonitorState", (_SM,), ("wait_event",), "wait_event: module.event, with where: 'expression' on its params and tree keys"),
     ("AlwaysFailure", (_BT,), ("fail",), "fail: \"why\""),
     ("Sleep", (_BT,), ("wait",), "wait: SECONDS"),
     ("SetBlackboard", (_BT,), ("set",), "set: {key: value}"),

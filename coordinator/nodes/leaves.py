@@ -26,7 +26,7 @@ from coordinator.nodes.setkeys import SetKeys, SetKind
 from coordinator.nodes.timeouts import NO_TIMEOUT, long_seconds, timeout_option, with_no_timeout
 from coordinator.refs import RefError
 from coordinator.treeast import TreeNode
-from coordinator.values import expr_errors
+from coordinator.values import KeyTypes, expr_errors, read_at
 
 __all__ = ["Check", "KINDS", "Recall", "SetKeys", "Wait", "WaitEvent"]
 
@@ -228,8 +228,9 @@ class WaitEventSpec:
     outputs: Dict[str, str] = field(default_factory=dict)
     timeout: Optional[float] = None
     timeout_pos: Optional[Pos] = None
-    where: Optional[Expr] = None      # over the event's params, by their names
+    where: Optional[Expr] = None      # over the event's params, by their names (and tree keys)
     where_pos: Optional[Pos] = None
+    where_keys: FrozenSet[str] = frozenset()   # the names ``where`` reads that are no param: tree keys
 
 
 class WaitEvent(Leaf):
@@ -277,11 +278,13 @@ class WaitEvent(Leaf):
                 values = ev.values
                 if where is not None:   # over its params (a later event may satisfy it)
                     try:
-                        if not where.evaluate(values.__getitem__):
+                        if not where.evaluate(self._names(values)):
                             self.skipped += 1
                             continue
                     except (KeyError, RefError) as exc:
-                        why = "the event has no param %s" % exc if isinstance(exc, KeyError) else exc.args[0]
+                        why = exc.args[0] if not isinstance(exc, KeyError) else (
+                            "the tree key %s has no value" if exc.args[0] in self.node.spec.where_keys
+                            else "the event has no param %s") % exc
                         return self._fail("where %s: %s" % (where.text, why))
                 for param, key in self.node.spec.outputs.items():
                     if param in values:
@@ -298,11 +301,28 @@ class WaitEvent(Leaf):
                 " (%d skipped)" % self.skipped if self.skipped else ""))
         return Status.RUNNING
 
+    def _names(self, values: Dict[str, Any]) -> Any:
+        """What ``where`` reads a name as: the event's param, else (no param of it) the tree key."""
+        keys = self.node.spec.where_keys
+        return lambda k: self.ctx.lookup(k) if k in keys else values[k]
+
     def terminate(self, new_status: Status) -> None:
         """Ended or halted: its module's node is no longer watched for it, nor events kept for it."""
         self.ctx.unwatch(self.watch)
         self.ctx.events.done(self)
         self.watch = None
+
+
+def _where_types(spec: WaitEventSpec, types: Dict[str, set]) -> KeyTypes:
+    """What ``where`` reads each name as, for its checks: the event's param, else the tree key (its kinds too)."""
+    keys = spec.where_keys
+    out = KeyTypes({k: types[k] for k in keys if k in types})
+    out.kinds = {k: v for k, v in getattr(types, "kinds", {}).items() if k in keys}
+    why_not = getattr(types, "why_not", None)
+    if why_not is not None:
+        out.why_not = lambda key, text, contains: why_not(key, text, contains) if key in keys else ""
+    out.update({q.name: {q.rostype} for q in spec.event.params})
+    return out
 
 
 class WaitEventKind(NodeKind):
@@ -314,8 +334,8 @@ class WaitEventKind(NodeKind):
                Option("timeout", "seconds", "seconds, or `none`: no limit, as when left out (it still fails when "
                                             "its module is lost)", shown="none"),
                Option("where", "expr", "an expression over the event's params, by their names (`person == "
-                                       "\"Ana\"`): the first event for which it is true is taken, the others "
-                                       "skipped"))
+                                       "\"Ana\"`), and tree keys (a name that is no param: `person == guest`): "
+                                       "the first event for which it is true is taken, the others skipped"))
     lasts = "a wait_event waits for its event"
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> WaitEventSpec:
@@ -340,14 +360,20 @@ class WaitEventKind(NodeKind):
         spec.event = ev
         spec.outputs = p.key_map(node, raw, "outputs", {q.name: q for q in ev.params}, "event param")
         repeated_outputs(p, raw, spec.outputs)
-        if spec.where is not None and spec.where_pos is not None:   # its names are params, not tree keys
+        if spec.where is not None and spec.where_pos is not None:   # its names: params first, then tree keys
             at = spec.where_pos
             params = [q.name for q in ev.params]
+            keys = set()
             for ref, off in zip(spec.where.refs, spec.where.ref_offsets):
-                if ref.key not in params:
+                if ref.key in params:
+                    continue
+                close = did_you_mean(ref.key, params)
+                if close:   # a misspelt param rather than a tree key
                     p.err(Pos(at.file, at.line, at.column + off), "where reads %r, which is no param of %s.%s%s" % (
-                        ref.key, mod.name, ename, did_you_mean(ref.key, params)
-                        or " (params: %s)" % (", ".join(params) or "none")))
+                        ref.key, mod.name, ename, close))
+                else:
+                    keys.add(ref.key)
+            spec.where_keys = frozenset(keys)
         return spec
 
     def default_name(self, node: TreeNode) -> str:
@@ -358,14 +384,20 @@ class WaitEventKind(NodeKind):
         return {key: types.get(param) for param, key in node.spec.outputs.items()}
 
     def reads(self, node: TreeNode) -> Iterable[str]:
-        return param_keys(node.spec.timeout)
+        return param_keys(node.spec.timeout) + sorted(node.spec.where_keys)
+
+    def read_pos(self, node: TreeNode, key: str) -> Optional[Pos]:
+        s = node.spec
+        if key in s.where_keys and s.where is not None and s.where_pos is not None:
+            return read_at(s.where, s.where_pos, key)
+        return read_at(s.timeout, s.timeout_pos, key) if s.timeout_pos is not None else None
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         spec = node.spec
         param_type_errors(spec.timeout, spec.timeout_pos, types, "seconds", "timeout of wait_event", errors)
-        if spec.where is not None and spec.event is not None:   # the params' types, not the tree keys'
-            expr_type_errors(spec.where, spec.where_pos, {q.name: {q.rostype} for q in spec.event.params}, errors)
-            errors.extend(quoted_key_warnings(spec.where, spec.where_pos, types, spec.target))
+        if spec.where is not None and spec.event is not None:   # a param's type, else the tree key's
+            expr_type_errors(spec.where, spec.where_pos, _where_types(spec, types), errors)
+            errors.extend(quoted_key_warnings(spec.where, spec.where_pos, types))
 
     def schema(self) -> Dict[str, Any]:
         return with_no_timeout(super().schema())

@@ -19,11 +19,10 @@ def _warnings(tmp_path, root: str):
 
 
 @pytest.mark.parametrize("written, col", [('{guest}', 22), ('$guest', 22), ('{ guest }', 22)])
-def test_a_key_quoted_in_a_where_says_how_to_compare_with_a_tree_key(tmp_path, written, col):
+def test_a_key_quoted_in_a_where_says_to_name_it(tmp_path, written, col):
     said = _warnings(tmp_path, "  wait_event: vision.personSeen\n  where: 'person == \"%s\"'\n  timeout: 10\n" % written)
-    assert said == ["t.yaml:8:%d: warning: %s inside a quoted text is that text, not the value of guest: where: reads "
-                    "only the params of vision.personSeen; to compare one with a tree key, take the event into "
-                    "outputs: and check it (a repeat … until: around the wait_event)" % (col, written)], said
+    assert said == ["t.yaml:8:%d: warning: %s inside a quoted text is that text, not the value of guest: an "
+                    "expression reads a key by its name, unquoted (guest)" % (col, written)], said
 
 
 def test_a_key_quoted_in_a_check_or_an_until_says_to_name_it(tmp_path):

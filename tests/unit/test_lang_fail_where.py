@@ -289,8 +289,8 @@ def test_where_reads_params_not_tree_keys(tree):
 @pytest.mark.parametrize("where, message", [
     ("'persn == \"Ana\"'", "5:11: where reads 'persn', which is no param of vision.personSeen (did you mean "
                            "'person'?)"),
-    ("'who == \"Ana\"'", "5:11: where reads 'who', which is no param of vision.personSeen (params: person, "
-                         "position)"),
+    ("'who == \"Ana\"'", "5:11: reads 'who', which is not written on every path before this node (only this "
+                         "node writes it: write it earlier on every path or declare it under 'inputs:')"),
     ("'person == \"Ana\" and $positon.x > 1'", "5:31: where reads 'positon', which is no param of "
                                               "vision.personSeen (did you mean 'position'?)"),
     ("'position.q > 1'", "5:11: reads position.q, but position holds a geometry_msgs/Point, which has no field "
@@ -314,6 +314,36 @@ root:
     assert status == 2
     assert lines == ["t.yaml:4:11: where reads 'plase', which is no param of navigation.arrived "
                      "(did you mean 'place'?)"]
+
+
+def test_where_compares_a_param_with_a_tree_key(tree):
+    """SMACH's MonitorState compares with userdata: a name that is no param of the event is a tree key,
+    read when each event is looked at."""
+    t = tree("""
+  sequence:
+    - set: {guest: Ana, far: 2}
+    - wait_event: vision.personSeen
+      where: 'person == guest and position.x > far'
+      outputs: {position: where_seen}
+      timeout: 10
+""")
+    t.mocks.event(1.0, "vision.personSeen", person="Bob", position={"x": 5.0, "y": 0.0, "z": 0.0})
+    t.mocks.event(2.0, "vision.personSeen", person="Ana", position={"x": 1.0, "y": 0.0, "z": 0.0})
+    t.mocks.event(3.0, "vision.personSeen", person="Ana", position={"x": 3.0, "y": 0.0, "z": 0.0})
+    run = t.run()
+    assert run.succeeded, run.reason
+    assert run.blackboard["where_seen"]["x"] == 3.0 and run.duration == pytest.approx(3.0)
+
+
+@pytest.mark.parametrize("where, message", [
+    ("'person == guest'", "6:25: reads 'guest', which no node writes and no input declares (write it first, with "
+                          "a call's 'outputs:' or a 'set', or declare it under 'inputs:')"),
+    ("'position.x > who'", "6:26: cannot compare a number > a string"),
+])
+def test_a_tree_key_in_where_is_checked_as_any_read(tmp_path, where, message):
+    errors = bad(tmp_path, "  sequence:\n    - set: {who: Ana}\n    - wait_event: vision.personSeen\n"
+                           "      where: %s\n" % where)
+    assert errors == ["bad.yaml:" + message], errors
 
 
 def test_a_key_the_where_names_is_not_a_read_of_the_tree(tmp_path):
