@@ -382,10 +382,11 @@ def make_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run a tree against the live modules (or --sim)")
     r.add_argument("tree", type=path_arg("a tree file"))
     r.add_argument("--sim", action="store_true", help="bring up a private simulated robot for this run")
-    r.add_argument("--module", action="append", metavar="DEF.json=FILE.py:CLASS|EXECUTABLE",
-                   type=text("DEF.json=FILE.py:CLASS or DEF.json=EXECUTABLE"),
-                   help="with --sim: start your module beside the simulated ones, a Python class or (no ':') a C++ "
-                        "module's executable with a bmtree-bridge (repeatable; replaces a simulated one of its name)")
+    r.add_argument("--module", action="append", metavar="DEF.json=FILE.py:CLASS|EXECUTABLE|SCRIPT.yaml",
+                   type=text("DEF.json=FILE.py:CLASS, DEF.json=EXECUTABLE or DEF.json=SCRIPT.yaml"),
+                   help="with --sim: start your module beside the simulated ones, a Python class, (no ':') a C++ "
+                        "module's executable with a bmtree-bridge, or (.yaml) a scripted stand-in for a module not "
+                        "written yet (repeatable; replaces a simulated one of its name)")
     r.add_argument("--legacy", action="append", metavar="MODULE=/NODE", type=text("MODULE=/NODE"),
                    help="the node of an original module whose node is not named /MODULE (repeatable)")
     r.add_argument("--control", action="store_true", help="let 'bmtree watch' and 'bmtree control' steer this run "

@@ -31,6 +31,7 @@ from coordinator.cliutil import (
 from coordinator.errors import TreeError, TreeErrors, UsageError
 from coordinator.preflight import call_limit_warnings, first_uses
 from coordinator.runstop import RequestNotice, interrupted_line, shutdown_notice
+from coordinator.usermodule import user_module
 
 __all__ = ["DEMO_TREE", "cmd_demo", "cmd_run", "interrupted_line", "shutdown_notice"]
 
@@ -200,7 +201,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.record and not args.no_record:
         _check_record(args.record)
     defs = definitions_from(args.modules)
-    user_modules = [_user_module(spec) for spec in (getattr(args, "module", None) or [])]
+    user_modules = [user_module(spec) for spec in (getattr(args, "module", None) or [])]
     if user_modules and not args.sim:
         raise UsageError("--module starts your module beside the simulated robot: it needs --sim "
                          "(without --sim, start it with bmtree-module, or a C++ module's node with its bmtree-bridge, and "
@@ -276,7 +277,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             absent = sorted(set(mods) - set(sim) - mine)
             if absent:
                 raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS "
-                                 "(or =EXECUTABLE for a C++ module)" % (args.tree, ", ".join(absent),
+                                 "(or =EXECUTABLE for a C++ module, =SCRIPT.yaml for a scripted stand-in)" % (args.tree, ", ".join(absent),
                                                                         ", ".join(SIM_MODULES), absent[0]))
             print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
                 sim + ["%s (yours)" % m for m in sorted(mine)]))
@@ -459,36 +460,6 @@ def _check_record(record: str) -> None:
         why = exc.strerror or str(exc)
     if why:
         raise UsageError("--record %s: cannot write in %s (%s)" % (record, folder, why))
-
-
-def _user_module(spec: str) -> Any:
-    """``DEFINITION.json=FILE.py:CLASS`` (or ``=package.module:Class``), or ``DEFINITION.json=EXECUTABLE`` (no
-    ``:``: a C++ module's node, :mod:`coordinator.simcpp`) for ``run --sim --module``."""
-    from coordinator.simcpp import check_executable
-    from coordinator.simgraph import UserModule
-    from modules.definition import load_definition
-
-    definition, sep, cls = spec.partition("=")
-    if sep and definition and cls and ":" not in cls:
-        loaded = load_definition(definition)
-        return UserModule(os.path.abspath(definition), "", loaded, check_executable(cls, loaded))
-    if not sep or not definition or ":" not in cls:
-        raise UsageError("--module takes DEFINITION.json=FILE.py:CLASS or DEFINITION.json=EXECUTABLE, got %s"
-                         % _shown(spec))
-    where = cls.rsplit(":", 1)[0]
-    if where.endswith(".py"):
-        if not os.path.isfile(where):
-            raise UsageError("--module %s: no such file %s" % (spec, where))
-        with open(where, "rb") as fh:
-            source = fh.read()
-        try:  # compiled, never run here: a syntax error is one line before the graph starts
-            compile(source, where, "exec", dont_inherit=True)
-        except SyntaxError as exc:
-            raise PlainError("%s:%s:%s: syntax error: %s" % (where, exc.lineno, exc.offset or 0, exc.msg))
-        except ValueError as exc:  # NUL bytes: not a Python source file at all
-            raise PlainError("%s: not a Python source file (%s)" % (where, exc))
-        cls = os.path.abspath(where) + ":" + cls.rsplit(":", 1)[1]
-    return UserModule(os.path.abspath(definition), cls, load_definition(definition))
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

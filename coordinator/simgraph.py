@@ -26,12 +26,14 @@ class UserModule(NamedTuple):
     """A user's module started beside the simulated ones (``bmtree run --sim --module``): a Python class
     (``class_spec``, ``FILE.py:CLASS``, run by ``bmtree-module``) or a C++ module's node (``executable``, its
     absolute path, checked before anything starts: :func:`coordinator.simcpp.check_executable`; run with a
-    ``bmtree-bridge``)."""
+    ``bmtree-bridge``), or a scripted stand-in (``script``, the absolute path of a mock node's script,
+    checked before anything starts: :mod:`coordinator.testing.mocknode`) for a module not written yet."""
 
     definition_path: str
     class_spec: str
     definition: ModuleDefinition
     executable: Optional[str] = None
+    script: Optional[str] = None
 
 
 class SimGraph(RosGraph):
@@ -241,10 +243,13 @@ def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, black
                                 for n, p, role in zip((node, bridge), procs, ("cpp", "bridge")))
                 pairs.append((node, bridge))
                 continue
+            if um.script is not None:   # the node is bm_<module>, as the simulated robot's
+                argv = ["-m", "coordinator.testing.mocknode", um.script, "--modules", um.definition_path, *extra]
+            else:
+                argv = ["-m", "modules.node", "--definition", um.definition_path, "--class", um.class_spec,
+                        "--node-name", node[1:], *extra]
             # a crash in C code (a driver's library) says where in the log (Fatal Python error: …)
-            proc = graph.start_node(["-m", "modules.node", "--definition", um.definition_path,
-                                     "--class", um.class_spec, "--node-name", node[1:], *extra], node,
-                                    wait=False, env={"PYTHONFAULTHANDLER": "1"})
+            proc = graph.start_node(argv, node, wait=False, env={"PYTHONFAULTHANDLER": "1"})
             starting.append(_Starting(node, proc, um.definition.name, True))
         _wait_up(graph, starting, timeout, started)
         for node, bridge in pairs:

@@ -14,10 +14,10 @@ import pytest
 
 from coordinator.cli import main
 from coordinator.errors import UsageError
-from coordinator.runcmd import _user_module
 from coordinator.simcpp import check_executable, pair_names, watch_pair
 from coordinator.simgraph import SimGraph, _Starting
 from coordinator.simprocess import process_ends
+from coordinator.usermodule import user_module as _user_module
 from modules.definition import load_definition
 from tests.conftest import ROOT, until
 
@@ -54,7 +54,7 @@ def test_the_executable_form_is_told_from_a_python_class_by_its_colon(given, pyt
 
 @pytest.mark.parametrize("given", ["g.json=", "gripper_node", "=./x"])
 def test_a_module_without_both_sides_says_both_forms(given):
-    with pytest.raises(UsageError, match="--module takes DEFINITION.json=FILE.py:CLASS or DEFINITION.json=EXECUTABLE"):
+    with pytest.raises(UsageError, match="--module takes DEFINITION.json=FILE.py:CLASS, DEFINITION.json=EXECUTABLE or DEFINITION.json=SCRIPT.yaml"):
         _user_module(given)
 
 
