@@ -3,9 +3,9 @@
     expr  := or ;  or := and ('or' and)* ;  and := not ('and' not)*
     not   := 'not' not | cmp ;  cmp := sum (('=='|'!='|'<'|'<='|'>'|'>='|'in') sum)?
     sum   := term (('+'|'-') term)* ;  term := unary (('*'|'/') unary)* ;  unary := '-' unary | value
-    value := number | string | true | false | null | ref | func '(' [expr (',' expr)*] ')' | '(' expr ')'
-           | '[' [expr (',' expr)*] ']'
-    ref   := ['$'] name ('.' field | '[' index ']')*
+    value := number | string | true | false | null | ref | func '(' [expr (',' expr)*] ')' path
+           | '(' expr ')' path | '[' [expr (',' expr)*] ']'
+    ref   := ['$'] name path ;  path := ('.' field | '[' index ']')*
 
 ``check`` holds one; a ``$( … )`` value and a template's ``{ … }`` hold one too. A one-field ROS
 message (``std_msgs/String``…) stands for its value, so ``answer == "yes"`` works on the output
@@ -34,7 +34,7 @@ from coordinator.exprfuncs import (
 )
 from coordinator.exprparse import Parser
 from coordinator.exprtypes import static_kind
-from coordinator.refs import Ref, RefError, check_size, kind_of, unwrap
+from coordinator.refs import Ref, RefError, check_size, field_of, kind_of, unwrap
 
 __all__ = ["BRIEF", "Expr", "ExprError", "FUNCTIONS", "brief", "MAX_TEXT", "check_text_size", "kind_of", "text_of"]
 
@@ -124,7 +124,12 @@ class Expr:
         if op == "arith":
             return arithmetic(node[1], unwrap(self._eval(node[2], lookup)), unwrap(self._eval(node[3], lookup)))
         if op == "call":
+            if node[1] == "if":   # only the branch chosen: if(len(xs) > 0, at(xs, 0), "nobody") on []
+                cond, then, other = node[2]
+                return self._eval(then if unwrap(self._eval(cond, lookup)) else other, lookup)
             return apply_function(node[1], [unwrap(self._eval(a, lookup)) for a in node[2]])
+        if op == "path":
+            return _follow(self._eval(node[1], lookup), node[2], node[4])
         if op == "list":
             items = [unwrap(self._eval(a, lookup)) for a in node[1]]
             try:
@@ -159,3 +164,14 @@ class Expr:
         (also when an operand is of the wrong kind: :meth:`type_errors` says that)."""
         return static_kind(self.tree, key_kind, [])
 
+
+def _follow(value: Any, steps: Tuple[Any, ...], written: str) -> Any:
+    """The fields and indexes ``steps`` of ``value``, the result of ``written`` (``at(ps.poses, i)``), read
+    as a reference's are, its errors naming the path so far (``at(ps.poses, i).position has no field 'w'``)."""
+    for i, step in enumerate(steps):
+        try:
+            value = field_of(value, step, written + "".join("[%d]" % s if isinstance(s, int) else "." + s
+                                                            for s in steps[:i]))
+        except RefError as exc:
+            raise ExprError(str(exc))
+    return value

@@ -4,12 +4,13 @@ the checks before running :mod:`coordinator.exprtypes`, the whole :mod:`coordina
 """
 from __future__ import annotations
 
+import re
 from typing import Any, Dict, List, Tuple
 
 from coordinator.refs import MAX_NESTING, RefError, check_size, kind_of, unwrap
 
 __all__ = ["ExprError", "FUNCTIONS", "BRIEF", "brief", "MAX_TEXT", "check_text_size", "text_of", "described",
-           "arithmetic", "apply_function", "compare", "list_hint", "VERB", "ORDER"]
+           "arithmetic", "apply_function", "compare", "list_hint", "VERB", "ORDER", "MAX_DECIMALS", "decimals_problem"]
 
 
 class ExprError(RefError):
@@ -23,13 +24,16 @@ FUNCTIONS: Dict[str, Tuple[Tuple[int, int], str, str]] = {
     "upper": ((1, 1), "string", "string"),
     "str": ((1, 1), "", "string"),
     "abs": ((1, 1), "number", "number"),
-    "round": ((1, 1), "number", "number"),
+    "round": ((1, 2), "number", "number"),
     "min": ((1, 8), "number", "number"),
     "max": ((1, 8), "number", "number"),
     "at": ((2, 2), "", ""),
     "join": ((1, 2), "", "string"),
     "split": ((1, 2), "string", "list"),
+    "words": ((1, 1), "string", "list"),
+    "if": ((3, 3), "", ""),   # lazy: coordinator.expr evaluates only the branch chosen
 }
+MAX_DECIMALS = 15   # round(x, n): a float64 holds about 15 significant decimal digits
 
 
 BRIEF = 40   # characters of a value said in a reason
@@ -154,11 +158,51 @@ def apply_function(name: str, args: List[Any]) -> Any:
         return a.upper()
     if name == "str":
         return a if isinstance(a, str) else text_of(a)
+    if name == "words":
+        return _words(a)
     if name == "abs":
         return abs(a)
     if name == "round":
-        return int(round(a))
+        return _round(a, args[1] if len(args) > 1 else 0)
+    if name == "if":   # not lazy here: an expression's if() is evaluated by coordinator.expr, one branch only
+        return args[1] if a else args[2]
     return min(args) if name == "min" else max(args)
+
+
+def decimals_problem(n: Any) -> str:
+    """Why ``n`` cannot be ``round()``'s number of decimals ('' when it can): a whole number 0 to 15."""
+    if isinstance(n, bool) or not isinstance(n, (int, float)):
+        return "round() takes a number of decimals, got %s" % described(n)
+    if isinstance(n, float) and not n.is_integer() or not 0 <= n <= MAX_DECIMALS:
+        return "round() takes a whole number of decimals from 0 to %d, got %s" % (MAX_DECIMALS, text_of(n))
+    return ""
+
+
+def _round(x: Any, n: Any) -> Any:
+    """``round(x)``: the nearest integer; ``round(pct, 1)``: ``x`` with ``n`` decimals, for a robot to say
+    (a template writes 42.5, not 42.4999…)."""
+    why = decimals_problem(n)
+    if why:
+        raise ExprError(why)
+    if n == 0:
+        return int(round(x))
+    return round(x, int(n))
+
+
+_WORD_ENDS = re.compile(r"^[\W_]+|[\W_]+$")
+
+
+def _words(text: str) -> List[str]:
+    """``words(heard)``: the words of a text in lower case, without the punctuation at their ends, so that
+    ``"yes" in words(heard)`` matches "Yes, please!" but not "yesterday" (``"yes" in heard`` does), and
+    ``"no"`` not "I don't know". Inner apostrophes stay (``don't``; a typographic ’ written '), and so do
+    letters of any language (``¿Sí?`` is ``sí``)."""
+    out = []
+    for word in text.replace("\u2019", "'").split():
+        word = _WORD_ENDS.sub("", word)
+        if word:
+            out.append(word.lower())
+    return out
 
 
 def _join(seq: Any, sep: Any) -> str:

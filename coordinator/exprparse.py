@@ -1,5 +1,9 @@
 """The expression grammar (see :mod:`coordinator.expr`): the tokenizer and the recursive-descent
 parser that turns a text into a tree of tuples, noting the references it reads.
+
+A function's result or a parenthesised expression may be followed by fields and indexes as a key is
+(``at(ps.poses, i).position.z``, ``split(heard)[0]``): a ``("path", value, steps, offset, written)`` node,
+or, after a reference in parentheses, the longer reference itself (``(pos).x`` is ``pos.x``).
 """
 from __future__ import annotations
 
@@ -14,12 +18,14 @@ __all__ = ["Parser", "tokens"]
 
 
 _TOKEN = re.compile(r"""\s*(?:
-    (?P<num>\d+\.\d*(?:[eE][-+]?\d+)?|\d*\.\d+(?:[eE][-+]?\d+)?|\d+)|
+    (?P<num>\d+\.\d*(?:[eE][-+]?\d+)?|\d*\.\d+(?:[eE][-+]?\d+)?|\d+[eE][-+]?\d+|\d+)|
     (?P<str>"(?:[^"\\]|\\.)*"|'(?:[^'\\]|\\.)*')|
     (?P<op>==|!=|<=|>=|<|>|\(|\)|\.|\[|\]|\+|-|\*|/|,)|
     (?P<name>\$?[A-Za-z_][A-Za-z0-9_]*)|
     (?P<bad>\S))""", re.X)
 _OPEN_PAREN = re.compile(r"\s*\(")
+_DECIMALS = re.compile(r"\s*:\s*\.(\d+)[fF]\s*$")   # Python's {pct:.1f}
+_IF = "unexpected 'if' (a choice is written if(condition, then, else))"
 
 _KEYWORDS = {"and", "or", "not", "in", "true", "false", "null", "True", "False", "None"}
 _CMP = {"==", "!=", "<", "<=", ">", ">=", "in"}
@@ -39,8 +45,18 @@ def tokens(text: str) -> List[Tuple[str, Any, int]]:
         start = m.start(kind)
         if kind == "bad":
             hint = {"=": " (compare with '==')", "&": " (use 'and')", "|": " (use 'or')",
-                    "!": " (use 'not', or '!=')"}.get(value, "")
+                    "!": " (use 'not', or '!=')", ":": _decimals_hint(text, start)}.get(value, "")
             raise ExprError("unexpected character %r%s" % (value, hint), start)
+        if kind == "name" and out and out[-1][:2] == ("op", "."):   # a field of a function's result
+            if value.startswith("$"):
+                raise ExprError("expected a field name after '.'", start)
+            try:
+                ref, end = scan_ref(text, start, dollar=False, spaces=True)
+            except RefError as exc:
+                raise ExprError(str(exc), exc.offset)
+            out.append(("field", (ref.key,) + ref.path, start))
+            pos = end
+            continue
         if kind == "name" and value in _KEYWORDS:
             kind = "kw"
         elif kind == "name" and not value.startswith("$") and _OPEN_PAREN.match(text, m.end()):
@@ -62,8 +78,28 @@ def tokens(text: str) -> List[Tuple[str, Any, int]]:
     return out
 
 
+def _decimals_hint(text: str, colon: int) -> str:
+    """`` (for 1 decimal write round(pct, 1))``: Python's format ``{pct:.1f}`` as the expression's
+    ``round(x, n)``, which a template writes without trailing zeros."""
+    m = _DECIMALS.match(text, colon)
+    before = text[:colon].strip()
+    if m is None or not before:
+        return " (a number is rounded to n decimals with round(x, n), not with ':')"
+    n = int(m.group(1))
+    if n == 0:
+        return " (for a whole number write round(%s))" % before
+    return " (for %d decimal%s write round(%s, %d))" % (n, "" if n == 1 else "s", before, n)
+
+
 def _shown(tok: Tuple[str, Any, int]) -> str:
+    if tok[0] == "field":
+        return str(Ref(tok[1][0], tok[1][1:]))[1:]
     return tok[1][1] if tok[0] == "ref" else tok[1]
+
+
+def _is_if(tok: Tuple[str, Any, int]) -> bool:
+    """Whether ``tok`` is a Python-style ``if`` (``a if c else b``), where an operator or the end is due."""
+    return tok[0] == "func" and tok[1] == "if" or tok[0] == "ref" and tok[1][0] == Ref("if")
 
 
 class Parser:
@@ -71,6 +107,7 @@ class Parser:
     written (``refs``, where each starts: ``ref_offsets``, their ``keys``); ExprError if malformed."""
 
     def __init__(self, text: str):
+        self._text = text
         self.keys: Set[str] = set()
         self.refs: List[Ref] = []
         self.ref_offsets: List[int] = []
@@ -103,6 +140,8 @@ class Parser:
         while self._peek()[1] == "or":
             self._take()
             node = ("or", node, self._and())
+        if _is_if(self._peek()):
+            raise ExprError(_IF, self._peek()[2])
         self._depth -= 1
         return node
 
@@ -154,9 +193,13 @@ class Parser:
     def _value(self) -> Any:
         kind, value, at = self._take()
         if kind == "num":
-            return ("lit", float(value) if any(c in value for c in ".eE") else int(value))
+            number = float(value) if any(c in value for c in ".eE") else int(value)
+            if number in (float("inf"), -float("inf")):
+                raise ExprError("the number %s is out of range (at most about 1.8e308)" % value, at)
+            return ("lit", number)
         if kind == "str":
-            return ("lit", bytes(value[1:-1], "utf-8").decode("unicode_escape"))
+            # escapes read as Python's; a letter beyond Latin-1 kept (as UTF-8 bytes, "sí" was "sÃ\xad")
+            return ("lit", value[1:-1].encode("latin-1", "backslashreplace").decode("unicode_escape"))
         if kind == "kw" and value in ("true", "True"):
             return ("lit", True)
         if kind == "kw" and value in ("false", "False"):
@@ -166,11 +209,11 @@ class Parser:
         if value == "(" and kind == "op":
             node = self._or()
             self._expect(")")
-            return node
+            return self._path(node, at)
         if value == "[" and kind == "op":
             return self._list(at)
         if kind == "func":
-            return self._call(value, at)
+            return self._path(self._call(value, at), at)
         if kind == "ref":
             self.keys.add(value[0].key)
             self.refs.append(value[0])
@@ -189,6 +232,34 @@ class Parser:
         self._expect(close)
         return items
 
+    def _path(self, node: Any, at: int) -> Any:
+        """``node`` (written from ``at`` to the token just taken) with the fields and indexes that follow it:
+        as a key's (a name after '.', an integer in brackets), read when it is evaluated."""
+        end = self._toks[self._i - 1][2] + 1
+        steps: List[Any] = []
+        while self._peek()[0] == "op" and self._peek()[1] in (".", "["):
+            if self._take()[1] == ".":
+                tok = self._take()
+                if tok[0] != "field":
+                    raise ExprError("expected a field name after '.'", tok[2])
+                steps.extend(tok[1])
+                continue
+            sign = -1 if self._peek()[:2] == ("op", "-") else 1
+            if sign < 0:
+                self._take()
+            tok = self._take()
+            if tok[0] != "num" or not tok[1].isdigit():
+                raise ExprError("expected an integer index", tok[2])
+            steps.append(sign * int(tok[1]))
+            self._expect("]")
+        if not steps:
+            return node
+        if node[0] == "ref":   # (pos).x is pos.x: one reference, typed and checked as one
+            ref = Ref(node[1].key, node[1].path + tuple(steps))
+            self.refs[-1] = ref
+            return ("ref", ref, node[2])
+        return ("path", node, tuple(steps), at, self._text[at:end])
+
     def _list(self, at: int) -> Any:
         """``[a, b]``: a list of the values of its expressions (``names + [heard]`` appends one)."""
         return ("list", tuple(self._items("]")), at)
@@ -198,6 +269,6 @@ class Parser:
         args = self._items(")")
         (lo, hi), _, _ = FUNCTIONS[name]
         if not lo <= len(args) <= hi:
-            raise ExprError("%s() takes %s, got %d" % (name, "1 argument" if hi == 1 else "%d to %d arguments"
-                                                       % (lo, hi), len(args)), at)
+            takes = "1 argument" if hi == 1 else "%d arguments" % hi if lo == hi else "%d to %d arguments" % (lo, hi)
+            raise ExprError("%s() takes %s, got %d" % (name, takes, len(args)), at)
         return ("call", name, tuple(args), at)

@@ -6,7 +6,8 @@ from __future__ import annotations
 import re
 from typing import Any, Callable, List, Optional, Tuple
 
-from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, list_hint, text_of
+from coordinator.exprfuncs import FUNCTIONS, ORDER, VERB, decimals_problem, list_hint, text_of
+from coordinator.keykinds import KIND_WORDS
 from coordinator.refs import Ref, kind_of
 
 __all__ = ["never_true", "static_kind"]
@@ -47,15 +48,28 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
             errors.append((node[4], "cannot %s a %s and a %s%s" % (VERB[node[1]], a, b, list_hint(node[1], a, b))))
             return None
         return "number"
+    if op == "path":
+        return _path_kind(node, key_kind, errors)
     if op == "call":
         name, args, at = node[1], node[2], node[3]
+        if name == "if":   # either branch may be the value: its kind is known when they agree
+            static_kind(args[0], key_kind, errors)
+            then, other = static_kind(args[1], key_kind, errors), static_kind(args[2], key_kind, errors)
+            return then if then == other else None
         if name == "at":
             kinds = [static_kind(arg, key_kind, errors) for arg in args]
             if kinds[0] not in (None, "list", "string"):
                 errors.append((at, "at() takes a list or a string first, not a %s" % kinds[0]))
             if len(kinds) > 1 and kinds[1] not in (None, "number"):
                 errors.append((at, "at() takes a number as position, not a %s" % kinds[1]))
-            return None   # an element: its kind is not known here
+            if kinds[0] == "string":
+                return "string"   # a character
+            element = _typed_as(node)   # at(ps.poses, i) holds what ps.poses[0] does
+            return None if element is None else key_kind(element)
+        if name == "round" and len(args) > 1 and args[1][0] == "lit" and kind_of(args[1][1]) == "number":
+            why = decimals_problem(args[1][1])
+            if why:
+                errors.append((at, why))
         if name == "join":
             kinds = [static_kind(arg, key_kind, errors) for arg in args]
             if kinds[0] not in (None, "list"):
@@ -82,6 +96,42 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
     return "bool"
 
 
+def _typed_as(node: Any) -> Optional[Ref]:
+    """The reference whose value's type ``node``'s value has, if any: a reference, an element of one
+    (``at(ps.poses, i)`` is of the type of ``ps.poses[0]``, whatever ``i``), a field of those."""
+    if node[0] == "ref":
+        return node[1]
+    if node[0] == "call" and node[1] == "at":
+        seq = _typed_as(node[2][0])
+        return None if seq is None else Ref(seq.key, seq.path + (0,))
+    if node[0] == "path":
+        base = _typed_as(node[1])
+        return None if base is None else Ref(base.key, base.path + node[2])
+    return None
+
+
+def _path_kind(node: Any, key_kind: Callable[[Ref], Optional[str]], errors: List[Tuple[int, str]]) -> Optional[str]:
+    """The kind of ``value.field`` / ``value[i]`` after a function's result or a parenthesised expression
+    (a ``path`` node), after recording a first step that a value of the kind known cannot have."""
+    base, steps, at, written = node[1], node[2], node[3], node[4]
+    kind = static_kind(base, key_kind, errors)
+    step = steps[0]
+    reads = written + ("[%d]" % step if isinstance(step, int) else "." + step)
+    if isinstance(step, int) and (kind in ("number", "bool") or kind == "message" and _typed_as(base) is not None):
+        errors.append((at, "reads %s, but %s is %s, which is not a list" % (reads, written, KIND_WORDS[kind])))
+        return None
+    # a key's value, an element of it or if()'s may be a one-field message, whose field may be read (heard.data)
+    plain = base[0] not in ("ref", "path") and not (base[0] == "call" and base[1] in ("at", "if"))
+    if not isinstance(step, int) and plain and kind in ("number", "bool", "string", "list"):
+        errors.append((at, "reads %s, but %s is %s, which has no fields%s" % (
+            reads, written, KIND_WORDS[kind], " (an element is %s[0])" % written if kind == "list" else "")))
+        return None
+    if kind == "string" and all(isinstance(s, int) for s in steps):
+        return "string"   # a character
+    typed = _typed_as(node)
+    return None if typed is None else key_kind(typed)
+
+
 def never_true(node: Any, why_not: Callable[[str, str, bool], str], errors: List[Tuple[int, str]]) -> None:
     """Each comparison of a key with text that its value can never pass (``st == "timed_out"`` where ``st``
     is a call's status): ``why_not(key, text, contains)`` says why ``$key`` is never ``text`` (``contains``:
@@ -106,6 +156,9 @@ def never_true(node: Any, why_not: Callable[[str, str, bool], str], errors: List
     if op in ("call", "list"):
         for arg in node[2 if op == "call" else 1]:
             never_true(arg, why_not, errors)
+        return
+    if op == "path":
+        never_true(node[1], why_not, errors)
         return
     for child in node[1:]:   # and, or, not, neg, arith: their operands are tuples
         if isinstance(child, tuple):
