@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, FrozenSet, Iterator, List, Tuple
+from typing import Any, Dict, FrozenSet, Iterator, List, Optional, Tuple
 
 import py_trees
 from py_trees.common import Status
@@ -23,7 +23,7 @@ from coordinator.nodes.base import (
 )
 from coordinator.treeast import TreeNode, walk
 
-__all__ = ["FirstSuccess", "KINDS", "MemorySpec", "POLICIES", "ParallelSpec"]
+__all__ = ["EndedBy", "FirstSuccess", "KINDS", "MemorySpec", "NamedEnd", "POLICIES", "ParallelSpec"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,7 @@ class ParallelSpec:
     policy: str = "all"
     synchronise: bool = True
     succeed_on: Tuple[int, ...] = ()   # the positions of the children named by ``succeed_on`` (none: ``policy``)
+    ended_by: str = ""                 # the tree key given the name of the child whose ending ended it
 
 
 # ``succeed_on``'s type, for the JSON Schema (registered here: only the parallel takes it)
@@ -46,15 +47,62 @@ TYPES.setdefault("parallel_policy", ValueType("parallel_policy", " or ".join("`%
                                               {"enum": list(POLICIES)}))
 
 
+class EndedBy:
+    """A parallel's ``ended_by``: when it ends, the name of the child whose ending ended it is written to a
+    tree key (SMACH's Concurrence outcome map with several outcomes: which of them happened): the child
+    that failed (under ``first_success``, the last of them); else the one that succeeded (under ``all``
+    and ``succeed_on``, the last of those it waited for). Not written when the parallel is halted."""
+
+    def __init__(self, ctx: Any, key: str, policy: str, waited: Tuple[int, ...] = ()):
+        self.ctx, self.key, self.policy, self.waited = ctx, key, policy, waited
+        self.order: List[py_trees.behaviour.Behaviour] = []   # children in the order they ended
+
+    def start(self) -> None:
+        self.order = []
+
+    def note(self, parallel: py_trees.composites.Composite) -> None:
+        """After each tick of ``parallel``: the children that ended, and its own end."""
+        children = parallel.children
+        self.order.extend(c for c in children if c.status in (Status.SUCCESS, Status.FAILURE) and c not in self.order)
+        if parallel.status not in (Status.SUCCESS, Status.FAILURE):
+            return
+        ended = [c for c in self.order if c.status == parallel.status
+                 and (parallel.status == Status.FAILURE or not self.waited or children.index(c) in self.waited)]
+        if not ended:
+            return
+        if parallel.status == Status.FAILURE:   # (but first_success, one tick's failures end it: the first)
+            last = self.policy == "first_success"
+        else:
+            last = self.policy == "all" or bool(self.waited)
+        self.ctx.write(self.key, (ended[-1] if last else ended[0]).name)
+
+
+class NamedEnd(py_trees.composites.Parallel):
+    """py_trees' parallel, telling which child ended it (:class:`EndedBy`)."""
+
+    def __init__(self, name: str, policy: Any, children: List[py_trees.behaviour.Behaviour], ended_by: EndedBy):
+        super().__init__(name, policy=policy, children=children)
+        self.ended_by = ended_by
+
+    def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        if self.status != Status.RUNNING:
+            self.ended_by.start()
+        for node in super().tick():
+            if node is self:
+                self.ended_by.note(self)
+            yield node
+
+
 class FirstSuccess(py_trees.composites.Composite):
     """A parallel that succeeds at the first child that succeeds (the others halted) and fails only when
     every child has failed (BehaviorTree.CPP's Parallel with ``success_count: 1`` and ``failure_count``
     all: detectors racing). A child that failed is not ticked again; the failure's reason names each
     child's (its children are reset once it failed, so that the reason is the parallel's own)."""
 
-    def __init__(self, name: str, children: List[py_trees.behaviour.Behaviour]):
+    def __init__(self, name: str, children: List[py_trees.behaviour.Behaviour], ended_by: Optional[EndedBy] = None):
         super().__init__(name=name, children=children)
         self.failures: List[str] = []
+        self.ended_by = ended_by
 
     def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
         if self.status != Status.RUNNING:
@@ -64,6 +112,8 @@ class FirstSuccess(py_trees.composites.Composite):
             self.failures = []
             self.feedback_message = ""
             self.initialise()
+            if self.ended_by is not None:
+                self.ended_by.start()
         for child in self.children:
             if child.status == Status.FAILURE:   # it failed in an earlier tick: it stays failed
                 continue
@@ -74,16 +124,24 @@ class FirstSuccess(py_trees.composites.Composite):
         if winner is not None:
             self.current_child = winner
             self.feedback_message = "%s succeeded" % winner.name
+            self._ended(Status.SUCCESS)
             self.stop(Status.SUCCESS)
         elif all(c.status == Status.FAILURE for c in self.children):
             self.current_child = self.children[-1] if self.children else None
             self.feedback_message = "all %d children failed: %s" % (len(self.children), "; ".join(self.failures))
+            self._ended(Status.FAILURE)
             for child in self.children:   # (the reason is this one's, naming each failure)
                 child.stop(Status.INVALID)
             self.stop(Status.FAILURE)
         else:
             self.status = Status.RUNNING
+            self._ended(Status.RUNNING)
         yield self
+
+    def _ended(self, status: Status) -> None:
+        if self.ended_by is not None:   # (before its children are reset: which failed last)
+            self.status = status
+            self.ended_by.note(self)
 
     def stop(self, new_status: Status = Status.INVALID) -> None:
         for child in self.children:
@@ -192,7 +250,12 @@ class Parallel(_Composite):
                                              "(their `name:`) have succeeded, halting the others (SMACH's "
                                              "Concurrence outcome map); any child failing still fails it"),
                Option("synchronise", "bool", "with `all` or `succeed_on`, a child that succeeded is not ticked "
-                                             "again", default=True))
+                                             "again", default=True),
+               Option("ended_by", "key", "a tree key given, when the parallel ends, the name of the child whose "
+                                         "ending ended it (its `name:`): the one that failed (with "
+                                         "`first_success`: the last to fail), else the one that succeeded (with "
+                                         "`all` or `succeed_on`: the last awaited); not written when it is "
+                                         "halted", shown="none"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Any) -> Any:
         policy = check_choice(p, raw, "policy", POLICIES, "all")
@@ -204,13 +267,23 @@ class Parallel(_Composite):
         selected: Tuple[int, ...] = ()
         if "succeed_on" in raw:   # the children's names are known now
             selected = _selected(p, node, raw["succeed_on"], raw.val_pos["succeed_on"])
-        return ParallelSpec(policy=policy, synchronise=synchronise, succeed_on=selected)
+        ended_by = p.opt(node, raw, self.option("ended_by")) if "ended_by" in raw else ""
+        return ParallelSpec(policy=policy, synchronise=synchronise, succeed_on=selected, ended_by=ended_by or "")
 
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """py_trees' parallel fails as soon as any child fails (the others halted: only the failed one's
         writes are sure), under every policy. ``all`` succeeds when every child has; ``one`` when a child
         has and none failed (the others halted): what any child that can succeed writes; ``succeed_on``
-        when the children it names have (the others halted): what those write."""
+        when the children it names have (the others halted): what those write. Its ``ended_by`` key is
+        written either way."""
+        ok, failed = self._outcome(node, avail, f)
+        key = frozenset([node.spec.ended_by]) if node.spec.ended_by else frozenset()
+        return join(ok, key), join(failed, key)
+
+    def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
+        return {node.spec.ended_by: None} if node.spec.ended_by else {}
+
+    def _outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         outs = [f.outcome(c, avail) for c in node.children]   # together: none reads what another writes
         if not outs:
             return frozenset(), NEVER
@@ -254,15 +327,18 @@ class Parallel(_Composite):
     def build(self, node: TreeNode, ctx: Any, child: Any) -> py_trees.behaviour.Behaviour:
         children = [child(c) for c in node.children]
         spec = node.spec
+        ended_by = EndedBy(ctx, spec.ended_by, spec.policy, spec.succeed_on) if spec.ended_by else None
         if spec.succeed_on:
             policy: py_trees.common.ParallelPolicy.Base = py_trees.common.ParallelPolicy.SuccessOnSelected(
                 [children[i] for i in spec.succeed_on], synchronise=spec.synchronise)
         elif spec.policy == "first_success":
-            return FirstSuccess(node.name, children)
+            return FirstSuccess(node.name, children, ended_by)
         elif spec.policy == "all":
             policy = py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=spec.synchronise)
         else:
             policy = py_trees.common.ParallelPolicy.SuccessOnOne()
+        if ended_by is not None:
+            return NamedEnd(node.name, policy, children, ended_by)
         return py_trees.composites.Parallel(node.name, policy=policy, children=children)
 
 

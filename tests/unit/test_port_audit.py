@@ -152,7 +152,7 @@ def test_an_output_written_to_a_port_is_told_to_write_the_key_with_no_knock_on_e
      "bmtree: write a sequence of the node and set: {key: value} (what comes after the node runs only when it "
      "succeeded))"),
     ("  parallel: [{wait: 1}]\n  failure_count: 2\n",
-     "t.yaml:4:3: unknown option 'failure_count' for parallel (parallel takes name, policy, succeed_on, "
+     "t.yaml:4:3: unknown option 'failure_count' for parallel (parallel takes ended_by, name, policy, succeed_on, "
      "synchronise): BehaviorTree.CPP's success_count and failure_count are parallel's policy: all (every child "
      "succeeds), one (the first success wins, the first failure fails it), first_success (the first success wins, "
      "it fails only when all failed), or succeed_on: [names]"),

@@ -187,7 +187,7 @@ def test_an_unknown_option_in_a_composites_mapping_form_lists_its_options_too(tm
     status, lines = check(tmp_path, capsys, "format: 1\nroot:\n  parallel: {children: [{wait: 0}], polcy_: one, "
                                             "x: 1}\n")
     assert lines == ["t.yaml:3:37: unknown option 'polcy_' for parallel (did you mean 'policy'?)",
-                     "t.yaml:3:50: unknown option 'x' for parallel (parallel takes name, policy, succeed_on, synchronise)"]
+                     "t.yaml:3:50: unknown option 'x' for parallel (parallel takes ended_by, name, policy, succeed_on, synchronise)"]
 
 
 def test_smachs_remapping_says_inputs_and_outputs(tmp_path, capsys):
@@ -263,7 +263,7 @@ def test_smachs_transitions_and_outcome_map_are_named_with_what_bmtree_writes(tm
     assert lines[0].endswith("): SMACH's transitions are a sequence's order (the next state when one succeeds) and, "
                              "to route on how a call ended, its status: KEY with a switch: $KEY over the outcomes "
                              "after it")
-    assert lines[1] == ("t.yaml:9:7: unknown option 'outcome_map' for parallel (parallel takes name, policy, succeed_on, "
+    assert lines[1] == ("t.yaml:9:7: unknown option 'outcome_map' for parallel (parallel takes ended_by, name, policy, succeed_on, "
                         "synchronise): SMACH's outcome_map is parallel's succeed_on: [child names] (those children "
                         "succeed: it succeeds, halting the others) or policy: all, one or first_success")
     assert OTHER_OPTIONS["child_termination_cb"] == OTHER_OPTIONS["outcome_map"]
