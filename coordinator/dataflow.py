@@ -3,7 +3,9 @@
 Data flow: every key a node reads is written earlier on every path by which the nodes before it
 succeed, or is a declared input (a branch that never succeeds is no such path); a read is reported
 at its reference, with where the key is written, and a key that no node writes is told apart (likely
-misspelt: a close name is suggested).
+misspelt: a close name is suggested). A ``switch`` case that only a call's status ``succeeded`` reaches may
+read that call's outputs (:mod:`coordinator.statusflow`); a subtree's read that only its caller's keys let
+pass is a warning at the include (:mod:`coordinator.subtreereads`).
 Types: a ``$reference`` whose value's ROS type (known from the definitions of the nodes that
 write the key) cannot be converted to the input it is passed to, or whose path names a field that
 type does not have (``coordinator.values.follow``); a count, duration or ``for_each`` list of a type

@@ -12,6 +12,7 @@ from coordinator.errors import Pos, TreeError
 from coordinator.nodes.base import NEVER, Flow, NodeKind, Option, fixed, join, meet, repeated_outputs, where
 from coordinator.nodes.leaves import SetKeys
 from coordinator.refs import Ref, refs_in
+from coordinator.subtreereads import Alone, caller_key_reads
 from coordinator.treeast import REQUIRED, TreeFile, TreeNode
 from coordinator.values import at_value_errors, read_at
 
@@ -26,7 +27,8 @@ class IncludeSpec:
     arg_pos: Dict[str, Pos] = field(default_factory=dict)   # where each argument's value is written
     outputs: Dict[str, str] = field(default_factory=dict)   # subtree key -> caller key, copied on success
     output_pos: Dict[str, Pos] = field(default_factory=dict)   # where each subtree key is written
-    # the keys of the caller it replaces, found by the data-flow walk (which runs before the warnings)
+    # its warnings, found by the data-flow walk (which runs before the warnings): the keys of the caller it
+    # replaces, and those the subtree reads without declaring them (coordinator.subtreereads)
     clashes: Set[TreeError] = field(default_factory=set, compare=False, repr=False)
     clashes_of: Any = field(default=None, compare=False, repr=False)   # the walk that found them: a new one starts afresh
 
@@ -109,21 +111,28 @@ class IncludeKind(NodeKind):
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """A sequence: its inputs set (failing when an argument's reference cannot be read), the subtree,
         then its ``outputs`` copied (each a key the subtree surely wrote: else an error at the key). Inside,
-        an input without its argument counts as given: that is reported by itself."""
+        an input without its argument counts as given: that is reported by itself. The keys of the caller
+        it replaces, and those it reads without declaring them, are warnings (``clashes``)."""
         f.need(node, self.reads(node), avail)
         spec = node.spec
         sub = spec.tree
         if sub is None:
             return frozenset(), frozenset()
         bound = frozenset(spec.bound())
-        if spec.clashes_of is not f:
-            spec.clashes_of, spec.clashes = f, set()
-        spec.clashes.update(_clashes(node, sub, avail, f))
+        real = not isinstance(f, Alone)   # (a walk of the subtree by itself only wants what it writes)
+        if real:
+            if spec.clashes_of is not f:
+                spec.clashes_of, spec.clashes = f, set()
+            spec.clashes.update(_clashes(node, sub, avail, f))
+        own = bound | sub.required_inputs
+        start = len(f.missed)
         f.files.append(sub)
         try:
-            ok, failed = f.outcome(sub.root, avail | bound | sub.required_inputs)
+            ok, failed = f.outcome(sub.root, avail | own)
         finally:
             f.files.pop()
+        if real and avail - own:   # (only the caller's keys can make a read pass that fails alone)
+            spec.clashes.update(caller_key_reads(node, sub, own, avail, f.missed[start:], f))
         if spec.outputs and ok is not NEVER:   # (a subtree that never succeeds copies nothing)
             for e in _output_errors(node, sub, ok, bound, f):
                 if e not in f.errors:   # (a subtree is walked once per include of it)
@@ -196,7 +205,8 @@ def _output_errors(node: TreeNode, sub: TreeFile, written: FrozenSet[str], input
 def _clashes(node: TreeNode, sub: TreeFile, held: FrozenSet[str], f: Flow) -> List[TreeError]:
     """The caller's keys (``held``: surely written or declared before the include) that the include
     replaces on the one tree blackboard: an input the arguments leave to its default, an argument that
-    is not the caller's own key passed on, a key a node of the subtree's file writes. A key that only an
+    is not the caller's own key passed on, a key a node of the subtree's file writes (unless ``outputs``
+    copies the subtree's key to that same caller key: the replacement is meant). A key that only an
     earlier run of this same subtree holds is not the caller's."""
     spec = node.spec
     name = os.path.basename(sub.path)
@@ -212,7 +222,7 @@ def _clashes(node: TreeNode, sub: TreeFile, held: FrozenSet[str], f: Flow) -> Li
                                                        "the caller's %r (%%s): rename the caller's key or the "
                                                        "subtree's input" % (k, name, k))
     for k, writer in f.file_writes(sub).items():
-        if k in held and k not in found:
+        if k in held and k not in found and spec.outputs.get(k) != k:   # (outputs: {k: k} says to replace it)
             found[k] = (node.pos, "%s writes %r (%s), replacing the caller's %r (%%s): rename one of them"
                         % (name, k, where(writer.pos, node.pos), k))
     out = []

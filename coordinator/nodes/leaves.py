@@ -25,6 +25,7 @@ from coordinator.nodes.loops import expr_option, expr_type_errors
 from coordinator.nodes.setkeys import SetKeys, SetKind
 from coordinator.nodes.timeouts import NO_TIMEOUT, long_seconds, timeout_option, with_no_timeout
 from coordinator.refs import RefError
+from coordinator.statusflow import SUCCEEDED, sure_when_status
 from coordinator.treeast import TreeNode
 from coordinator.values import KeyTypes, expr_errors, read_at
 
@@ -164,6 +165,16 @@ def _recalled_type(p: Any, parts: List[str], at: Pos) -> Optional[str]:
 
 
 # check ------------------------------------------------------------------------------------
+def _status_compared(tree: Any) -> str:
+    """``KEY`` of an expression ``KEY == "succeeded"`` (either way round), else ''."""
+    if tree[0] != "cmp" or tree[1] != "==":
+        return ""
+    for ref, text in ((tree[2], tree[3]), (tree[3], tree[2])):
+        if ref[0] == "ref" and not ref[1].path and text[0] == "lit" and text[1] == SUCCEEDED:
+            return str(ref[1].key)
+    return ""
+
+
 class Check(Leaf):
     def update(self) -> Status:
         expr = self.node.spec
@@ -204,10 +215,14 @@ class CheckKind(NodeKind):
         return node.spec.keys if node.spec is not None else ()
 
     def flow(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> FrozenSet[str]:
-        """The base's flow, in one call (checks are many): a check reads keys and writes none."""
-        if node.spec is not None and node.spec.keys:
-            f.need(node, node.spec.keys, avail)
-        return _WRITES_NOTHING
+        """The base's flow, in one call (checks are many): a check reads keys and writes none; but
+        ``check: 'found == "succeeded"'`` on a call's status key passes only after that call succeeded,
+        so the nodes after it may read its outputs (:mod:`coordinator.statusflow`)."""
+        if node.spec is None or not node.spec.keys:
+            return _WRITES_NOTHING
+        f.need(node, node.spec.keys, avail)
+        key = _status_compared(node.spec.tree)
+        return sure_when_status(f, key, [SUCCEEDED]) if key else _WRITES_NOTHING
 
     def check_types(self, node: TreeNode, types: Dict[str, set], errors: List[TreeError]) -> None:
         errors.extend(quoted_key_warnings(node.spec, node.value_pos, types))

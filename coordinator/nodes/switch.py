@@ -9,8 +9,10 @@ from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import kind_of, text_of
-from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, fixed, meet
+from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, fixed, join, meet
+from coordinator.nodes.call import STATUS_TEXTS
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
+from coordinator.statusflow import sure_when_status
 from coordinator.treeast import TreeNode
 from coordinator.values import at_value_errors, read_at, value_kind
 
@@ -132,10 +134,14 @@ class SwitchKind(NodeKind):
     def outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         """Ends as the chosen child does: a case that never succeeds (a ``force_failure`` default) is no
         way for the switch to succeed. It also fails with no child run, when nothing matches and there
-        is no default, or when its value cannot be worked out."""
+        is no default, or when its value cannot be worked out. A case run only when ``$key`` is a call's
+        status ``succeeded`` may read that call's outputs (:mod:`coordinator.statusflow`)."""
         f.need(node, self.reads(node), avail)
         _cases_never_matching(node, f)
-        outs = [f.outcome(c, avail) for c in node.children]
+        outs = []
+        for c, sure in zip(node.children, _sure_in_cases(node, f)):
+            cs, cf = f.outcome(c, avail | sure if sure else avail)
+            outs.append((join(sure, cs), join(sure, cf)) if sure else (cs, cf))
         ok = meet(cs for cs, _ in outs)
         failed = meet(cf for _, cf in outs)
         if not node.spec.has_default or not fixed(node.spec.value):
@@ -176,6 +182,23 @@ def _cases_never_matching(node: TreeNode, f: Flow) -> None:
         why = [w.nodekind.never_matches(w, key, label, contains, at) for w in writers]
         if all(why):   # (None, any value: no error; '': it may match)
             f.errors.append(TreeError(at, why[0]))
+
+
+def _sure_in_cases(node: TreeNode, f: Flow) -> List[FrozenSet[str]]:
+    """For each child (the default last), the keys surely written when it runs, known from the value: on
+    ``$key`` that only calls' ``status`` writes, a case that matches no status but ``succeeded`` (those an
+    earlier case matches aside) runs after such a call succeeded. The default gets nothing."""
+    spec: SwitchSpec = node.spec
+    none: List[FrozenSet[str]] = [frozenset()] * len(node.children)
+    if not isinstance(spec.value, Ref) or spec.value.path or not spec.labels:
+        return none
+    left = list(STATUS_TEXTS)   # the statuses no earlier case matches
+    out = []
+    for label in spec.labels:
+        taken = [s for s in left if matches(s, label, spec.match)]
+        left = [s for s in left if s not in taken]
+        out.append(sure_when_status(f, spec.value.key, taken) if taken else frozenset())
+    return out + none[len(out):]
 
 
 _YAML_BOOL = "this case is read by YAML as %s (unquoted yes/no/on/off/null)"

@@ -170,7 +170,8 @@ def test_the_default_an_include_leaves_to_its_subtree_is_checked(tmp_path, defs)
 def test_a_literal_is_checked_only_when_nothing_else_writes_the_input(tmp_path, defs):
     args = "- include: sub.yaml\n  args: {tries: three}"
     assert len(sub_found(tmp_path, defs, args)) == 1
-    written = SUB.replace("  sequence:\n", "  sequence:\n    - set: {tries: $answer.data}\n")
+    written = SUB.replace("  sequence:\n", "  sequence:\n    - {call: speech.listen, inputs: {seconds: 1}, "
+                                           "outputs: {text: heard}}\n    - set: {tries: $heard.data}\n")
     assert sub_found(tmp_path, defs, args, written) == []    # (its value when the retry starts is not known)
     assert sub_found(tmp_path, defs, args + "\n- set: {tries: 2}") == []
 
