@@ -21,10 +21,11 @@ import re
 import sys
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
-from comm.textfile import read_text, text_pos
+from comm.textfile import read_text
+from coordinator.btimportformat import format_of
 from coordinator.btimportnodes import Converter, Out
 from coordinator.btimportports import Scope
-from coordinator.btxml import Element, XmlErrors, parse_xml
+from coordinator.btxml import Element, XmlErrors, byte_pos, parse_xml
 from coordinator.errors import Pos, TreeError, TreeErrors, UsageError
 from modules.definition import ModuleDefinition
 
@@ -34,6 +35,7 @@ _PLAIN = re.compile(r"^[A-Za-z_$][\w.$/-]*( [\w.$/-]+)*$")
 _QUOTED_WORDS = frozenset(("y", "n", "Y", "N", "yes", "no", "on", "off", "true", "false", "null", "none"))
 _IGNORED_TOP = ("TreeNodesModel",)
 _LINE = re.compile(r"\bline (\d+)\b")
+_MILLISECONDS_HINT = re.compile(r": durations are in seconds; for \S+ milliseconds write ")
 
 
 def add_import_parser(sub: Any) -> None:
@@ -50,6 +52,9 @@ def add_import_parser(sub: Any) -> None:
     i.add_argument("--map", action="append", metavar="ID=module.function", type=text("ID=module.function"),
                    help="the module function an action or condition ID is (repeatable; default: the function "
                         "whose name matches the ID: GoTo, go_to, Navigation.GoTo)")
+    i.add_argument("--tree", dest="tree_id", metavar="ID", type=text("a BehaviorTree ID"),
+                   help="the BehaviorTree to import (default: main_tree_to_execute, or the file's only one), as "
+                        "BehaviorTree.CPP's createTree(ID) chooses it")
     i.set_defaults(func=cmd_import)
 
 
@@ -61,7 +66,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise UsageError("-o %s is the XML file itself: give another name" % args.output)
     defs = definitions_from(args.modules)
     out_path = args.output or os.path.splitext(args.tree)[0] + ".yaml"
-    text, warnings = import_tree(args.tree, defs, maps, out_path)
+    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id)
     for w in warnings:
         err(str(w))
     if not args.output:
@@ -92,42 +97,56 @@ def _shown(path: str) -> str:
 
 
 def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Mapping[str, str],
-                out_path: str) -> Tuple[str, List[TreeError]]:
-    """The YAML text of the main tree of ``path``, checked as if written at ``out_path``, and the check's
-    warnings (at the XML's positions); TreeErrors (at the XML's positions) when it cannot be converted."""
+                out_path: str, tree_id: Optional[str] = None) -> Tuple[str, List[TreeError]]:
+    """The YAML text of the main tree of ``path`` (or of ``tree_id``), checked as if written at ``out_path``,
+    and the warnings (at the XML's positions); TreeErrors (at the XML's positions) when it cannot be
+    converted."""
     shown = _shown(path)
     try:
         text = read_text(path)
     except OSError as exc:
         raise TreeErrors([TreeError(Pos(shown, 1, 1), "cannot read %s: %s" % (shown, exc.strerror or exc))])
     except UnicodeDecodeError as exc:
-        raise TreeErrors([TreeError(Pos(shown, *text_pos(exc.object, exc.start)), "not UTF-8 text: byte 0x%02x"
+        raise TreeErrors([TreeError(Pos(shown, *byte_pos(exc.object, exc.start)), "not UTF-8 text: byte 0x%02x"
                                     % exc.object[exc.start])])
     try:
         root = parse_xml(text, shown)
     except XmlErrors as exc:
         raise TreeErrors(exc.errors)
     errors: List[TreeError] = []
-    version, trees, main = _top(root, errors)
+    notes: List[TreeError] = []
+    version, trees, main = _top(root, errors, notes, tree_id)
     if main is None:
-        raise TreeErrors(errors)
+        raise TreeErrors(notes + errors)   # the format chosen may be why
     conv = Converter(trees, version, definitions, maps)
     top = conv.tree(main, Scope(), trees[main])
+    conv.finish()
     errors += conv.errors
     if errors or top is None:
-        raise TreeErrors(errors)
+        raise TreeErrors(notes + errors)
+    if conv.initial:   # generated keys a node reads before it writes them (SequenceWithMemory's progress)
+        top = Out(top.pos, ("sequence", [Out(top.pos, ("set", conv.initial)), top]))
     inputs = sorted(conv.reads - conv.written)
     lines = _document(top, main, shown, version, inputs)
     yaml_text = "".join(t + "\n" for t, _p in lines)
-    return yaml_text, _check(yaml_text, lines, out_path, definitions)
+    warnings = [w for w in _check(yaml_text, lines, out_path, definitions)   # BehaviorTree.CPP wrote milliseconds
+                if not (_MILLISECONDS_HINT.search(w.message) and (w.pos.line, w.pos.column) in conv.from_ms)]
+    return yaml_text, notes + warnings
 
 
-def _top(root: Element, errors: List[TreeError]) -> Tuple[int, Dict[str, Element], Optional[str]]:
-    """The format, the BehaviorTrees by ID and the one to import (None after reporting)."""
+def _top(root: Element, errors: List[TreeError], notes: List[TreeError],
+         chosen: Optional[str]) -> Tuple[int, Dict[str, Element], Optional[str]]:
+    """The format, the BehaviorTrees by ID and the one to import (None after reporting); ``notes``: how the
+    format was chosen when the file does not say."""
     if root.tag != "root":
         errors.append(TreeError(root.pos, "not a BehaviorTree.CPP file: its top element is <%s>, not <root>" % root.tag))
         return 3, {}, None
-    raw = root.attrs.get("BTCPP_format", "3").strip()
+    raw = root.attrs.get("BTCPP_format")
+    if raw is None:
+        version, why = format_of(root)
+        notes.append(TreeError(root.pos, "warning: %s" % why))
+        raw = str(version)
+    raw = raw.strip()
     if raw not in ("3", "4"):
         errors.append(TreeError(root.at("BTCPP_format"), "BTCPP_format %r: bmtree import reads formats 3 and 4" % raw))
         return 3, {}, None
@@ -149,17 +168,24 @@ def _top(root: Element, errors: List[TreeError]) -> Tuple[int, Dict[str, Element
         elif el.tag not in _IGNORED_TOP:
             errors.append(TreeError(el.pos, "<%s> is no element of a BehaviorTree.CPP file's <root> (BehaviorTree, "
                                             "TreeNodesModel, include)" % el.tag))
-    main = root.attrs.get("main_tree_to_execute")
+    from comm.errors import did_you_mean
+
+    if chosen is not None and chosen not in trees:
+        if not errors:
+            raise UsageError("--tree %s: no BehaviorTree of that ID in %s (%s)%s" % (
+                chosen, root.pos.file, ", ".join(trees) or "none", did_you_mean(chosen, trees)))
+        return int(raw), trees, None
+    main = chosen or root.attrs.get("main_tree_to_execute")
     if main is None and len(trees) == 1:
         main = next(iter(trees))
     elif main is None:
-        errors.append(TreeError(root.pos, "%s: name the one to import with main_tree_to_execute=\"…\" on <root>" % (
-            "several BehaviorTrees (%s)" % ", ".join(trees) if trees else "no BehaviorTree in the file")))
+        errors.append(TreeError(root.pos, "several BehaviorTrees (%s) and no main_tree_to_execute on <root>: choose "
+                                          "the one to import with --tree ID (BehaviorTree.CPP's createTree(ID))"
+                                % ", ".join(trees) if trees else "no BehaviorTree in the file"))
     elif main not in trees:
-        from comm.errors import did_you_mean
-
         errors.append(TreeError(root.at("main_tree_to_execute"), "main_tree_to_execute %r: no BehaviorTree of that ID "
-                                "(%s)%s" % (main, ", ".join(trees) or "none", did_you_mean(main, trees))))
+                                "(%s)%s; or choose one with --tree ID" % (main, ", ".join(trees) or "none",
+                                                                         did_you_mean(main, trees))))
         main = None
     return int(raw), trees, main
 
@@ -181,6 +207,8 @@ def scalar(v: Any) -> str:
 def _flow(v: Any) -> str:
     if isinstance(v, dict):
         return "{%s}" % ", ".join("%s: %s" % (scalar(k), _flow(x)) for k, x in v.items())
+    if isinstance(v, list):   # for_each's elements
+        return "[%s]" % ", ".join(_flow(x) for x in v)
     return scalar(v)
 
 
@@ -198,7 +226,7 @@ def _emit(node: Out, indent: int, lead: str, out: List[Line]) -> None:
         if isinstance(value, Out):
             out.append((head, node.pos))
             _emit(value, inner, "", out)
-        elif isinstance(value, list):
+        elif isinstance(value, list) and value and all(isinstance(c, Out) for c in value):   # children
             out.append((head, node.pos))
             for child in value:
                 _emit(child, inner, "- ", out)

@@ -2,7 +2,8 @@
 
 Each node becomes an :class:`Out` (its YAML keys in order, and the element it came from, so that a problem
 the tree checks find later is said at the XML's line). Every problem is collected, never a placeholder
-written. SubTrees are inlined (see ``btimport``'s docstring for why).
+written. SubTrees are inlined (see ``btimport``'s docstring for why). The decorators and controls are in
+``btimportcontrols``.
 """
 from __future__ import annotations
 
@@ -10,11 +11,15 @@ import re
 from typing import Any, Dict, List, Mapping, Optional, Set, Tuple, Union
 
 from comm.errors import did_you_mean
+from coordinator.btimportcontrols import Controls, seconds
 from coordinator.btimportports import (
     Lit,
+    Out,
+    OutOfRange,
     Scope,
     escape_text,
     find_function,
+    is_text,
     key_ref,
     plain_literal,
     typed_literal,
@@ -31,23 +36,9 @@ _IGNORED = ("name", "ID", "_description", "_uid", "_fullpath")   # Groot's notes
 _COMPOSITES = {"Sequence": ("sequence", None), "SequenceStar": ("sequence", None),
                "SequenceWithMemory": ("sequence", None), "ReactiveSequence": ("sequence", False),
                "Fallback": ("selector", None), "ReactiveFallback": ("selector", False)}
+_MEMORY = ("SequenceStar", "SequenceWithMemory")
 _SIMPLE_DECORATORS = {"Inverter": "inverter", "ForceSuccess": "force_success", "ForceFailure": "force_failure"}
 _WRAPPERS = ("Action", "Condition", "Control", "Decorator")
-
-
-class Out:
-    """A converted node: its YAML keys in order (the kind first), and the element it came from."""
-
-    __slots__ = ("pos", "items")
-
-    def __init__(self, pos: Pos, *items: Tuple[str, Any]):
-        self.pos = pos
-        self.items = list(items)
-
-    def named(self, name: Optional[str]) -> Out:
-        if name and not any(k == "name" for k, _v in self.items):
-            self.items.insert(1, ("name", name))
-        return self
 
 
 def _snake(name: str) -> str:
@@ -56,7 +47,7 @@ def _snake(name: str) -> str:
     return s if s and not s[0].isdigit() else "t_" + s
 
 
-class Converter:
+class Converter(Controls):
     """Converts the trees of one file, collecting every problem in ``errors``."""
 
     def __init__(self, trees: Mapping[str, Element], version: int, definitions: Mapping[str, ModuleDefinition],
@@ -72,6 +63,12 @@ class Converter:
         self.depth = 0
         self.count = 0
         self.flags = 0
+        self.rerun = 0   # > 0 below a node that ticks its child again after a failure (a retry, a reactive parent)
+        self.initial: Dict[str, Any] = {}   # generated keys set before the tree runs
+        self.from_ms: Set[Tuple[int, int]] = set()   # elements whose seconds were milliseconds
+        # what reads or writes each key: a port's definition, or "whole"/"number" (a count, milliseconds)
+        self.uses: Dict[str, List[Any]] = {}
+        self.literals: List[Tuple[Dict[str, Any], str, str, Element, str]] = []   # SetBlackboard's, typed last
 
     def err(self, pos: Pos, message: str) -> None:
         self.errors.append(TreeError(pos, message))
@@ -93,6 +90,11 @@ class Converter:
             return self.node(el.children[0], scope)
         finally:
             self.stack = self.stack[:-1]
+
+    def finish(self) -> None:
+        """Type SetBlackboard's literals from the ports that use their keys (all converted by now)."""
+        for table, key, text, el, where in self.literals:
+            table[key] = self.set_literal(key, text, el, where)
 
     # nodes ------------------------------------------------------------------------------------
     def node(self, el: Element, scope: Scope) -> Optional[Out]:
@@ -122,9 +124,16 @@ class Converter:
         if kind in _COMPOSITES:
             bm, memory = _COMPOSITES[kind]
             self.attrs(el, kind, ())
-            kids = self.kids(el, kind, scope, 1)
-            return Out(el.pos, (bm, kids), *([("memory", memory)] if memory is not None else [])) \
-                if kids is not None else None
+            self.rerun += memory is False   # reactive: an earlier child ends a later one, ticked again later
+            try:
+                kids = self.kids(el, kind, scope, 1)
+            finally:
+                self.rerun -= memory is False
+            if kids is None:
+                return None
+            if kind in _MEMORY and self.rerun and len(kids) > 1:
+                return self.memory_sequence(el, kids)
+            return Out(el.pos, (bm, kids), *([("memory", memory)] if memory is not None else []))
         if kind in _SIMPLE_DECORATORS:
             self.attrs(el, kind, ())
             child = self.one_child(el, kind, scope)
@@ -136,6 +145,8 @@ class Converter:
             return self._switch(el, kind, scope)
         if kind in ("SubTree", "SubTreePlus"):
             return self.subtree(el, kind, scope)
+        if self.version < 4 and kind in self.trees and kind not in self.maps and not el.children:
+            return self.subtree(el, "SubTree", scope, kind)   # BehaviorTree.CPP 3: <Talk/> is <SubTree ID="Talk"/>
         other = OTHER_KINDS.get(re.sub(r"[_\-]", "", kind).lower()) if "." not in kind else None
         if other is not None:
             self.err(el.pos, "%s is not converted: bmtree has no such node (%s); write that in the YAML by hand, or "
@@ -198,13 +209,17 @@ class Converter:
             self.err(el.pos, "%s needs %s" % (kind, attr))
             return None
         ref = key_ref(raw)
-        where = el.at(attr)
+        where: Any = el.at(attr)
         if ref is not None:
-            key = self.use_key(el, attr, ref, scope, False)
+            key = self.use_key(el, attr, ref, scope, False, "whole" if whole else "number")
             if not isinstance(key, Lit):
                 return None if key is None else "$" + key
             raw, where = key.text, key.where   # a SubTree gave the literal
-        value = plain_literal(raw)
+        try:
+            value = plain_literal(raw)
+        except OutOfRange as exc:
+            self.err(el.at(attr), "%s of %s is %s%s" % (attr, kind, exc, _from(where, el.at(attr))))
+            return None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (whole and not isinstance(value, int)):
             self.err(el.at(attr), "%s of %s must be a %s, got %r%s" % (attr, kind, "whole number" if whole else
                                                                      "number", raw, _from(where, el.at(attr))))
@@ -215,8 +230,10 @@ class Converter:
             return None
         return value
 
-    def use_key(self, el: Element, attr: str, ref: str, scope: Scope, write: bool) -> Union[str, Lit, None]:
-        """The tree key a port's ``{ref}`` names (or the literal a SubTree gave it); None after reporting."""
+    def use_key(self, el: Element, attr: str, ref: str, scope: Scope, write: bool,
+                use: Any = None) -> Union[str, Lit, None]:
+        """The tree key a port's ``{ref}`` names (or the literal a SubTree gave it); None after reporting.
+        ``use``: the port's definition (or "whole"/"number"), which types a SetBlackboard literal of the key."""
         value, root = scope.resolve(attr if ref in ("=", "") else ref)
         if isinstance(value, Lit):
             return value
@@ -228,6 +245,8 @@ class Converter:
             self.written.add(value)
         elif root:
             self.reads.add(value)
+        if use is not None:
+            self.uses.setdefault(value, []).append(use)
         return value
 
     # leaves -----------------------------------------------------------------------------------
@@ -235,6 +254,9 @@ class Converter:
         word = "Condition" if el.tag == "Condition" else "Action"
         fn, why = find_function(node_id, self.definitions, self.maps)
         if fn is None:
+            if node_id in self.trees:
+                why += "; %r is a BehaviorTree of this file, which format 4 includes with <SubTree ID=\"%s\"/>" % (
+                    node_id, node_id)
             self.err(el.pos, "%s %r %s" % (word, node_id, why))
             return None
         inputs: Dict[str, Any] = {}
@@ -249,30 +271,24 @@ class Converter:
                 self.err(el.at(k), "%s has no port %r: its inputs: %s; its outputs: %s%s" % (
                     said, k, ", ".join(p.name for p in fn.inputs) or "none",
                     ", ".join(p.name for p in fn.outputs) or "none", did_you_mean(k, names)))
-            elif p_in is not None:
-                text, where = v, el.at(k)
-                if ref is not None:
-                    key = self.use_key(el, k, ref, scope, False)
-                    if not isinstance(key, Lit):
-                        if key is not None:
-                            inputs[k] = "$" + key
-                        continue
-                    text, where = key.text, key.where
-                value, want = typed_literal(text, p_in)
-                if want:
-                    self.err(el.at(k), "%s: input %r takes %s, got %r%s" % (said, k, want, text, _from(where, el.at(k))))
-                else:
-                    inputs[k] = value
-            elif ref is None:
-                self.err(el.at(k), "%s: %r is an output: give it the blackboard key to write, %s=\"{key}\", not %r"
-                         % (said, k, k, v))
-            else:
-                key = self.use_key(el, k, ref, scope, True)
-                if isinstance(key, Lit):
-                    self.err(el.at(k), "%s: %r is an output, but the SubTree gives it the literal %r (%s): give it a "
-                                       "{key}" % (said, k, key.text, key.where))
-                elif key is not None:
-                    outputs[k] = key
+                continue
+            if p_in is not None:
+                self.input(el, k, v, ref, p_in, scope, said, inputs)
+            if p_out is None:
+                continue
+            if ref is None and self.version < 4 and v.strip() and p_in is None:
+                ref = v.strip()   # BehaviorTree.CPP 3 writes an output to the key its bare word names
+            if ref is None:
+                if v.strip() and p_in is None:
+                    self.err(el.at(k), "%s: %r is an output: give it the blackboard key to write, %s=\"{key}\", not %r"
+                             % (said, k, k, v))
+                continue   # "" (Groot 1 writes it for a port left empty): BehaviorTree.CPP keeps no output either
+            key = self.use_key(el, k, ref, scope, True, "text" if is_text(p_out) else p_out)
+            if isinstance(key, Lit):
+                self.err(el.at(k), "%s: %r is an output, but the SubTree gives it the literal %r (%s): give it a "
+                                   "{key}" % (said, k, key.text, key.where))
+            elif key is not None:
+                outputs[k] = key
         for p in fn.inputs:
             if p.name in _IGNORED:
                 self.err(el.pos, "%s: the function's input %r cannot be a port in BehaviorTree.CPP XML (%s= is the "
@@ -285,6 +301,27 @@ class Converter:
         items += [("inputs", inputs)] if inputs else []
         items += [("outputs", outputs)] if outputs else []
         return Out(el.pos, *items)
+
+    def input(self, el: Element, k: str, v: str, ref: Optional[str], param: Any, scope: Scope, said: str,
+              inputs: Dict[str, Any]) -> None:
+        """One input port's value into ``inputs`` (``$key``, or the literal typed by the definition)."""
+        text, where = v, el.at(k)
+        if ref is not None:
+            key = self.use_key(el, k, ref, scope, False, "text" if is_text(param) else param)
+            if not isinstance(key, Lit):
+                if key is not None:
+                    inputs[k] = "$" + key
+                return
+            text, where = key.text, key.where
+        try:
+            value, want = typed_literal(text, param)
+        except OutOfRange as exc:
+            self.err(el.at(k), "%s: input %r is %s%s" % (said, k, exc, _from(where, el.at(k))))
+            return
+        if want:
+            self.err(el.at(k), "%s: input %r takes %s, got %r%s" % (said, k, want, text, _from(where, el.at(k))))
+        else:
+            inputs[k] = value
 
     def _SetBlackboard(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
         a = self.attrs(el, kind, ("output_key", "value"))
@@ -300,16 +337,44 @@ class Converter:
                                           "give it a {key}" % (key.text, key.where))
             return None
         ref = key_ref(a["value"])
-        value: Any = plain_literal(a["value"])
+        text: Optional[str] = a["value"]
+        where = str(el.at("value"))
+        got: Union[str, Lit, None] = None
         if ref is not None:
             got = self.use_key(el, "value", ref, scope, False)
-            value = plain_literal(got.text) if isinstance(got, Lit) else None if got is None else "$" + got
-        return Out(el.pos, ("set", {key: value})) if key is not None and value is not None else None
+            if isinstance(got, Lit):
+                text, where = got.text, got.where
+            elif got is None:
+                return None
+        if key is None:
+            return None
+        if isinstance(got, str):   # a copy of another key
+            return Out(el.pos, ("set", {key: "$" + got}))
+        table: Dict[str, Any] = {key: text}
+        self.literals.append((table, key, text or "", el, where))   # typed by finish(), once every reader is known
+        return Out(el.pos, ("set", table))
+
+    def set_literal(self, key: str, text: str, el: Element, where: str) -> Any:
+        """A SetBlackboard literal as the ports that use its key take it: BehaviorTree.CPP stores the string, which
+        each reader converts; text when one reads text or none says (a number, when only numbers are read)."""
+        uses = self.uses.get(key, [])
+        if not uses or "text" in uses:
+            return escape_text(text)
+        try:
+            if isinstance(uses[0], str):   # a count or milliseconds
+                value = plain_literal(text)
+                return value if isinstance(value, (int, float)) and not isinstance(value, bool) else escape_text(text)
+            value, bad = typed_literal(text, uses[0])
+        except OutOfRange as exc:
+            self.err(el.at("value"), "value of SetBlackboard is %s%s" % (exc, _from(where, el.at("value"))))
+            return None
+        return escape_text(text) if bad else value   # the check then says which reader cannot take text
 
     def _Sleep(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
         self.attrs(el, kind, ("msec",))
         ms = self.number(el, kind, "msec", scope, False)
-        return Out(el.pos, ("wait", _seconds(ms))) if ms is not None else None
+        self.from_ms.add((el.pos.line, el.pos.column))
+        return Out(el.pos, ("wait", seconds(ms))) if ms is not None else None
 
     def _AlwaysSuccess(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
         self.attrs(el, kind, ())
@@ -319,138 +384,10 @@ class Converter:
         self.attrs(el, kind, ())
         return Out(el.pos, ("fail", escape_text(el.attrs.get("name") or kind)))
 
-    # decorators -------------------------------------------------------------------------------
-    def _loop(self, el: Element, kind: str, scope: Scope, attr: str, bm: str) -> Optional[Out]:
-        self.attrs(el, kind, (attr,))
-        n = self.number(el, kind, attr, scope, True)
-        child = self.one_child(el, kind, scope)
-        if n == 0:
-            self.err(el.at(attr), "%s of %s is 0: bmtree's %s takes 1 or more" % (attr, kind, bm))
-            return None
-        return Out(el.pos, (bm, n), ("child", child)) if n is not None and child is not None else None
-
-    def _RetryUntilSuccessful(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        return self._loop(el, kind, scope, "num_attempts", "retry")
-
-    _RetryUntilSuccesful = _RetryUntilSuccessful   # BehaviorTree.CPP 3's spelling
-
-    def _Repeat(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        return self._loop(el, kind, scope, "num_cycles", "repeat")
-
-    def _Timeout(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        self.attrs(el, kind, ("msec",))
-        ms = self.number(el, kind, "msec", scope, False)
-        child = self.one_child(el, kind, scope)
-        if ms == 0:
-            self.err(el.at("msec"), "msec of Timeout is 0: bmtree's timeout takes more than 0 seconds")
-            return None
-        return Out(el.pos, ("timeout", _seconds(ms)), ("child", child)) if ms is not None and child else None
-
-    def _Delay(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        self.attrs(el, kind, ("delay_msec",))
-        ms = self.number(el, kind, "delay_msec", scope, False)
-        child = self.one_child(el, kind, scope)
-        if ms is None or child is None:
-            return None
-        return Out(el.pos, ("sequence", [Out(el.pos, ("wait", _seconds(ms))), child]))
-
-    # controls ---------------------------------------------------------------------------------
-    def _Parallel(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        names = ("success_count", "failure_count") if self.version >= 4 else ("threshold",)
-        self.attrs(el, kind, names)
-        kids = self.kids(el, kind, scope, 1)
-        n = len(el.children)
-        if self.version >= 4:
-            succ = self._count(el, kind, "success_count", scope, "-1", n)
-            fail = self._count(el, kind, "failure_count", scope, "1", n)
-        else:
-            succ = self._count(el, kind, "threshold", scope, None, n)
-            fail = n - succ + 1 if isinstance(succ, int) else None   # v3 fails once threshold is out of reach
-        if kids is None or not isinstance(succ, int) or not isinstance(fail, int):
-            if isinstance(succ, str) or isinstance(fail, str):
-                self.err(el.pos, "Parallel's counts from the blackboard are not converted: bmtree's parallel policy "
-                                 "is written in the tree")
-            return None
-        if succ > n or fail > n or succ < 1 or fail < 1:
-            self.err(el.pos, "Parallel counts %d success%s and %d failure%s of %d children: each must be from 1 to "
-                             "the number of children" % (succ, "" if succ == 1 else "es", fail, "" if fail == 1 else "s", n))
-            return None
-        if succ == n:
-            return Out(el.pos, ("parallel", kids))   # the first failure fails it, as success_count all does
-        if succ == 1 and fail == 1:
-            return Out(el.pos, ("parallel", kids), ("policy", "one"))
-        if succ == 1 and fail == n:
-            return Out(el.pos, ("parallel", kids), ("policy", "first_success"))
-        self.err(el.pos, "Parallel with success_count %d and failure_count %d of %d children is not converted: bmtree's "
-                         "parallel succeeds when all children do (policy: all), when the first does (policy: one, "
-                         "failure_count 1; policy: first_success, failure_count %d) or when named children do "
-                         "(succeed_on): it cannot count %s" % (
-                             succ, fail, n, n, "%d successes" % succ if succ > 1 else "%d failures" % fail))
-        return None
-
-    def _count(self, el: Element, kind: str, attr: str, scope: Scope, default: Optional[str], n: int) -> Any:
-        """A count of children, a negative one counted from the number of children (-1: all of them)."""
-        raw = el.attrs.get(attr, default)
-        if raw is not None and re.match(r"^\s*-\d+\s*$", raw):
-            return n + 1 + int(raw)
-        return self.number(el, kind, attr, scope, True, default)
-
-    def _IfThenElse(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        self.attrs(el, kind, ())
-        kids = self.kids(el, kind, scope, 2, 3)
-        if kids is None:
-            return None
-        if len(kids) == 2:   # the condition fails: FAILURE, as a sequence
-            return Out(el.pos, ("sequence", kids))
-        self.flags += 1
-        flag = "if_then_else_%d" % self.flags
-        self.written.add(flag)
-        cond, then, other = kids
-        p = el.pos
-        held = Out(p, ("force_success", Out(p, ("sequence", [cond, Out(p, ("set", {flag: True}))]))))
-        branch = Out(p, ("selector", [Out(p, ("sequence", [Out(p, ("check", flag)), then])),
-                                      Out(p, ("sequence", [Out(p, ("check", "not " + flag)), other]))]))
-        return Out(p, ("sequence", [Out(p, ("set", {flag: False})), held, branch]))
-
-    def _WhileDoElse(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        self.attrs(el, kind, ())
-        kids = self.kids(el, kind, scope, 2, 3)
-        if kids is None:
-            return None
-        if len(kids) == 3:
-            self.err(el.pos, "WhileDoElse with an else branch is not converted: bmtree would have to tick its "
-                             "condition twice a tick; write a selector with memory: false of a sequence with memory: "
-                             "false [condition, do] and the else node, or give WhileDoElse two children")
-            return None
-        return Out(el.pos, ("sequence", kids), ("memory", False))
-
-    def _switch(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        n = int(kind[-1])
-        cases = ["case_%d" % i for i in range(1, n + 1)]
-        a = self.attrs(el, kind, ("variable",) + tuple(cases))
-        kids = self.kids(el, kind, scope, n + 1, n + 1)
-        ref = key_ref(a.get("variable", ""))
-        if ref is None:
-            self.err(el.at("variable"), "%s needs variable=\"{key}\"" % kind)
-            return None
-        key = self.use_key(el, "variable", ref, scope, False)
-        missing = [c for c in cases if c not in a]
-        if missing:
-            self.err(el.pos, "%s needs %s" % (kind, ", ".join(missing)))
-        if kids is None or missing or not isinstance(key, str):
-            if isinstance(key, Lit):
-                self.err(el.at("variable"), "%s: the SubTree gives variable the literal %r (%s): give it a {key}"
-                         % (kind, key.text, key.where))
-            return None
-        table = {escape_text(a[c]): kid for c, kid in zip(cases, kids)}
-        if len(table) < n:
-            self.err(el.pos, "%s has two cases of one value" % kind)
-            return None
-        return Out(el.pos, ("switch", "$" + key), ("cases", table), ("default", kids[-1]))
-
     # subtrees ---------------------------------------------------------------------------------
-    def subtree(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
-        sid = el.attrs.get("ID", "")
+    def subtree(self, el: Element, kind: str, scope: Scope, implicit: str = "") -> Optional[Out]:
+        """A SubTree inlined (``implicit``: BehaviorTree.CPP 3's ``<Talk/>`` for ``<SubTree ID="Talk"/>``)."""
+        sid = implicit or el.attrs.get("ID", "")
         if sid not in self.trees:
             self.err(el.at("ID"), "SubTree %r: no BehaviorTree of that ID in the file (%s)%s" % (
                 sid, ", ".join(sorted(self.trees)), did_you_mean(sid, self.trees)))
@@ -478,16 +415,12 @@ class Converter:
                 continue
             remap[k] = (value, root)
         out = self.tree(sid, Scope(scope, remap, auto, _snake(sid) + "_"), el)
-        return out.named(el.attrs.get("name") or sid) if out is not None else None
+        if out is None:
+            return None
+        # the caller's name, as BehaviorTree.CPP shows the SubTree node; else the subtree's root's, else its ID
+        return out.named(el.attrs.get("name"), replace=True).named(sid)
 
 
 def _from(where: Any, at: Pos) -> str:
     """`` (given by the SubTree at …)`` when a literal came from elsewhere."""
     return "" if str(where) == str(at) else " (given by the SubTree at %s)" % where
-
-
-def _seconds(ms: Any) -> Any:
-    if isinstance(ms, str):   # $key: milliseconds on the blackboard
-        return "$(%s / 1000)" % ms[1:]
-    s = ms / 1000.0
-    return int(s) if s == int(s) else s

@@ -7,18 +7,55 @@ port's C++ type.
 """
 from __future__ import annotations
 
+import math
 import re
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
+from coordinator.errors import Pos
 from modules.definition import FunctionDefinition, ModuleDefinition, Param
 
-__all__ = ["Lit", "Scope", "find_function", "typed_literal", "plain_literal", "key_ref", "escape_text"]
+__all__ = ["Lit", "Out", "Scope", "OutOfRange", "MAX_DIGITS", "find_function", "typed_literal", "plain_literal",
+           "key_ref", "escape_text", "is_text", "whole_number", "bool_literal"]
 
 _NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
 _INTS = ("int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64", "byte", "char")
 _FLOATS = ("float32", "float64", "time", "duration")
 _TRUE, _FALSE = ("true", "True", "TRUE", "1"), ("false", "False", "FALSE", "0")
 _REF = re.compile(r"^\{([^{}]*)\}$")
+MAX_DIGITS = 308
+"""The most digits of a number literal: bmtree's own bound on a whole number (trees/README.md), and about
+float's range; Python 3.11 refuses to read a whole number of more than 4,300 digits at all."""
+
+
+class OutOfRange(ValueError):
+    """A number literal bmtree cannot hold: infinite as a float (``1e400``) or of more than MAX_DIGITS digits;
+    its text says so after the literal (``1e400: out of range …``)."""
+
+    def __init__(self, text: str):
+        t = text.strip()
+        shown = t if len(t) <= 24 else "%s… (%d characters)" % (t[:20], len(t))
+        super().__init__("%s: out of range (a number has at most %d digits)" % (shown, MAX_DIGITS))
+
+
+class Out:
+    """A converted node: its YAML keys in order (the kind first), and the element it came from, so that a
+    problem the tree's check finds later is said at the XML's line."""
+
+    __slots__ = ("pos", "items")
+
+    def __init__(self, pos: Pos, *items: Tuple[str, Any]):
+        self.pos = pos
+        self.items = list(items)
+
+    def named(self, name: Optional[str], replace: bool = False) -> Out:
+        """The node with ``name`` (a name it has already kept, unless ``replace``)."""
+        if name:
+            mine = [i for i, (k, _v) in enumerate(self.items) if k == "name"]
+            if not mine:
+                self.items.insert(1, ("name", name))
+            elif replace:
+                self.items[mine[0]] = ("name", name)
+        return self
 
 
 class Lit:
@@ -108,17 +145,41 @@ def escape_text(text: str) -> str:
 
 
 def _number(text: str, whole: bool) -> Any:
+    """The number ``text`` is (None: it is none; whole: an integer or None); OutOfRange past bmtree's bound."""
     t = text.strip()
     if not _NUMBER.match(t):
         return None
+    if sum(c.isdigit() for c in re.split("[eE]", t)[0]) > MAX_DIGITS:
+        raise OutOfRange(t)
     if whole:
         return int(t) if re.match(r"^[+-]?\d+$", t) else None
-    return float(t) if any(c in t for c in ".eE") else int(t)
+    value = float(t) if any(c in t for c in ".eE") else int(t)
+    if not math.isfinite(value):
+        raise OutOfRange(t)
+    return value
+
+
+def whole_number(text: str) -> Optional[int]:
+    """A whole number written ``text`` (a count, maybe negative), None for any other text; OutOfRange."""
+    value = _number(text, True)
+    return value if isinstance(value, int) else None
+
+
+def bool_literal(text: str) -> Optional[bool]:
+    """True or false as BehaviorTree.CPP's convertFromString<bool> reads them ("1", "TRUE", …), else None."""
+    t = text.strip()
+    return True if t in _TRUE else False if t in _FALSE else None
+
+
+def is_text(param: Param) -> bool:
+    """Whether BehaviorTree.CPP would give the port the string itself (a std_msgs/String input)."""
+    fields = _fields(param)
+    return fields is not None and len(fields) == 1 and fields[0][1] == "string"
 
 
 def typed_literal(text: str, param: Param) -> Tuple[Any, str]:
     """The YAML value of a literal port for ``param`` (typed as BehaviorTree.CPP's convertFromString would),
-    or None and what it should be."""
+    or None and what it should be; OutOfRange for a number bmtree cannot hold."""
     fields = _fields(param)
     if fields is None:
         return plain_literal(text), ""
@@ -146,7 +207,7 @@ def typed_literal(text: str, param: Param) -> Tuple[Any, str]:
 
 
 def plain_literal(text: str) -> Any:
-    """A literal with no type to follow (SetBlackboard's value): a number, true or false, else text."""
+    """A literal with no type to follow: a number, true or false, else text; OutOfRange."""
     t = text.strip()
     if t in ("true", "false"):
         return t == "true"

@@ -142,7 +142,11 @@ def test_v3_tree_converts(tmp_path, sim_defs):
     assert "outputs: {text: approach_heard}" in text           # the subtree's own key, prefixed
     assert "inputs: {target: $cup}" in text                    # v3 remapping: a key name, no braces
     assert "inputs: {text: \"Found it {{ok}}\"}" in text     # literal braces are no template
-    assert warnings == []
+    assert [(w.pos.line, w.pos.column, w.message) for w in warnings] == [
+        (1, 1, "warning: no BTCPP_format on <root>: read as format 3, which BehaviorTree.CPP 3 and Groot 1 write "
+               "without it (line 3 has <SequenceStar>, of format 3 only); BehaviorTree.CPP 4 would read it as format "
+               "4, where a SubTree's place=\"kitchen\" is text, not the caller's key: add BTCPP_format=\"3\" or \"4\" "
+               "to <root> to say which")]
 
 
 @pytest.mark.parametrize("found, said", [(True, ["Found it {ok}", ""]), (False, ["Not found", ""])])
