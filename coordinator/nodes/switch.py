@@ -224,11 +224,13 @@ def _cases_of_another_kind(node: TreeNode, types: Dict[str, set], errors: List[T
         return
     for label, at in zip(spec.labels, spec.label_pos):
         why = ""
+        if isinstance(label, bool) and kind in (None, "string") and _written(at).lower() in ("true", "false"):
+            continue   # true: matches a true value and the text "true" alike (see matches)
         if isinstance(label, bool) and kind != "bool":
             why = _YAML_BOOL % text_of(label) + (
                 ": quote it, e.g. \"yes\": or \"no\":" if not said else ", and %s: it never matches" % said)
             if kind is None:
-                why += ' (a value that is true or false is matched by "true": and "false": too)'
+                why += " (a value that is true or false is matched by true: and false:)"
         elif kind == "bool" and not isinstance(label, bool) and text_of(label) not in ("true", "false"):
             why = "case %r never matches: %s: its cases are true: and false:" % (label, said)
         elif kind == "number" and isinstance(label, str) and not _number_text(label):
@@ -237,6 +239,19 @@ def _cases_of_another_kind(node: TreeNode, types: Dict[str, set], errors: List[T
                                                           if fix else "not text")
         if why:
             errors.append(TreeError(at, why))
+
+
+def _written(at: Pos) -> str:
+    """The case's key as written at ``at`` in its file ('' when it cannot be read): YAML made both
+    ``true:`` and ``yes:`` a true, and only the second never matches the text it says."""
+    import itertools
+
+    try:
+        with open(at.file, encoding="utf-8", errors="replace") as fh:
+            line = next(itertools.islice(fh, at.line - 1, None), "")
+    except OSError:
+        return ""
+    return line[at.column - 1:at.column + 7].split(":")[0].strip().strip("'\"")
 
 
 def _number_text(text: str) -> bool:

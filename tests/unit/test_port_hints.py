@@ -107,12 +107,22 @@ def test_the_cases_a_true_or_false_value_can_never_match_are_errors(tmp_path, ca
     ("count", "this case is read by YAML as true (unquoted yes/no/on/off/null), and $count holds a whole number "
               "(std_msgs/Int32): it never matches"),
     ("tries", 'this case is read by YAML as true (unquoted yes/no/on/off/null): quote it, e.g. "yes": or "no": '
-              '(a value that is true or false is matched by "true": and "false": too)'),
+              '(a value that is true or false is matched by true: and false:)'),
 ])
 def test_an_unquoted_yes_is_an_error_unless_the_value_is_true_or_false(tmp_path, capsys, key, said):
     text = switch_on(key, "yes: {wait: 0}").replace("root:", "inputs:\n  tries: {}\nroot:")
     status, lines = check_counted(tmp_path, capsys, text)
     assert lines == ["t.yaml:13:9: " + said]
+
+
+@pytest.mark.parametrize("case", ["true", "True", "false", "'true'"])
+def test_a_true_or_false_case_written_so_is_no_error(tmp_path, capsys, case):
+    """YAML reads ``true:`` and ``yes:`` alike; only ``yes:`` never matches the text it says: ``true:``
+    matches a true value and the text "true" (a tree input given false by default, as SMACH ports have)."""
+    text = switch_on("tries", "%s: {wait: 0}" % case).replace("root:", "inputs:\n  tries: {default: false}\nroot:")
+    assert check_counted(tmp_path, capsys, text) == (0, [])
+    status, lines = check_counted(tmp_path, capsys, switch_on("count", "%s: {wait: 0}" % case))
+    assert status == 2 and "never matches" in lines[0] and "whole number" in lines[0], lines
 
 
 def test_contains_on_a_value_that_is_not_text_is_an_error(tmp_path, capsys):
