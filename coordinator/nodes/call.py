@@ -205,8 +205,8 @@ class CallKind(NodeKind):
                Option("outputs", "outputs", "output name → tree key (written when the module answered them: the call "
                                               "succeeded, or answered `success: false`)"),
                Option("status", "key", "a tree key given how the call ended, whether it succeeded or not: "
-                                       "`succeeded`, `failed` (also an answered `success: false`), `rejected`, "
-                                       "`cancelled`, `timeout`, `module_lost`, `not_sent` (it could not be built); "
+                                       "`succeeded`, `failed` (also an answered `success: false`, but `succeeded` "
+                                       "under `check_success: false`), `rejected`, `cancelled`, `timeout`, `module_lost`, `not_sent` (it could not be built); "
                                        "not written when the call is halted"),
                Option("error", "key", "a tree key given why the call did not succeed (the module's error, "
                                       "`answered success: false`, …), `\"\"` when it succeeded; written like "
