@@ -79,7 +79,7 @@ TYPES: Dict[str, ValueType] = {t.name: t for t in (
     ValueType("list", "a list, `$key` or `$( … )`", {"anyOf": [{"type": "array"}, _PARAM]}),
     ValueType("key", "a tree key", _KEY, lambda v: isinstance(v, str) and v.isidentifier(), "a tree key"),
     ValueType("cases", "case value → node", {"type": "object", "minProperties": 1, "additionalProperties": _NODE}),
-    ValueType("match", "`equals` or `contains`", {"enum": ["equals", "contains"]}),
+    ValueType("match", "`equals`, `contains` or `words`", {"enum": ["equals", "contains", "words"]}),
     ValueType("value", "a value: `$key`, `$( … )`, text with `{…}`", {}),
     ValueType("expr", "an expression", {"type": "string", "minLength": 1}),
     ValueType("path", "a tree file (relative to this file)", {"type": "string", "minLength": 1}),

@@ -9,6 +9,7 @@ from py_trees.common import Status
 
 from coordinator.errors import Pos, TreeError
 from coordinator.expr import kind_of, text_of
+from coordinator.exprfuncs import apply_function
 from coordinator.nodes.base import Flow, NodeKind, Option, check_choice, fixed, join, meet
 from coordinator.nodes.call import STATUS_TEXTS
 from coordinator.refs import Ref, RefError, refs_in, resolve, unwrap
@@ -40,6 +41,11 @@ def matches(value: Any, label: Any, how: str) -> bool:
     value = unwrap(value)
     if how == "contains":
         return isinstance(value, str) and text_of(label).lower() in value.lower()
+    if how == "words":   # the case's words, in order, among the value's: "no" in "No, thanks", not "I don't know"
+        if not isinstance(value, str):
+            return False
+        want, got = apply_function("words", [text_of(label)]), apply_function("words", [value])
+        return bool(want) and any(got[i:i + len(want)] == want for i in range(len(got) - len(want) + 1))
     if kind_of(label) != kind_of(value):   # (a true/false value is no number here: true is not 1)
         return text_of(value) == text_of(label)
     return bool(value == label)
@@ -96,11 +102,14 @@ class SwitchKind(NodeKind):
     options = (Option("cases", "cases", "case value → node, tried in order", required=True),
                Option("default", "node", "the node run when no case matches"),
                Option("match", "match", "`equals`: the value is the case; `contains`: the case's text is in the "
-                                        "value (any case), e.g. `yes` in \"yes, please\"", default="equals"))
+                                        "value (any case), e.g. `yes` in \"yes, please\"; `words`: the case's "
+                                        "words are words of the value, in order (any case, punctuation aside): "
+                                        "`no` matches \"No, thanks.\" but not \"I don't know\"",
+                                        default="equals"))
 
     def parse(self, p: Any, node: TreeNode, raw: Any, value: Any, at: Pos) -> SwitchSpec:
         spec = SwitchSpec(value=p.literal_at(raw, self.name, at),
-                          match=check_choice(p, raw, "match", ("equals", "contains"), "equals"),
+                          match=check_choice(p, raw, "match", ("equals", "contains", "words"), "equals"),
                           match_pos=raw.val_pos["match"] if "match" in raw else None)
         cases = raw.get("cases")
         if "cases" in raw and (not isinstance(cases, dict) or not cases):
@@ -175,7 +184,7 @@ def _cases_never_matching(node: TreeNode, f: Flow) -> None:
     writers = f.writers(key)
     if not writers or not all(hasattr(w.nodekind, "never_matches") for w in writers):
         return
-    contains = spec.match == "contains"
+    contains = spec.match in ("contains", "words")   # (a case whose text is in no status is in none as words)
     for label, at in zip(spec.labels, spec.label_pos):
         if label is None or isinstance(label, bool):   # an unquoted yes/no/null: the type check says so
             continue
@@ -214,9 +223,10 @@ def _cases_of_another_kind(node: TreeNode, types: Dict[str, set], errors: List[T
     kind, said = value_kind(types, spec.value)
     if kind == "string":
         said = ""   # a text value: every case may match (a number case matches its text)
-    elif kind is not None and spec.match == "contains" and spec.match_pos is not None:
-        errors.append(TreeError(spec.match_pos, "match: contains looks for the case's text in the value, but %s: "
-                                                "use match: equals" % said))
+    elif kind is not None and spec.match in ("contains", "words") and spec.match_pos is not None:
+        errors.append(TreeError(spec.match_pos, "match: %s looks for the case's %s in the value, but %s: "
+                                                "use match: equals" % (spec.match, "text" if spec.match == "contains"
+                                                                       else "words", said)))
         return
     elif kind in ("list", "message") and spec.labels:
         errors.append(TreeError(node.value_pos or node.pos, "no case can match: %s, and a case is text or a "
