@@ -40,6 +40,12 @@ def static_kind(node: Any, key_kind: Callable[[Ref], Optional[str]],
         return "number"
     if op == "arith":
         a, b = static_kind(node[2], key_kind, errors), static_kind(node[3], key_kind, errors)
+        if node[1] != "+" and (a or b) not in (None, "number") and (a is None or b is None):
+            known = a or b   # - * / take numbers only: one side is enough to know it fails
+            errors.append((node[4], "cannot %s %s: '%s' takes numbers%s" % (
+                VERB[node[1]], "a %s and a value" % known if a else "a value and a %s" % known, node[1],
+                " (a list has no '-': build the list you want, e.g. with for_each and set)" if known == "list" else "")))
+            return None
         if a is None or b is None:
             return None
         if node[1] == "+" and a == b and a in ("string", "list"):

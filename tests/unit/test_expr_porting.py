@@ -338,3 +338,23 @@ def test_a_number_past_a_float64_is_an_error_where_it_is(text):
         Expr.parse(text)
     assert str(info.value).startswith("the number 1") and "is out of range" in str(info.value)
     assert info.value.offset == text.index("1")
+
+
+# - * / with one side known not to be a number ------------------------------------------------------
+@pytest.mark.parametrize("expr, col, said", [
+    ('people - [\\"John\\"]', 29, "cannot subtract a value and a list: '-' takes numbers (a list has no '-': build "
+                                  "the list you want, e.g. with for_each and set)"),
+    ('\\"ab\\" * people', 27, "cannot multiply a string and a value: '*' takes numbers"),
+])
+def test_minus_times_divide_with_one_side_not_a_number_is_an_error_before_running(tmp_path, capsys, expr, col, said):
+    """A tree input's kind is not known; a list or a text on the other side is enough: it fails when run."""
+    status, lines = check(tmp_path, capsys, "format: 1\ninputs:\n  people: {default: [John, Ana]}\nroot:\n"
+                                            "  sequence:\n    - set: {left: \"$(%s)\"}\n" % expr)
+    assert status == 2 and lines == ["t.yaml:6:%d: %s" % (col, said)], lines
+
+
+def test_plus_with_one_side_unknown_is_left_to_the_run(tmp_path, capsys):
+    """``+`` joins texts and lists too: an unknown side may be either."""
+    status, lines = check(tmp_path, capsys, "format: 1\ninputs:\n  people: {default: [John, Ana]}\nroot:\n"
+                                            "  set: {more: \"$(people + [\\\"Bob\\\"])\"}\n")
+    assert status == 0, lines
