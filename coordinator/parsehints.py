@@ -177,7 +177,9 @@ def quoted_mapping(text: Any) -> str:
         value = yaml.safe_load(shown)
     except yaml.YAMLError:
         return ""
-    return shown if isinstance(value, dict) and value else ""
+    if not isinstance(value, dict) or not value or any(":" in str(k) for k in value):
+        return ""   # ({pct:.1f}: YAML's key 'pct:.1f', Python's format; a mapping is written {k: v})
+    return shown
 
 
 def quoted_mapping_message(text: str, key: Any = None) -> str:

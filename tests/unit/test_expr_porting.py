@@ -358,3 +358,11 @@ def test_plus_with_one_side_unknown_is_left_to_the_run(tmp_path, capsys):
     status, lines = check(tmp_path, capsys, "format: 1\ninputs:\n  people: {default: [John, Ana]}\nroot:\n"
                                             "  set: {more: \"$(people + [\\\"Bob\\\"])\"}\n")
     assert status == 0, lines
+
+
+def test_a_python_format_as_a_whole_quoted_value_gets_the_round_hint(tmp_path, capsys):
+    """``text: "{pct:.0f}"`` was taken for a mapping written in quotes ("write the mapping without quotes")."""
+    status, lines = check(tmp_path, capsys, 'format: 1\nroot:\n  sequence:\n    - set: {pct: 42.5}\n'
+                                            '    - call: speech.say\n      inputs: {text: "{pct:.0f}"}\n')
+    assert status == 2 and lines == [
+        "t.yaml:6:27: in {pct:.0f}: unexpected character ':' (for a whole number write round(pct))"], lines
