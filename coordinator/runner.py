@@ -166,6 +166,7 @@ class TreeRunner:
         for v in [self._history, self._visited, *visitors]:
             if v is not None:
                 self.tree.add_visitor(v)
+        self._halts = [v for v in visitors if hasattr(v, "halted")]   # told the halts, as the history is
 
     @property
     def history(self) -> Dict[Any, List[Status]]:
@@ -189,8 +190,8 @@ class TreeRunner:
         if self._visited is None:
             return
         changes = self._watcher.changes(visited)
-        if self._history is not None:
-            self._history.halted(changes)
+        for v in ([self._history] if self._history is not None else []) + self._halts:
+            v.halted(changes)
         if self.ctx.observers:
             notify(self.ctx.observers, "on_tick", self.root, changes, self.ctx.clock.now())
 

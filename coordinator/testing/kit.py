@@ -43,6 +43,8 @@ from modules.search import default_definitions
 
 __all__ = ["TreeTest", "TreeRun", "Coverage", "RunStatus", "UnscriptedWarning"]
 
+HALTED = "halted"   # coverage: a node a parent or a timeout stopped while it ran
+
 
 class UnscriptedWarning(UserWarning):
     """A run's calls were answered without a script, with empty outputs the tree may have used (pytest
@@ -260,10 +262,12 @@ class Coverage:
                 if not got:
                     lines.append("  %s:%d: %s '%s' never ran" % (f, n.pos.line, n.kind, n.name))
                 else:
-                    outcomes = [s for s in ("SUCCESS", "FAILURE") if s in got]
+                    outcomes = ", ".join(s for s in ("SUCCESS", "FAILURE") if s in got)
+                    if HALTED in got:
+                        outcomes = "%s, halted" % outcomes if outcomes else "RUNNING, then halted"
                     missing = [s for s in self.possible(n) if s not in got]
                     lines.append("  %s:%d: %s '%s' reached %s%s" % (
-                        f, n.pos.line, n.kind, n.name, ", ".join(outcomes) or "RUNNING only",
+                        f, n.pos.line, n.kind, n.name, outcomes or "RUNNING only",
                         "; never %s" % ", ".join(missing) if missing else ""))
         return "\n".join(lines)
 
@@ -291,6 +295,13 @@ class _CoverageVisitor(py_trees.visitors.VisitorBase):
     def __init__(self, reached: Dict[Any, Set[str]]):
         super().__init__(full=False)
         self.reached = reached
+
+    def halted(self, changes: List[Any]) -> None:
+        """The nodes a tick halted (RUNNING, then INVALID: a parallel or a timeout stopped them)."""
+        for b, before, status in changes:
+            node = getattr(b, "bmtree_node", None)
+            if node is not None and status == Status.INVALID and before == Status.RUNNING:
+                self.reached[node.pos].add(HALTED)
 
     def run(self, behaviour: py_trees.behaviour.Behaviour) -> None:
         node = getattr(behaviour, "bmtree_node", None)
