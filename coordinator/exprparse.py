@@ -26,6 +26,8 @@ _TOKEN = re.compile(r"""\s*(?:
 _OPEN_PAREN = re.compile(r"\s*\(")
 _DECIMALS = re.compile(r"\s*:\s*\.(\d+)[fF]\s*$")   # Python's {pct:.1f}
 _IF = "unexpected 'if' (a choice is written if(condition, then, else))"
+_INSTEAD = {"range": ": to count, write repeat: N with index: KEY (its run's number, 0 for the first)",
+            "filter": ": to keep some elements, for_each over the list with a check and set: {kept: $(kept + [x])}"}
 
 _KEYWORDS = {"and", "or", "not", "in", "true", "false", "null", "True", "False", "None"}
 _CMP = {"==", "!=", "<", "<=", ">", ">=", "in"}
@@ -61,8 +63,9 @@ def tokens(text: str) -> List[Tuple[str, Any, int]]:
             kind = "kw"
         elif kind == "name" and not value.startswith("$") and _OPEN_PAREN.match(text, m.end()):
             if value not in FUNCTIONS:
-                raise ExprError("unknown function %r%s" % (value, did_you_mean(value, FUNCTIONS)
-                                                           or " (functions: %s)" % ", ".join(FUNCTIONS)), start)
+                raise ExprError("unknown function %r%s%s" % (value, did_you_mean(value, FUNCTIONS)
+                                                             or " (functions: %s)" % ", ".join(FUNCTIONS),
+                                                             _INSTEAD.get(value, "")), start)
             kind = "func"
         elif kind == "name":  # a reference: the one grammar of coordinator.refs, '$' optional here
             try:

@@ -33,8 +33,9 @@ _TABLE: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
     ("Parallel", (_BT, _PT), ("parallel",), "parallel, with policy: all, one or first_success (success_count 1 "
                                             "and failure_count all)"),
     ("ParallelAll", (_BT,), ("parallel",), "parallel"),
-    ("Concurrence", (_SM,), ("parallel",), "parallel, with policy: all or one, or succeed_on: [child names] "
-                                           "(its outcome map)"),
+    ("Concurrence", (_SM,), ("parallel",), "parallel, with policy: all, one or first_success, or succeed_on: "
+                                           "[child names] (its outcome map); ended_by: KEY and a switch: $KEY "
+                                           "after it for several outcomes"),
     ("Inverter", (_BT, _PT), ("inverter",), "inverter"),
     ("ForceSuccess", (_BT,), ("force_success",), "force_success"),
     ("FailureIsSuccess", (_PT,), ("force_success",), "force_success"),
@@ -122,7 +123,8 @@ OTHER_OPTIONS: Dict[str, Tuple[Tuple[str, ...], str]] = {
                                  "outcomes after it"),
     "outcome_map": (("policy", "succeed_on"), "SMACH's outcome_map is parallel's succeed_on: [child names] (those "
                                               "children succeed: it succeeds, halting the others) or policy: all, "
-                                              "one or first_success"),
+                                              "one or first_success; for several outcomes, ended_by: KEY (the name "
+                                              "of the child that ended it) and a switch: $KEY after it"),
     "num_attempts": (("child",), "BehaviorTree.CPP's num_attempts is retry's value: retry: N"),
     "num_cycles": (("child",), "BehaviorTree.CPP's num_cycles is repeat's value: repeat: N"),
     "msec": (("child",), "BehaviorTree.CPP's msec is timeout's value, in seconds: timeout: SECONDS"),

@@ -366,3 +366,9 @@ def test_a_python_format_as_a_whole_quoted_value_gets_the_round_hint(tmp_path, c
                                             '    - call: speech.say\n      inputs: {text: "{pct:.0f}"}\n')
     assert status == 2 and lines == [
         "t.yaml:6:27: in {pct:.0f}: unexpected character ':' (for a whole number write round(pct))"], lines
+
+
+def test_range_says_what_counts_instead():
+    at, said = error("len(range(3))")
+    assert at == 4 and said.startswith("unknown function 'range' ("), said
+    assert said.endswith("): to count, write repeat: N with index: KEY (its run's number, 0 for the first)"), said

@@ -147,7 +147,9 @@ def test_a_switch_on_text_takes_number_and_text_cases(tmp_path, capsys):
     ("retry_until_successful", "BehaviorTree.CPP's RetryUntilSuccessful is bmtree's retry: N (attempts in all), "
                                "with child: beside it"),
     ("Switch3", "BehaviorTree.CPP's Switch3 is bmtree's switch: $key, with cases: {case: node} and default:"),
-    ("Concurrence", "SMACH's Concurrence is bmtree's parallel, with policy: all or one, or succeed_on: [child names] (its outcome map)"),
+    ("Concurrence", "SMACH's Concurrence is bmtree's parallel, with policy: all, one or first_success, or "
+                    "succeed_on: [child names] (its outcome map); ended_by: KEY and a switch: $KEY after it for "
+                    "several outcomes"),
     ("Delay", "BehaviorTree.CPP's Delay has no kind of its own in bmtree: a wait before the node, in a sequence: "
               "[{wait: SECONDS}, node] (or retry's delay: between attempts)"),
     ("EternalGuard", "py_trees' EternalGuard has no kind of its own in bmtree: a sequence with memory: false whose "
@@ -275,7 +277,8 @@ def test_smachs_transitions_and_outcome_map_are_named_with_what_bmtree_writes(tm
                              "after it")
     assert lines[1] == ("t.yaml:9:7: unknown option 'outcome_map' for parallel (parallel takes ended_by, name, policy, succeed_on, "
                         "synchronise): SMACH's outcome_map is parallel's succeed_on: [child names] (those children "
-                        "succeed: it succeeds, halting the others) or policy: all, one or first_success")
+                        "succeed: it succeeds, halting the others) or policy: all, one or first_success; for several outcomes, ended_by: KEY (the name of the child that ended it) "
+                        "and a switch: $KEY after it")
     assert OTHER_OPTIONS["child_termination_cb"] == OTHER_OPTIONS["outcome_map"]
 
 
