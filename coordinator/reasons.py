@@ -202,6 +202,8 @@ def _where(b: Any) -> str:
         node = getattr(a, "bmtree_node", None)
         if node is not None and node.kind == "with_cleanup":   # above root and cleanup: the tree's name
             break
+        if node is not None and node.kind == "timeout" and a.name == node.nodekind.default_name(node):
+            continue   # "timeout 40s: go_to failed" reads as if the time ran out: that one says itself
         if node is None or a.name != node.kind:
             return a.name
     return ""
