@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -25,6 +26,7 @@ from comm.textfile import read_text
 from coordinator.btimportformat import format_of
 from coordinator.btimportnodes import Converter, Out
 from coordinator.btimportports import Scope
+from coordinator.btimportreactive import POLL_DEFAULT, model_kinds
 from coordinator.btxml import Element, XmlErrors, byte_pos, parse_xml
 from coordinator.errors import Pos, TreeError, TreeErrors, UsageError
 from modules.definition import ModuleDefinition
@@ -36,6 +38,18 @@ _QUOTED_WORDS = frozenset(("y", "n", "Y", "N", "yes", "no", "on", "off", "true",
 _IGNORED_TOP = ("TreeNodesModel",)
 _LINE = re.compile(r"\bline (\d+)\b")
 _MILLISECONDS_HINT = re.compile(r": durations are in seconds; for \S+ milliseconds write ")
+POLL_RANGE = (0.01, 3600.0)   # 100 checks a second (a call each) to one an hour
+
+
+def _poll(value: Any) -> float:
+    """``--poll``'s seconds, from POLL_RANGE."""
+    try:
+        out = float(value)
+    except ValueError:
+        out = math.nan
+    if not POLL_RANGE[0] <= out <= POLL_RANGE[1]:   # nan and inf too
+        raise argparse.ArgumentTypeError("expected seconds from %g to %g, got %r" % (POLL_RANGE + (value,)))
+    return out
 
 
 def add_import_parser(sub: Any) -> None:
@@ -55,6 +69,9 @@ def add_import_parser(sub: Any) -> None:
     i.add_argument("--tree", dest="tree_id", metavar="ID", type=text("a BehaviorTree ID"),
                    help="the BehaviorTree to import (default: main_tree_to_execute, or the file's only one), as "
                         "BehaviorTree.CPP's createTree(ID) chooses it")
+    i.add_argument("--poll", type=_poll, default=POLL_DEFAULT, metavar="S",
+                   help="seconds between two checks of a ReactiveSequence's or ReactiveFallback's Conditions while "
+                        "its action runs (default %g; BehaviorTree.CPP checks them at each tick)" % POLL_DEFAULT)
     i.set_defaults(func=cmd_import)
 
 
@@ -66,7 +83,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise UsageError("-o %s is the XML file itself: give another name" % args.output)
     defs = definitions_from(args.modules)
     out_path = args.output or os.path.splitext(args.tree)[0] + ".yaml"
-    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id)
+    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id, args.poll)
     for w in warnings:
         err(str(w))
     if not args.output:
@@ -97,10 +114,11 @@ def _shown(path: str) -> str:
 
 
 def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Mapping[str, str],
-                out_path: str, tree_id: Optional[str] = None) -> Tuple[str, List[TreeError]]:
+                out_path: str, tree_id: Optional[str] = None,
+                poll: float = POLL_DEFAULT) -> Tuple[str, List[TreeError]]:
     """The YAML text of the main tree of ``path`` (or of ``tree_id``), checked as if written at ``out_path``,
     and the warnings (at the XML's positions); TreeErrors (at the XML's positions) when it cannot be
-    converted."""
+    converted. ``poll``: the seconds between two checks of a reactive node's Conditions."""
     shown = _shown(path)
     try:
         text = read_text(path)
@@ -118,7 +136,7 @@ def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Ma
     version, trees, main = _top(root, errors, notes, tree_id)
     if main is None:
         raise TreeErrors(notes + errors)   # the format chosen may be why
-    conv = Converter(trees, version, definitions, maps)
+    conv = Converter(trees, version, definitions, maps, model_kinds(root), poll)
     top = conv.tree(main, Scope(), trees[main])
     conv.finish()
     errors += conv.errors

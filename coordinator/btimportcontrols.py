@@ -243,7 +243,7 @@ class Controls:
                              "condition twice a tick; write a selector with memory: false of a sequence with memory: "
                              "false [condition, do] and the else node, or give WhileDoElse two children")
             return None
-        return Out(el.pos, ("sequence", kids), ("memory", False))
+        return self.reactive(el, kind, scope, "sequence", kids)   # [condition, do]: a ReactiveSequence
 
     def _switch(self: Converter, el: Element, kind: str, scope: Scope) -> Optional[Out]:
         n = int(kind[-1])

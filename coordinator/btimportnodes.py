@@ -3,7 +3,7 @@
 Each node becomes an :class:`Out` (its YAML keys in order, and the element it came from, so that a problem
 the tree checks find later is said at the XML's line). Every problem is collected, never a placeholder
 written. SubTrees are inlined (see ``btimport``'s docstring for why). The decorators and controls are in
-``btimportcontrols``.
+``btimportcontrols``, the reactive controls in ``btimportreactive``.
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from coordinator.btimportports import (
     plain_literal,
     typed_literal,
 )
+from coordinator.btimportreactive import POLL_DEFAULT, Reactive
 from coordinator.btxml import Element
 from coordinator.errors import Pos, TreeError
 from coordinator.language import MAX_REPEATED_NODES, MAX_TREE_DEPTH
@@ -33,9 +34,8 @@ from modules.definition import ModuleDefinition
 __all__ = ["Out", "Converter"]
 
 _IGNORED = ("name", "ID", "_description", "_uid", "_fullpath")   # Groot's notes: nothing to run
-_COMPOSITES = {"Sequence": ("sequence", None), "SequenceStar": ("sequence", None),
-               "SequenceWithMemory": ("sequence", None), "ReactiveSequence": ("sequence", False),
-               "Fallback": ("selector", None), "ReactiveFallback": ("selector", False)}
+_COMPOSITES = {"Sequence": "sequence", "SequenceStar": "sequence", "SequenceWithMemory": "sequence",
+               "Fallback": "selector"}   # the reactive ones: btimportreactive
 _MEMORY = ("SequenceStar", "SequenceWithMemory")
 _SIMPLE_DECORATORS = {"Inverter": "inverter", "ForceSuccess": "force_success", "ForceFailure": "force_failure"}
 _WRAPPERS = ("Action", "Condition", "Control", "Decorator")
@@ -47,12 +47,15 @@ def _snake(name: str) -> str:
     return s if s and not s[0].isdigit() else "t_" + s
 
 
-class Converter(Controls):
+class Converter(Controls, Reactive):
     """Converts the trees of one file, collecting every problem in ``errors``."""
 
     def __init__(self, trees: Mapping[str, Element], version: int, definitions: Mapping[str, ModuleDefinition],
-                 maps: Mapping[str, str]):
+                 maps: Mapping[str, str], models: Optional[Mapping[str, str]] = None, poll: float = POLL_DEFAULT):
         self.trees = trees
+        self.models = models or {}   # ID -> Action or Condition, as TreeNodesModel declares it
+        self.poll = poll   # seconds between two checks of a reactive node's Conditions
+        self.lastings: Dict[int, Any] = {}   # id(element) -> whether it can run (btimportreactive)
         self.version = version
         self.definitions = definitions
         self.maps = maps
@@ -122,18 +125,13 @@ class Converter(Controls):
 
     def _node(self, el: Element, kind: str, scope: Scope) -> Optional[Out]:
         if kind in _COMPOSITES:
-            bm, memory = _COMPOSITES[kind]
             self.attrs(el, kind, ())
-            self.rerun += memory is False   # reactive: an earlier child ends a later one, ticked again later
-            try:
-                kids = self.kids(el, kind, scope, 1)
-            finally:
-                self.rerun -= memory is False
+            kids = self.kids(el, kind, scope, 1)
             if kids is None:
                 return None
             if kind in _MEMORY and self.rerun and len(kids) > 1:
                 return self.memory_sequence(el, kids)
-            return Out(el.pos, (bm, kids), *([("memory", memory)] if memory is not None else []))
+            return Out(el.pos, (_COMPOSITES[kind], kids))
         if kind in _SIMPLE_DECORATORS:
             self.attrs(el, kind, ())
             child = self.one_child(el, kind, scope)
