@@ -52,6 +52,19 @@ def _poll(value: Any) -> float:
     return out
 
 
+def _forever(value: Any) -> int:
+    """``--forever``'s count: a whole number a loop may take (1 to bmtree's bound of a count)."""
+    from coordinator.bounds import beyond_bound
+
+    try:
+        out = int(value)
+    except ValueError:
+        out = 0
+    if out < 1 or beyond_bound("count", out):
+        raise argparse.ArgumentTypeError("expected a whole number of runs from 1, got %r" % (value,))
+    return out
+
+
 def add_import_parser(sub: Any) -> None:
     from coordinator.cliutil import path_arg, text
 
@@ -72,6 +85,10 @@ def add_import_parser(sub: Any) -> None:
     i.add_argument("--poll", type=_poll, default=POLL_DEFAULT, metavar="S",
                    help="seconds between two checks of a ReactiveSequence's or ReactiveFallback's Conditions while "
                         "its action runs (default %g; BehaviorTree.CPP checks them at each tick)" % POLL_DEFAULT)
+    i.add_argument("--forever", type=_forever, metavar="N",
+                   help="write a count of -1 (BehaviorTree.CPP's for ever: RetryUntilSuccessful's num_attempts, "
+                        "Repeat's num_cycles) as N, each said in a warning (default: an error; every bmtree loop is "
+                        "bounded)")
     i.set_defaults(func=cmd_import)
 
 
@@ -83,7 +100,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise UsageError("-o %s is the XML file itself: give another name" % args.output)
     defs = definitions_from(args.modules)
     out_path = args.output or os.path.splitext(args.tree)[0] + ".yaml"
-    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id, args.poll)
+    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id, args.poll, args.forever)
     for w in warnings:
         err(str(w))
     if not args.output:
@@ -115,10 +132,11 @@ def _shown(path: str) -> str:
 
 def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Mapping[str, str],
                 out_path: str, tree_id: Optional[str] = None,
-                poll: float = POLL_DEFAULT) -> Tuple[str, List[TreeError]]:
+                poll: float = POLL_DEFAULT, forever: Optional[int] = None) -> Tuple[str, List[TreeError]]:
     """The YAML text of the main tree of ``path`` (or of ``tree_id``), checked as if written at ``out_path``,
     and the warnings (at the XML's positions); TreeErrors (at the XML's positions) when it cannot be
-    converted. ``poll``: the seconds between two checks of a reactive node's Conditions."""
+    converted. ``poll``: the seconds between two checks of a reactive node's Conditions; ``forever``: what a
+    count of -1 becomes (None: an error)."""
     shown = _shown(path)
     try:
         text = read_text(path)
@@ -136,7 +154,7 @@ def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Ma
     version, trees, main = _top(root, errors, notes, tree_id)
     if main is None:
         raise TreeErrors(notes + errors)   # the format chosen may be why
-    conv = Converter(trees, version, definitions, maps, model_kinds(root), poll)
+    conv = Converter(trees, version, definitions, maps, model_kinds(root), poll, forever)
     top = conv.tree(main, Scope(), trees[main])
     conv.finish()
     errors += conv.errors
@@ -149,7 +167,7 @@ def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Ma
     yaml_text = "".join(t + "\n" for t, _p in lines)
     warnings = [w for w in _check(yaml_text, lines, out_path, definitions)   # BehaviorTree.CPP wrote milliseconds
                 if not (_MILLISECONDS_HINT.search(w.message) and (w.pos.line, w.pos.column) in conv.from_ms)]
-    return yaml_text, notes + warnings
+    return yaml_text, notes + conv.notes + warnings
 
 
 def _top(root: Element, errors: List[TreeError], notes: List[TreeError],

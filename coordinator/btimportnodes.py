@@ -51,8 +51,11 @@ class Converter(Controls, Reactive):
     """Converts the trees of one file, collecting every problem in ``errors``."""
 
     def __init__(self, trees: Mapping[str, Element], version: int, definitions: Mapping[str, ModuleDefinition],
-                 maps: Mapping[str, str], models: Optional[Mapping[str, str]] = None, poll: float = POLL_DEFAULT):
+                 maps: Mapping[str, str], models: Optional[Mapping[str, str]] = None, poll: float = POLL_DEFAULT,
+                 forever: Optional[int] = None):
         self.trees = trees
+        self.forever = forever   # what a count of -1 (for ever) becomes (--forever N); None: an error
+        self.notes: List[TreeError] = []   # warnings of the conversion (a count made bounded)
         self.models = models or {}   # ID -> Action or Condition, as TreeNodesModel declares it
         self.poll = poll   # seconds between two checks of a reactive node's Conditions
         self.lastings: Dict[int, Any] = {}   # id(element) -> whether it can run (btimportreactive)
@@ -222,9 +225,14 @@ class Converter(Controls, Reactive):
             self.err(el.at(attr), "%s of %s must be a %s, got %r%s" % (attr, kind, "whole number" if whole else
                                                                      "number", raw, _from(where, el.at(attr))))
             return None
+        if value < 0 and whole and self.forever:
+            self.notes.append(TreeError(el.at(attr), "warning: %s of %s is %s (for ever): written as %d (--forever)"
+                                        % (attr, kind, raw.strip(), self.forever)))
+            return self.forever
         if value < 0:
             self.err(el.at(attr), "%s of %s is %s (for ever): every bmtree loop and wait is bounded; give the most "
-                                  "it may take" % (attr, kind, raw.strip()))
+                                  "it may take%s" % (attr, kind, raw.strip(), ", or --forever N to write N for each"
+                                                     if whole else ""))
             return None
         return value
 

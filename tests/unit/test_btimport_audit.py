@@ -267,3 +267,22 @@ def test_unset_blackboard_and_loops_over_a_literal_queue(tmp_path, sim_defs):
         (4, 13, "LoopString over the queue of a blackboard key is not converted: bmtree's for_each runs over a list "
                 "written in the tree (or a key holding a list): write for_each: $key, with as: and child: beside it, "
                 "in the YAML by hand")]
+
+
+def test_forever_writes_a_bound_for_each_minus_one_and_says_so(tmp_path, capsys):
+    """4 of 4 real RoboCup trees retried -1 times (BehaviorTree.CPP's for ever): --forever N converts them."""
+    from coordinator.cli import main as bmtree
+
+    xml = tmp_path / "t.xml"
+    xml.write_text('<root BTCPP_format="4">\n  <BehaviorTree ID="Main">\n    <RetryUntilSuccessful num_attempts="-1">\n'
+                   '      <Repeat num_cycles="-1">\n        <AlwaysSuccess/>\n      </Repeat>\n'
+                   '    </RetryUntilSuccessful>\n  </BehaviorTree>\n</root>\n')
+    assert bmtree(["import", str(xml), "--forever", "1000"]) == 0
+    out = capsys.readouterr()
+    assert "retry: 1000" in out.out and "repeat: 1000" in out.out, out.out
+    assert out.err.replace(str(xml), "t.xml").splitlines() == [
+        "t.xml:3:27: warning: num_attempts of RetryUntilSuccessful is -1 (for ever): written as 1000 (--forever)",
+        "t.xml:4:15: warning: num_cycles of Repeat is -1 (for ever): written as 1000 (--forever)"], out.err
+    for bad in ("0", "x", "10000000000"):
+        assert bmtree(["import", str(xml), "--forever", bad]) == 2
+        assert "argument --forever: expected a whole number of runs from 1, got '%s'" % bad in capsys.readouterr().err

@@ -51,7 +51,7 @@ EXPECTED = [
             "'condition' and the node (it is skipped, as SUCCESS, while the condition holds)"),
     (10, 16, "SubTree 'Reprot': no BehaviorTree of that ID in the file (Main, Report) (did you mean 'Report'?)"),
     (11, 29, "num_attempts of RetryUntilSuccessful is -1 (for ever): every bmtree loop and wait is bounded; give the "
-             "most it may take"),
+             "most it may take, or --forever N to write N for each"),
     (12, 7, "Action 'GoTo' (navigation.go_to): no port place, the function's input: give place=\"…\" or "
             "place=\"{key}\""),
     (13, 17, "Action 'approach' (navigation.approach): input 'target' takes a geometry_msgs/Point: a {key} that "
