@@ -14,7 +14,7 @@ from coordinator.yamlsrc import LList, LMap
 __all__ = ["check_inside", "CONDITIONS", "OTHER_KINDS", "OTHER_OPTIONS", "decorator_mapping", "foreign_option", "kind_hint",
            "one_child", "option_hint", "takes", "top_key_hint"]
 
-_BT, _PT, _SM = "BehaviorTree.CPP", "py_trees", "SMACH"
+_BT, _PT, _SM, _N2 = "BehaviorTree.CPP", "py_trees", "SMACH", "Nav2"
 _MEMORY = "sequence, whose memory: true (its default) does not tick again a child that succeeded"
 _REACTIVE = ("%s with memory: false (the earlier children are checked again on every tick, so only its last child "
              "may take more than one tick; to react while an action runs, see 'Reacting while an action runs' in "
@@ -93,6 +93,28 @@ _IDIOMS: Tuple[Tuple[str, Tuple[str, ...], Tuple[str, ...], str], ...] = (
                                   "names its inputs and outputs)"),
     ("Condition", (_BT,), ("check", "call"), "check: 'expression' over tree keys, or call: module.function of a "
                                              "function whose success output answers true or false"),
+    # navigation2's own controls and decorators (nav2_behavior_tree), met in its navigator trees
+    ("RecoveryNode", (_N2,), ("repeat", "selector", "sequence", "set"),
+     "repeat: N+1 (number_of_retries + 1) with until: done, of a selector of a sequence [the first child, set: "
+     "{done: true}] and the recovery, with done false before it (the recovery succeeding runs the first child "
+     "again, failing ends it)"),
+    ("PipelineSequence", (_N2,), ("parallel",),
+     "a parallel with succeed_on: [the last child's name] of its children, the earlier ones each a repeat of "
+     "itself (ComputePathToPose keeps replanning while FollowPath runs)"),
+    ("RoundRobin", (_N2,), ("switch", "set"),
+     "a switch on a key counting the turns, cases 0, 1, … the children, with set: {turn: \"$(turn + 1)\"} "
+     "after it and the key set back to 0 after the last case"),
+    ("RateController", (_N2,), ("repeat", "sequence", "wait"),
+     "a repeat of a sequence of the child and wait: 1/hz seconds"),
+    ("DistanceController", (_N2,), ("repeat", "sequence", "call", "check"),
+     "a repeat that reads the distance travelled (a call's output) and runs the child when a check of it says so"),
+    ("SpeedController", (_N2,), ("repeat", "sequence", "wait"),
+     "a repeat of a sequence of the child and a wait computed from the speed (wait: $(…))"),
+    ("GoalUpdater", (_N2,), ("wait_event", "recall"),
+     "a wait_event (or a recall) that writes the new goal to the key the call reads"),
+    ("SingleTrigger", (_N2,), ("selector", "sequence", "check", "set"),
+     "a selector of check: 'done' and a sequence of the node and set: {done: true}, as BehaviorTree.CPP's "
+     "RunOnce"),
 )
 
 

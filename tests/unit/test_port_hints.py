@@ -336,3 +336,16 @@ def test_an_output_name_not_of_the_function_is_said_once_not_again_where_its_key
                                             "    - call: speech.listen\n      inputs: {seconds: 3}\n"
                                             "      outputs: {txt: heard}\n    - check: 'heard == \"yes\"'\n")
     assert status == 2 and lines == ["t.yaml:6:17: speech.listen has no output 'txt' (did you mean 'text'?)"]
+
+
+@pytest.mark.parametrize("kind, said", [
+    ("RecoveryNode", "repeat: N+1 (number_of_retries + 1) with until: done"),
+    ("PipelineSequence", "a parallel with succeed_on: [the last child's name]"),
+    ("RateController", "a repeat of a sequence of the child and wait: 1/hz seconds"),
+])
+def test_nav2_controls_say_the_bmtree_idiom(tmp_path, capsys, kind, said):
+    """navigation2's trees are BehaviorTree.CPP's with its own controls: a ported one gets the idiom, not
+    only 'unknown node kind'."""
+    status, lines = check_counted(tmp_path, capsys, "format: 1\nroot:\n  %s: [{wait: 1}]\n" % kind)
+    assert status == 2 and lines[0].startswith("t.yaml:3:3: unknown node kind %r (Nav2's %s has no kind of its own "
+                                               "in bmtree: %s" % (kind, kind, said)), lines
