@@ -78,7 +78,8 @@ def add_import_parser(sub: Any) -> None:
                    help="more module definitions, file or directory (repeatable; added to the default ones)")
     i.add_argument("--map", action="append", metavar="ID=module.function", type=text("ID=module.function"),
                    help="the module function an action or condition ID is (repeatable; default: the function "
-                        "whose name matches the ID: GoTo, go_to, Navigation.GoTo)")
+                        "whose name matches the ID: GoTo, go_to, Navigation.GoTo); ID=module.function(port=input,"
+                        "-port) also renames its ports to the function's inputs and outputs, or drops them")
     i.add_argument("--tree", dest="tree_id", metavar="ID", type=text("a BehaviorTree ID"),
                    help="the BehaviorTree to import (default: main_tree_to_execute, or the file's only one), as "
                         "BehaviorTree.CPP's createTree(ID) chooses it")
@@ -95,12 +96,12 @@ def add_import_parser(sub: Any) -> None:
 def cmd_import(args: argparse.Namespace) -> int:
     from coordinator.cliutil import EXIT_OK, definitions_from, err
 
-    maps = _maps(args.map)
+    maps, renames = _maps(args.map)
     if args.output and os.path.abspath(args.output) == os.path.abspath(args.tree):
         raise UsageError("-o %s is the XML file itself: give another name" % args.output)
     defs = definitions_from(args.modules)
     out_path = args.output or os.path.splitext(args.tree)[0] + ".yaml"
-    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id, args.poll, args.forever)
+    text, warnings = import_tree(args.tree, defs, maps, out_path, args.tree_id, args.poll, args.forever, renames)
     for w in warnings:
         err(str(w))
     if not args.output:
@@ -115,14 +116,37 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _maps(pairs: Optional[List[str]]) -> Dict[str, str]:
-    out = {}
+_MAP = re.compile(r"^(\w+\.\w+)(?:\((.*)\))?$")
+
+
+def _maps(pairs: Optional[List[str]]) -> Tuple[Dict[str, str], Dict[str, Dict[str, Optional[str]]]]:
+    """``--map ID=module.function``, maybe with its ports renamed or dropped: ``Speak=speech.say(say_text=text,
+    -server_timeout)``. The functions by ID, and each ID's port renames (None: the port is dropped)."""
+    out: Dict[str, str] = {}
+    renames: Dict[str, Dict[str, Optional[str]]] = {}
+    form = ("--map takes ID=module.function, or ID=module.function(port=input,-port) to rename or drop ports "
+            "(e.g. --map 'Speak=speech.say(say_text=text)'), got %r")
     for pair in pairs or []:
         node_id, sep, target = pair.partition("=")
-        if not sep or not node_id or not re.match(r"^\w+\.\w+$", target):
-            raise UsageError("--map takes ID=module.function (e.g. --map GoTo=navigation.go_to), got %r" % pair)
-        out[node_id] = target
-    return out
+        m = _MAP.match(target.strip())
+        if not sep or not node_id or m is None:
+            raise UsageError(form % pair)
+        out[node_id] = m.group(1)
+        ports: Dict[str, Optional[str]] = {}
+        for item in (m.group(2) or "").split(","):
+            item = item.strip()
+            port, eq, name = item.partition("=")
+            if not item:
+                continue
+            if item.startswith("-") and item[1:].isidentifier():
+                ports[item[1:]] = None
+            elif eq and port.strip().isidentifier() and name.strip().isidentifier():
+                ports[port.strip()] = name.strip()
+            else:
+                raise UsageError(form % pair)
+        if ports:
+            renames[node_id] = ports
+    return out, renames
 
 
 def _shown(path: str) -> str:
@@ -132,11 +156,13 @@ def _shown(path: str) -> str:
 
 def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Mapping[str, str],
                 out_path: str, tree_id: Optional[str] = None,
-                poll: float = POLL_DEFAULT, forever: Optional[int] = None) -> Tuple[str, List[TreeError]]:
+                poll: float = POLL_DEFAULT, forever: Optional[int] = None,
+                renames: Optional[Mapping[str, Mapping[str, Optional[str]]]] = None) -> Tuple[str, List[TreeError]]:
     """The YAML text of the main tree of ``path`` (or of ``tree_id``), checked as if written at ``out_path``,
     and the warnings (at the XML's positions); TreeErrors (at the XML's positions) when it cannot be
     converted. ``poll``: the seconds between two checks of a reactive node's Conditions; ``forever``: what a
-    count of -1 becomes (None: an error)."""
+    count of -1 becomes (None: an error); ``renames``: by ID, its ports renamed to the function's inputs and
+    outputs (None: dropped), from ``--map ID=module.function(port=input,-port)``."""
     shown = _shown(path)
     try:
         text = read_text(path)
@@ -154,7 +180,7 @@ def import_tree(path: str, definitions: Mapping[str, ModuleDefinition], maps: Ma
     version, trees, main = _top(root, errors, notes, tree_id)
     if main is None:
         raise TreeErrors(notes + errors)   # the format chosen may be why
-    conv = Converter(trees, version, definitions, maps, model_kinds(root), poll, forever)
+    conv = Converter(trees, version, definitions, maps, model_kinds(root), poll, forever, renames)
     top = conv.tree(main, Scope(), trees[main])
     conv.finish()
     errors += conv.errors

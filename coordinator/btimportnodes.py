@@ -52,8 +52,9 @@ class Converter(Controls, Reactive):
 
     def __init__(self, trees: Mapping[str, Element], version: int, definitions: Mapping[str, ModuleDefinition],
                  maps: Mapping[str, str], models: Optional[Mapping[str, str]] = None, poll: float = POLL_DEFAULT,
-                 forever: Optional[int] = None):
+                 forever: Optional[int] = None, renames: Optional[Mapping[str, Mapping[str, Optional[str]]]] = None):
         self.trees = trees
+        self.renames = renames or {}   # ID -> port -> the function's input/output it is (None: dropped)
         self.forever = forever   # what a count of -1 (for ever) becomes (--forever N); None: an error
         self.notes: List[TreeError] = []   # warnings of the conversion (a count made bounded)
         self.models = models or {}   # ID -> Action or Condition, as TreeNodesModel declares it
@@ -268,31 +269,46 @@ class Converter(Controls, Reactive):
         inputs: Dict[str, Any] = {}
         outputs: Dict[str, str] = {}
         said = "%s %r (%s)" % (word, node_id, fn.qualified)
-        for k, v in el.attrs.items():
-            if self.skipped(el, k, node_id):
+        renamed = self.renames.get(node_id, {})
+        for port, name in renamed.items():
+            if name is not None and fn.input(name) is None and fn.output(name) is None:
+                self.err(el.pos, "--map %s renames port %s to %r, which %s does not have: its inputs: %s; its "
+                                 "outputs: %s" % (node_id, port, name, fn.qualified,
+                                                  ", ".join(p.name for p in fn.inputs) or "none",
+                                                  ", ".join(p.name for p in fn.outputs) or "none"))
+                return None
+        given = set()
+        for port, v in el.attrs.items():
+            if self.skipped(el, port, node_id) or (port in renamed and renamed[port] is None):
                 continue
+            k = renamed.get(port) or port   # the function's name for it (the XML's for positions and messages)
+            given.add(k)
             p_in, p_out, ref = fn.input(k), fn.output(k), key_ref(v)
             if p_in is None and p_out is None:
                 names = [p.name for p in fn.inputs + fn.outputs]
-                self.err(el.at(k), "%s has no port %r: its inputs: %s; its outputs: %s%s" % (
+                self.err(el.at(port), "%s has no port %r: its inputs: %s; its outputs: %s%s" % (
                     said, k, ", ".join(p.name for p in fn.inputs) or "none",
-                    ", ".join(p.name for p in fn.outputs) or "none", did_you_mean(k, names)))
+                    ", ".join(p.name for p in fn.outputs) or "none",
+                    did_you_mean(k, names) or (" (rename it: --map '%s=%s(%s=INPUT)', or drop it: -%s)"
+                                               % (node_id, fn.qualified, port, port) if port == k else "")))
                 continue
             if p_in is not None:
-                self.input(el, k, v, ref, p_in, scope, said, inputs)
+                self.input(el, port, v, ref, p_in, scope, said, inputs)
+                if port != k and port in inputs:
+                    inputs[k] = inputs.pop(port)
             if p_out is None:
                 continue
             if ref is None and self.version < 4 and v.strip() and p_in is None:
                 ref = v.strip()   # BehaviorTree.CPP 3 writes an output to the key its bare word names
             if ref is None:
                 if v.strip() and p_in is None:
-                    self.err(el.at(k), "%s: %r is an output: give it the blackboard key to write, %s=\"{key}\", not %r"
-                             % (said, k, k, v))
+                    self.err(el.at(port), "%s: %r is an output: give it the blackboard key to write, %s=\"{key}\", "
+                                          "not %r" % (said, port, port, v))
                 continue   # "" (Groot 1 writes it for a port left empty): BehaviorTree.CPP keeps no output either
-            key = self.use_key(el, k, ref, scope, True, "text" if is_text(p_out) else p_out)
+            key = self.use_key(el, port, ref, scope, True, "text" if is_text(p_out) else p_out)
             if isinstance(key, Lit):
-                self.err(el.at(k), "%s: %r is an output, but the SubTree gives it the literal %r (%s): give it a "
-                                   "{key}" % (said, k, key.text, key.where))
+                self.err(el.at(port), "%s: %r is an output, but the SubTree gives it the literal %r (%s): give it a "
+                                      "{key}" % (said, port, key.text, key.where))
             elif key is not None:
                 outputs[k] = key
         for p in fn.inputs:
@@ -300,7 +316,7 @@ class Converter(Controls, Reactive):
                 self.err(el.pos, "%s: the function's input %r cannot be a port in BehaviorTree.CPP XML (%s= is the "
                                  "node's own there): --map %s to another function, or write this node in the YAML "
                                  "by hand" % (said, p.name, p.name, node_id))
-            elif p.name not in el.attrs:
+            elif p.name not in given:
                 self.err(el.pos, "%s: no port %s, the function's input: give %s=\"…\" or %s=\"{key}\"" % (
                     said, p.name, p.name, p.name))
         items: List[Tuple[str, Any]] = [("call", fn.qualified)]

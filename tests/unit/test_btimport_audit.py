@@ -286,3 +286,27 @@ def test_forever_writes_a_bound_for_each_minus_one_and_says_so(tmp_path, capsys)
     for bad in ("0", "x", "10000000000"):
         assert bmtree(["import", str(xml), "--forever", bad]) == 2
         assert "argument --forever: expected a whole number of runs from 1, got '%s'" % bad in capsys.readouterr().err
+
+
+def test_map_renames_and_drops_ports(tmp_path, capsys):
+    """The IRL trees' Speak say_text=, Nav2's server_timeout: --map renames a port to the function's input, or
+    drops it; a rename to a name the function does not have is an error naming its ports."""
+    from coordinator.cli import main as bmtree
+
+    xml = tmp_path / "t.xml"
+    xml.write_text('<root BTCPP_format="4">\n  <BehaviorTree ID="Main">\n    <Sequence>\n'
+                   '      <Speak say_text="{greeting}" server_timeout="100"/>\n'
+                   '      <Listen listened_text="{heard}" seconds="3"/>\n    </Sequence>\n  </BehaviorTree>\n</root>\n')
+    assert bmtree(["import", str(xml), "--map", "Speak=speech.say(say_text=text, -server_timeout)",
+                   "--map", "Listen=speech.listen(listened_text=text)"]) == 0
+    out = capsys.readouterr().out
+    assert "- call: speech.say\n      inputs: {text: $greeting}" in out, out
+    assert "server_timeout" not in out and "outputs: {text: heard}" in out, out
+    assert bmtree(["import", str(xml), "--map", "Speak=speech.say(say_text=txt)", "--map",
+                   "Listen=speech.listen(listened_text=text)"]) == 2
+    err = capsys.readouterr().err.replace(str(xml), "t.xml")
+    assert "t.xml:4:7: --map Speak renames port say_text to 'txt', which speech.say does not have: its inputs: " \
+           "text; its outputs: success" in err, err
+    for bad in ("Speak=speech.say(say text=text)", "Speak=speech.say(=text)", "Speak=speech.say(a=b"):
+        assert bmtree(["import", str(xml), "--map", bad]) == 2
+        assert "--map takes ID=module.function, or ID=module.function(port=input,-port)" in capsys.readouterr().err

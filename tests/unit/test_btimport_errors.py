@@ -36,7 +36,7 @@ EXPECTED = [
     (4, 7, "Action 'Grasp' matches no module function: give --map Grasp=module.function (functions of the "
            "definitions: %s)" % FUNCTIONS),
     (5, 29, "Action 'GoTo' (navigation.go_to) has no port 'speed': its inputs: place; its outputs: success, room, "
-            "position"),
+            "position (rename it: --map 'GoTo=navigation.go_to(speed=INPUT)', or drop it: -speed)"),
     (6, 22, "Action 'speech.listen' (speech.listen): input 'seconds' takes a number (std_msgs/Float64), got 'five'"),
     (6, 37, "Action 'speech.listen' (speech.listen): 'text' is an output: give it the blackboard key to write, "
             "text=\"{key}\", not 'hi'"),
@@ -147,7 +147,8 @@ def test_cli_writes_only_a_checked_tree(tmp_path, capsys):
     assert main(["import", str(src), "--map", "Grab=speech.say"]) == 2   # now its input is missing
     assert "no port text" in capsys.readouterr().err
     assert main(["import", str(src), "--map", "Grab"]) == 2
-    assert capsys.readouterr().err.endswith("--map takes ID=module.function (e.g. --map GoTo=navigation.go_to), "
+    assert capsys.readouterr().err.endswith("--map takes ID=module.function, or ID=module.function(port=input,-port) "
+                                            "to rename or drop ports (e.g. --map 'Speak=speech.say(say_text=text)'), "
                                             "got 'Grab'\n")
     assert main(["import", str(tmp_path / "none.xml")]) == 2
 
