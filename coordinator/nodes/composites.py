@@ -283,6 +283,18 @@ class Parallel(_Composite):
     def writes(self, node: TreeNode) -> Dict[str, Optional[str]]:
         return {node.spec.ended_by: None} if node.spec.ended_by else {}
 
+    def never_matches(self, node: TreeNode, key: str, label: Any, contains: bool, seen_from: Any) -> Optional[str]:
+        """For a ``switch`` on its ``ended_by`` key: why case ``label`` is no child's name ('' when it may be;
+        None for another key), as a call says of its status: a misspelt name would silently never run."""
+        if key != node.spec.ended_by:
+            return None
+        names = [c.name for c in node.children]
+        text = str(label)
+        if (any(text.lower() in n.lower() for n in names) if contains else text in names):
+            return ""
+        return "case %r never matches: $%s is the name of the child that ended the parallel at %s, one of %s%s" % (
+            label, key, where(node.pos, seen_from), ", ".join(repr(n) for n in names), did_you_mean(text, names))
+
     def _outcome(self, node: TreeNode, avail: FrozenSet[str], f: Flow) -> Tuple[FrozenSet[str], FrozenSet[str]]:
         outs = [f.outcome(c, avail) for c in node.children]   # together: none reads what another writes
         if not outs:

@@ -141,3 +141,19 @@ def test_the_language_reference_example_runs(tmp_path, bmtree_tree):
     run = t.run()
     assert run.succeeded, run.reason
     assert said(run) == ["Hello Ana."]
+
+
+def test_a_case_or_a_check_no_child_name_can_match_is_an_error(tmp_path):
+    """As a misspelt status of a call: a misspelt child name would silently never run its case."""
+    path = tmp_path / "bad.yaml"
+    path.write_text("format: 1\nroot:\n  sequence:\n    - parallel:\n        policy: one\n        ended_by: why\n"
+                    "        children:\n          - {name: waited, wait: 1}\n          - {name: arrived, wait: 2}\n"
+                    "    - switch: $why\n      cases:\n        arived: {wait: 0}\n        waited: {wait: 0}\n"
+                    "    - check: why != \"waitd\"\n")
+    with pytest.raises(TreeErrors) as info:
+        load_tree(str(path), DEFS)
+    assert [str(e).replace(str(path), "bad.yaml") for e in info.value.errors] == [
+        "bad.yaml:12:9: case 'arived' never matches: $why is the name of the child that ended the parallel at line "
+        "4, one of 'waited', 'arrived' (did you mean 'arrived'?)",
+        "bad.yaml:14:18: why != \"waitd\" is always true: $why is the name of the child that ended the parallel at "
+        "line 4, one of 'waited', 'arrived' (did you mean 'waited'?)"]
