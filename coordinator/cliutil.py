@@ -182,6 +182,7 @@ def err(text: str) -> None:
     from coordinator.runevents import terminal_text
 
     sys.stderr.write(terminal_text(text.rstrip("\n")) + "\n")
+    sys.stderr.flush()  # Python 3.8 buffers a piped stderr in blocks: a watcher of the pipe would wait for it
 
 
 def definitions_from(paths: Optional[List[str]]) -> Dict[str, ModuleDefinition]:

@@ -5,7 +5,6 @@ import argparse
 import errno
 import logging
 import os
-import sys
 import time
 from typing import Any, Dict, List, Optional, Set
 
@@ -279,10 +278,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 raise UsageError("%s uses %s, which --sim does not start (it starts %s): add --module %s.json=FILE.py:CLASS "
                                  "(or =EXECUTABLE for a C++ module, =SCRIPT.yaml for a scripted stand-in)" % (args.tree, ", ".join(absent),
                                                                         ", ".join(SIM_MODULES), absent[0]))
-            print("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
+            # progress goes to stderr: stdout holds the run's outcome, for scripts (and with -q, only that)
+            err("starting the simulated robot (private rosmaster, Blackboard, %s)..." % ", ".join(
                 sim + ["%s (yours)" % m for m in sorted(mine)]))
-            sys.stdout.flush()
-            print("its Blackboard store and module logs go to %s" % files.sim_dir)
+            err("its Blackboard store and module logs go to %s" % files.sim_dir)
             try:
                 graph = start_sim(world=args.world, ros_home=files.sim_dir, modules=sim, user_modules=user_modules,
                                   address=args.ros_ip, timeout=args.wait)
@@ -290,8 +289,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 err("error: %s" % exc)
                 return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV
             graph.adopt()  # loopback: the private graph works whatever the hostname
-            print("simulated robot up, master at %s" % graph.uri)
-            print("  (to watch it from another terminal: ROS_MASTER_URI=%s bmtree watch)" % graph.uri)
+            err("simulated robot up, master at %s" % graph.uri)
+            err("  (to watch it from another terminal: ROS_MASTER_URI=%s bmtree watch)" % graph.uri)
             guard = _start_guard(args.wait, interrupts)
         assert guard is not None
         with guard.watching():  # a master that stops answering now: a bounded wait, then exit 3
@@ -345,7 +344,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             view, sinks = run_view(transport, args.quiet)
             display = None if args.quiet or view is not None else Display()
-            print("running %s" % tree.name)
+            err("running %s" % tree.name)
             recorder = files.recorder([stream_sink] + sinks, given, args.max_duration, args.world if args.sim else None,
                                       control=bool(getattr(args, "control", False)),
                                       modules=list(args.modules or []) + [um.definition_path for um in user_modules])

@@ -39,7 +39,9 @@ def test_find_apple_without_an_apple_ends_in_its_fallback(tmp_path):
     path.write_text(yaml.safe_dump(world))
     out = run("run", "--sim", "--world", str(path), os.path.join(TREES, "find_apple.yaml"), "-q")
     assert out.returncode == 1, out.stdout + out.stderr
-    assert "find_apple: FAILURE" in out.stdout
+    # stdout is the outcome alone (for scripts); the start-up's progress is on stderr
+    assert out.stdout.strip().splitlines()[0].startswith("find_apple: FAILURE in"), out.stdout
+    assert "simulated robot up, master at" in out.stderr and "running find_apple" in out.stderr
     calls = [line.split()[2] for line in out.stdout.splitlines() if line.startswith("  +")]
     assert calls.count("vision.find_object") == 4 and calls[-1] == "speech.say"
     assert "navigation.approach" not in calls

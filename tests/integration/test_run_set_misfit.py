@@ -30,5 +30,5 @@ def test_a_set_value_the_call_cannot_take_is_refused_before_any_call(tmp_path):
     assert out.returncode == 2, out.stdout + out.stderr
     assert out.stderr.strip() == ("error: --set x: 'abc' is text, but navigation.approach's target.x at %s:9:28 "
                                   "takes a number (float64)" % tree), out.stderr
-    assert "starting the simulated robot" not in out.stdout and "navigation.go_to" not in out.stdout, out.stdout
+    assert "starting the simulated robot" not in out.stdout + out.stderr and "navigation.go_to" not in out.stdout, out.stdout
     assert not record.exists() and not (tmp_path / "home").exists()   # no run: nothing recorded, no robot

@@ -29,7 +29,7 @@ def no_master(monkeypatch):
 def test_ros_ip_must_be_an_address_of_this_machine(no_master, capsys, address, says):
     assert main(["run", "--sim", "--ros-ip", address, FIND_APPLE]) == 2
     out = capsys.readouterr()
-    assert says in out.err and "starting the simulated robot" not in out.out
+    assert says in out.err and "starting the simulated robot" not in out.out + out.err
 
 
 @pytest.mark.parametrize("uri", ["notaurl", "", "http://127.0.0.1:99999/", "localhost:11311"])
@@ -76,7 +76,7 @@ def test_a_world_that_cannot_be_read_is_exit_2_before_the_simulated_robot_starts
         assert main(["run", "--sim", "--world", str(world), FIND_APPLE]) == 2
         out = capsys.readouterr()
         assert out.err.startswith("error: --world %s" % world) and says in out.err
-        assert "starting the simulated robot" not in out.out
+        assert "starting the simulated robot" not in out.out + out.err
 
 
 def test_a_number_parameter_out_of_range_is_refused_like_the_option(no_master, capsys):

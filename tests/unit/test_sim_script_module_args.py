@@ -43,7 +43,7 @@ def test_a_wrong_script_is_said_where_it_is_before_anything_starts(arm, capsys, 
     assert main(["run", "--sim", "--module", "arm.json=arm.yaml", "t.yaml"]) == 2
     out = capsys.readouterr()
     assert out.err.startswith(said) and "Traceback" not in out.err, out.err
-    assert "starting the simulated robot" not in out.out
+    assert "starting the simulated robot" not in out.out + out.err
 
 
 def test_a_missing_script_is_one_line(arm, capsys):
