@@ -10,7 +10,7 @@ from __future__ import annotations
 import difflib
 from typing import Any, Iterable
 
-__all__ = ["EnvironmentProblem", "InvalidInput", "ProtocolError", "did_you_mean"]
+__all__ = ["EnvironmentProblem", "InvalidInput", "ProtocolError", "TooLarge", "did_you_mean"]
 
 
 class InvalidInput(Exception):
@@ -30,6 +30,11 @@ class ProtocolError(InvalidInput, ValueError):
     The message always names the problem (the key, the index, the ROS type), so
     that a log line is enough to find the sender's mistake.
     """
+
+
+class TooLarge(ProtocolError):
+    """A payload over the receiver's size limit: well formed perhaps, but refused unread (what to raise
+    is the receiver's ``--max-bytes``)."""
 
 
 def did_you_mean(word: Any, choices: Iterable[Any]) -> str:

@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
-from comm.errors import ProtocolError
+from comm.errors import ProtocolError, TooLarge
 from comm.limits import MAX_DEPTH, check_depth
 from comm.rostypes import from_message, message_from_json, resolve_type, rostype_of, unknown_type_error
 from comm.textenum import TextEnum
@@ -69,7 +69,7 @@ def load_payload(text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> Dict[str, Any
     """Parse a payload into a JSON object: size limit, then depth limit, then parsing."""
     if isinstance(text, (bytes, bytearray)):
         if len(text) > max_bytes:
-            raise ProtocolError("payload of %d bytes exceeds the limit of %d bytes" % (len(text), max_bytes))
+            raise TooLarge("payload of %d bytes exceeds the limit of %d bytes" % (len(text), max_bytes))
         try:
             text = bytes(text).decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -77,9 +77,7 @@ def load_payload(text: Any, max_bytes: int = DEFAULT_MAX_BYTES) -> Dict[str, Any
     if not isinstance(text, str):
         raise ProtocolError("payload is not text (got %s)" % type(text).__name__)
     if len(text) > max_bytes or (len(text) * 4 > max_bytes and len(text.encode("utf-8")) > max_bytes):
-        raise ProtocolError(
-            "payload of %d bytes exceeds the limit of %d bytes" % (len(text.encode("utf-8")), max_bytes)
-        )
+        raise TooLarge("payload of %d bytes exceeds the limit of %d bytes" % (len(text.encode("utf-8")), max_bytes))
     check_depth(text)
     try:
         data = json.loads(text)

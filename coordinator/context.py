@@ -27,11 +27,11 @@ from coordinator.received import Received
 from coordinator.refs import resolve, unwrap
 from coordinator.runevents import Notice, RunObserver, notify
 from coordinator.transport import Transport
-from modules.answers import NOT_RETURNED
+from modules.answers import NOT_RETURNED, NOT_STOPPED
 from modules.definition import FunctionDefinition, ModuleDefinition
 
-__all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "SUCCESS_FALSE", "WAKE", "gone_text",
-           "late_answer_text", "plain", "success_false_said"]
+__all__ = ["CallRecord", "LATE_ANSWER", "MODULE_GONE", "RecordStatus", "RunContext", "STILL_RUNNING", "SUCCESS_FALSE",
+           "WAKE", "gone_text", "late_answer_text", "plain", "success_false_said"]
 
 log = logging.getLogger("bmtree.coordinator")
 
@@ -144,7 +144,7 @@ class CallRecord:
             return ""
         if not self.cancel_answer:
             return "its module did not answer the cancel"
-        if NOT_RETURNED in self.cancel_answer:
+        if NOT_RETURNED in self.cancel_answer or NOT_STOPPED in self.cancel_answer:
             return "its module says %s" % self.cancel_answer.partition(", but ")[2]
         return ""
 
@@ -168,6 +168,8 @@ class CallRecord:
 
 LATE_ANSWER = "late_answer"
 """The ``what`` of the notice of a late answer (:func:`late_answer_text`)."""
+STILL_RUNNING = "still_running"
+"""The ``what`` of the notice of a cancel's answer saying the call may go on (``maybe_running``)."""
 
 _ENDED: Dict[str, str] = {RecordStatus.TIMEOUT: "timed out", RecordStatus.HALTED: "halted",
                           RecordStatus.MODULE_LOST: "given up as module_lost"}
@@ -310,10 +312,13 @@ class RunContext:
         """Stop waiting for ``rec`` and ask its module to stop it."""
         if rec.ended is not None:
             return
+        # a call still kept for its module's node to connect was never sent: the transport takes it back, and
+        # nothing can be running it (no "may still be running: its module did not answer the cancel")
+        unsent = bool(rec.call_id) and bool(self.transport.unsent_note(rec.call_id or ""))
         self.finish(rec, status, error)
         fn = rec.function
         assert fn is not None
-        rec.cancel_sent = True
+        rec.cancel_sent = not unsent
         self.transport.send_cancel(CancelRequest(call_id=rec.call_id, basic_mod=fn.module, function=fn.name))
 
     def request(self, names: List[str]) -> str:
@@ -418,6 +423,11 @@ class RunContext:
             return
         if result.status == RecordStatus.CANCELLED and not rec.cancel_answer:
             rec.cancel_answer = result.error or "cancelled"
+            if rec.maybe_running:  # in the run log and the viewers too, not only in bmtree run's summary
+                ended = (rec.ended if rec.ended is not None else self.started) - self.started
+                self._notice(Notice(STILL_RUNNING, "%s (call %s, %s at %.2fs) may still be running: %s" % (
+                    rec.target, rec.call_id, _ENDED.get(str(rec.status), "ended %s" % rec.status), ended,
+                    rec.maybe_running), rec.call_id))
         if result.status == RecordStatus.CANCELLED or rec.late_status is not None:
             log.debug("a late answer (%s) to call %s of %s, which had ended %s", result.status, result.call_id,
                       rec.target, rec.status)

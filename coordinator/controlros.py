@@ -7,13 +7,15 @@ import itertools
 import json
 import threading
 import time
-from typing import Any, Dict
+from typing import Any, Dict, List
 
 from comm import settle_new_connection
 from comm.nodelife import registering
 from coordinator.control import MAX_REQUEST, REPLY, REQUEST, Controller, Unreadable, read_request
 
 __all__ = ["ControlClient", "ros_controller"]
+
+MASTER_QUESTION = 3.0  # s the master may take to say which runs there are
 
 
 class ControlClient:
@@ -30,6 +32,7 @@ class ControlClient:
         self._cond = threading.Condition()
         self._sub = rospy.Subscriber(reply, String, self._got, queue_size=100)
         self._pub = rospy.Publisher(request, String, queue_size=100)
+        self._request = rospy.resolve_name(request)
         self._prefix = "%s-%d" % (rospy.get_name(), int(time.time() * 1000) % 100000)
 
     def _got(self, msg: Any) -> None:
@@ -42,16 +45,49 @@ class ControlClient:
             self._replies[key] = rep
             self._cond.notify_all()
 
+    def runs(self) -> List[str]:
+        """The nodes of the runs on this master now (every run takes requests, refusing them without
+        ``--control``): one master query. Raises OSError when the master does not answer."""
+        import rospy
+
+        from comm.rpc import master_api
+
+        _, subs, _ = master_api(rospy.get_name(), MASTER_QUESTION).getSystemState()
+        return sorted(n for topic, nodes in subs if topic == self._request for n in nodes if n != rospy.get_name())
+
     def send(self, command: Dict[str, Any], timeout: float = 10.0) -> Dict[str, Any]:
-        """The run's reply, or ``{"ok": False, "answer": ...}`` if no run answers within ``timeout``."""
+        """The run's reply, or ``{"ok": False, "answer": ...}`` if no run answers within ``timeout``.
+
+        A command is for a run that runs now, never for one that starts later: it goes to the run
+        named by ``to``, or to the one run on the master; none (or several, without ``to``) is said at
+        once. It names that run (``to``), so no other run takes it."""
+        to = str(command.get("to") or "")
+        import rosgraph
+
+        try:
+            runs = self.runs()
+        except (OSError, rosgraph.masterapi.Error) as exc:
+            return {"ok": False, "answer": "no run answered: the ROS master does not answer (%s)" % exc}
+        if to and to not in runs:
+            return {"ok": False, "answer": "no run of node %s takes commands on this master%s" % (
+                to, " (the runs on it: %s)" % ", ".join(runs) if runs else " (it has ended)")}
+        if not to and not runs:
+            return {"ok": False, "answer": "no run takes commands on this master now (a command is for a run that "
+                                           "is running, not kept for the next one)"}
+        if not to and len(runs) > 1:
+            return {"ok": False, "answer": "%d runs take commands on this master (%s): say which one with --node" % (
+                len(runs), ", ".join(runs))}
+        to = to or runs[0]
         end = time.monotonic() + timeout
         waited = False
-        while (self._pub.get_num_connections() < 1 or self._sub.get_num_connections() < 1) and \
+        while not (self._pub.impl.has_connection(to) and any(
+                c.callerid_pub == to and not getattr(c, "done", False) for c in self._sub.impl.connections)) and \
                 time.monotonic() < end:
             waited = True
             time.sleep(0.05)  # a message sent before the connection is up is lost
         if waited:
             settle_new_connection()  # the run's reply publisher, which this side counted first
+        command = dict(command, to=to)
         cid = "%s-%d" % (self._prefix, next(self._ids))
         self._pub.publish(self._String(json.dumps(dict(command, id=cid))))
         with self._cond:

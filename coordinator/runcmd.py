@@ -311,8 +311,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             for other in [] if args.sim else _other_runs():  # a private graph has no other run
                 err("warning: another bmtree run is running on this master (node %s): both store results under the "
                     "same Blackboard names (a recall may read its values), both publish the run stream on %s (bmtree "
-                    "watch shows the first it sees; watch --run ID picks one) and both take bmtree control commands "
-                    "(control --node NODE steers one)" % (other, STREAM_NS))
+                    "watch shows the first it sees; watch --run ID picks one), and bmtree control needs --node NODE to say "
+                    "which run it steers" % (other, STREAM_NS))
             try:
                 left = args.wait if args.sim else max(deadline - time.monotonic(), min(args.wait, PREFLIGHT_AT_LEAST))
                 transport.wait_ready(mods, left, defs, blackboard=recall, legacy=legacy, notify=None if args.sim else err,

@@ -372,7 +372,7 @@ def cmd_control(args: argparse.Namespace) -> int:
         print(terminal_text(str(reply.get("answer"))))
         return EXIT_OK
     err("refused: %s" % reply.get("answer"))
-    return EXIT_ENV if str(reply.get("answer", "")).startswith("no run answered") else EXIT_INVALID
+    return EXIT_ENV if str(reply.get("answer", "")).startswith("no run ") else EXIT_INVALID  # none there, or no answer
 
 
 def add_control_parser(sub: Any) -> None:

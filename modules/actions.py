@@ -16,7 +16,14 @@ time for the server to end it, and raises, so the runtime answers ``cancelled``.
 node stops (Ctrl-C, ``rosnode kill``) it cancels its running goals the same way, and their calls
 answer ``failed: /move_base: the module's node stops: goal cancelled`` (the coordinator did not
 cancel them; the runtime answers what the function raised, as for any call in flight when its
-node stops).
+node stops). A server that does not end a cancelled goal in time is said in the call's answer
+(``bmtree run`` lists the call under "may still be running"). A server whose process is gone
+(its status connection closed) loses the goal at once.
+
+A module killed outright (``kill -9``) cannot cancel its goals. When its node starts again (a
+``respawn``), the first status it sees from the server still lists them, under ids that begin
+with the node's name: it cancels those (its earlier process's, so nobody waits for them) before
+it sends a goal, and logs each.
 """
 from __future__ import annotations
 
@@ -36,6 +43,9 @@ GOAL_STATES = {0: "PENDING", 1: "ACTIVE", 2: "PREEMPTED", 3: "SUCCEEDED", 4: "AB
                6: "PREEMPTING", 7: "RECALLING", 8: "RECALLED", 9: "LOST"}
 SUCCEEDED = 3
 LOST = 9
+_UNENDED = (0, 1, 6, 7)  # PENDING, ACTIVE, PREEMPTING, RECALLING: a goal the server still runs or holds
+_SENT: Set[str] = set()  # ids of the goals this process sent (every Action): not an earlier process's
+_SENT_LOCK = threading.Lock()  # also held while a goal is sent: a sweep never sees one of ours unrecorded
 _DONE = 7  # actionlib.CommState.DONE: the client's state machine has the goal's result (or lost it)
 _POLL = 0.5  # seconds between checks that the server still publishes its status
 _CONNECT_POLL = 0.01  # as actionlib's wait_for_server
@@ -53,8 +63,9 @@ class ActionFailed(Failure):
     the call was cancelled). ``state`` is the goal's terminal GoalStatus code (None: it never ended,
     or was never sent), ``text`` the server's status text."""
 
-    def __init__(self, message: str, namespace: str, state: Optional[int] = None, text: str = ""):
-        super().__init__(message)
+    def __init__(self, message: str, namespace: str, state: Optional[int] = None, text: str = "",
+                 not_stopped: str = ""):
+        super().__init__(message, not_stopped=not_stopped)
         self.namespace = namespace
         self.state = state
         self.text = text
@@ -65,9 +76,12 @@ class _RosClient:
     connected (why not), how old is the server's last status, send a goal. Unit tests give a
     stand-in with the same methods."""
 
-    def __init__(self, namespace: str, action_type: Any, stale_after: Optional[float] = None):
+    def __init__(self, namespace: str, action_type: Any, stale_after: Optional[float] = None,
+                 sweep: bool = True):
         import actionlib
         import rospy
+
+        owner = self
 
         class _Timed(actionlib.ActionClient):  # type: ignore[misc]
             """Notes when the server's status last came: a server that died sends none (5 Hz otherwise)."""
@@ -77,11 +91,58 @@ class _RosClient:
             def _status_cb(self, msg: Any) -> None:
                 self.status_at = time.monotonic()
                 super()._status_cb(msg)
+                owner.sweep()
 
         self.where = rospy.resolve_name(namespace)
         self._rospy = rospy
         self.stale_after = stale_after  # seconds without a status after which a connected server is not taken
+        self._swept: Optional[str] = None if sweep else ""  # the server whose goals were looked at ('': never look)
         self.client = _Timed(namespace, action_type)
+
+    def _server(self) -> Optional[str]:
+        """The node of the server's last status while this node is still connected to it (actionlib keeps
+        the last status for ever: a server that died would be named still), else None."""
+        c = self.client
+        last = c.last_status_msg
+        if last is None:
+            return None
+        server = last._connection_header.get("callerid", "?")
+        if not any(x.callerid_pub == server and not getattr(x, "done", False) for x in c.status_sub.impl.connections):
+            return None
+        return server
+
+    def server_left(self) -> str:
+        """Why the server that sent the last status is gone ('' while it is connected, or none was seen): its
+        process ended or it stopped serving (rospy closes the status link at once), which a goal need not
+        wait ``stale_after`` seconds of silence to learn."""
+        last = self.client.last_status_msg
+        if last is None or self._server() is not None:
+            return ""
+        return "its server %s closed its connection to %s/status: it stopped or died" % (
+            last._connection_header.get("callerid", "?"), self.where)
+
+    def sweep(self) -> None:
+        """Once per server, when connected both ways (a cancel published earlier could be lost): cancel the
+        goals it still runs under this node's name that this process did not send, which an earlier
+        process of this node left (killed outright: nobody waits for them, and the robot would go on)."""
+        if getattr(self, "client", None) is None:  # a status before __init__ ended
+            return
+        if self._swept is not None and self._swept in ("", self._server()):
+            return
+        with _SENT_LOCK:
+            server = self._server()
+            if server is None or server == self._swept or self.missing():
+                return
+            self._swept = server
+            prefix = self._rospy.get_name() + "-"  # actionlib's goal ids: NODE-COUNT-STAMP
+            left = [s.goal_id.id for s in self.client.last_status_msg.status_list
+                    if s.status in _UNENDED and s.goal_id.id.startswith(prefix) and s.goal_id.id not in _SENT]
+            for goal_id in left:
+                from actionlib_msgs.msg import GoalID
+
+                self.client.pub_cancel.publish(GoalID(stamp=self._rospy.Time(), id=goal_id))
+                log.warning("%s: cancelled goal %s, which an earlier process of this node left running on %s",
+                            self.where, goal_id, server)
 
     def missing(self) -> str:
         """Empty once a server is connected both ways (actionlib's own ``wait_for_server`` test, without
@@ -91,12 +152,9 @@ class _RosClient:
         topic (actionlib keeps that last message for ever: a server that died would be named still)
         and its status is not older than ``stale_after``."""
         c = self.client
-        last = c.last_status_msg
-        if last is None:
+        server = self._server()
+        if server is None:  # none yet, or its server left (stopped or died): rospy closed the link
             return "nothing publishes %s/status" % self.where
-        server = last._connection_header.get("callerid", "?")
-        if not any(x.callerid_pub == server and not getattr(x, "done", False) for x in c.status_sub.impl.connections):
-            return "nothing publishes %s/status" % self.where  # its server left (stopped or died): rospy closed the link
         age = self.status_age()
         if self.stale_after is not None and age is not None and age > self.stale_after:
             return "its server %s has published nothing on %s/status for %.1fs" % (server, self.where, age)
@@ -114,7 +172,16 @@ class _RosClient:
     def send(self, goal: Any, transition: Callable[[Any], None], feedback: Callable[[Any, Any], None]) -> Any:
         # ActionClient.send_goal tracks the goal before publishing it, and calls back with the handle:
         # a result that arrives before it returns is not lost (SimpleActionClient's is)
-        return self.client.send_goal(goal, transition, feedback)
+        self.sweep()  # an earlier process's goals are cancelled before this one starts
+        with _SENT_LOCK:
+            handle = self.client.send_goal(goal, transition, feedback)
+            _SENT.add(handle.comm_state_machine.action_goal.goal_id.id)
+        return handle
+
+    def forget(self, handle: Any) -> None:
+        """The call of a goal sent with :meth:`send` is over (its id need not be kept)."""
+        with _SENT_LOCK:
+            _SENT.discard(handle.comm_state_machine.action_goal.goal_id.id)
 
     def shutting_down(self) -> bool:
         return bool(self._rospy.is_shutdown())
@@ -139,19 +206,22 @@ class Action:
         silence_timeout: seconds without a status from the server (5 a second normally) after
             which the goal is taken as LOST (the server died), and a connected server as no server
             (the call is not sent); None never.
+        cancel_left_goals: cancel, once connected, the goals the server still runs for an earlier
+            process of this node (killed outright, then restarted); False leaves them.
         client: a stand-in for the ROS client (tests); default made on first use, after
             ``rospy.init_node``.
     """
 
     def __init__(self, module: BasicModule, namespace: str, action_type: Any, connect_timeout: float = 5.0,
                  cancel_timeout: Optional[float] = None, silence_timeout: Optional[float] = 5.0,
-                 client: Any = None):
+                 client: Any = None, cancel_left_goals: bool = True):
         self.module = module
         self.namespace = namespace
         self.action_type = action_type
         self.connect_timeout = connect_timeout
         self.cancel_timeout = cancel_timeout
         self.silence_timeout = silence_timeout
+        self.cancel_left_goals = cancel_left_goals
         self._client = client
         self._lock = threading.Lock()
         self._active: Dict[Any, threading.Event] = {}  # running goals' handles and ends, cancelled if the node stops
@@ -208,14 +278,18 @@ class Action:
             with self._lock:
                 self._active.pop(handle, None)
                 self._stop_cancelled.discard(handle)
+            if done.is_set() and hasattr(client, "forget"):
+                client.forget(handle)
         state = handle.get_goal_status() if done.is_set() else None
         text = handle.get_goal_status_text() if done.is_set() else ""
         if ctx.cancelled.is_set():
+            going = ""
             if state is None:
-                log.warning("%s did not end the goal within %gs of its cancel: it may still run it", self.where,
-                            self._cancel_timeout())
+                going = "%s did not end the goal within %gs of its cancel" % (self.where, self._cancel_timeout())
+                log.warning("%s: it may still run it", going)
             raise ActionFailed("%s: call cancelled, goal %s" % (self.where, state_name(state) if state is not None
-                                                                 else "still running"), self.where, state, text)
+                                                                 else "still running"), self.where, state, text,
+                               not_stopped=going)
         if state != SUCCEEDED and self._stops(client):
             # cancelled by the node's stop, not by the coordinator: a server that honours the cancel
             # ends it PREEMPTED "cancelled by the client", which would read as a navigation failure
@@ -234,7 +308,8 @@ class Action:
     def _get_client(self) -> Any:
         with self._lock:
             if self._client is None:
-                self._client = _RosClient(self.namespace, self.action_type, stale_after=self.silence_timeout)
+                self._client = _RosClient(self.namespace, self.action_type, stale_after=self.silence_timeout,
+                                          sweep=self.cancel_left_goals)
                 self._client.on_shutdown(self._cancel_all)
             return self._client
 
@@ -302,6 +377,9 @@ class Action:
                 if now >= deadline:
                     return ""
             else:
+                left = client.server_left() if hasattr(client, "server_left") else ""
+                if left:
+                    return left
                 age = client.status_age()
                 if self.silence_timeout is not None and age is not None and age > self.silence_timeout:
                     _cancel(handle)  # a server that comes back must not run it on

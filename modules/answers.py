@@ -11,7 +11,7 @@ from comm.messages import CallStatus, FunctionResult
 from modules.basicmodule import Failure
 from modules.errortext import bounded, place_of, raised_text, said, which_call, wire_text
 
-__all__ = ["Answers", "CANCELLED_TEXT", "NOT_RETURNED", "stopped_text"]
+__all__ = ["Answers", "CANCELLED_TEXT", "NOT_RETURNED", "NOT_STOPPED", "stopped_text"]
 
 log = logging.getLogger("bmtree.module")
 
@@ -19,6 +19,9 @@ CANCELLED_TEXT = "cancelled by the coordinator"
 #: in the ``cancelled`` answer of a call whose code did not return within the cancel's grace: the coordinator
 #: tells its user that the call may go on moving the robot
 NOT_RETURNED = "its code has not returned"
+#: in the ``cancelled`` answer of a call whose code returned but said what it drives may go on
+#: (:class:`~modules.basicmodule.Failure`'s ``not_stopped``): the coordinator tells its user the same
+NOT_STOPPED = "it may not have stopped"
 
 
 def stopped_text(why: str, still_running: float = 0.0, returned: bool = False) -> str:
@@ -128,19 +131,21 @@ class Answers:
             size = _size(text)
         return text
 
-    def cancelled(self, call: Any, still_running: float = 0.0) -> FunctionResult:
+    def cancelled(self, call: Any, still_running: float = 0.0, not_stopped: str = "") -> FunctionResult:
         """``still_running``: the grace after which the call's code still runs (it does not look at its cancel).
+        ``not_stopped``: what its code, which returned, said may go on (an action server's goal).
         A call its node's stop cancelled (``call.stopping``), or the module because its caller could not be
         reached (``call.cancel_why``), says so instead of naming the coordinator."""
+        goes_on = ", but %s: %s" % (not_stopped, NOT_STOPPED) if not_stopped and not still_running else ""
         why = getattr(call, "stopping", "")
         if why:
-            return self.result(call, CallStatus.CANCELLED, stopped_text(why, still_running, returned=True))
+            return self.result(call, CallStatus.CANCELLED, stopped_text(why, still_running, returned=True) + goes_on)
         why = getattr(call, "cancel_why", "")
         if why:
             return self.result(call, CallStatus.CANCELLED, "%s, but %s %gs after the cancel: it goes on running" % (
-                why, NOT_RETURNED, still_running) if still_running else why)
+                why, NOT_RETURNED, still_running) if still_running else why + goes_on)
         return self.result(call, CallStatus.CANCELLED, "%s, but %s after %gs: it goes on running" % (
-            CANCELLED_TEXT, NOT_RETURNED, still_running) if still_running else CANCELLED_TEXT)
+            CANCELLED_TEXT, NOT_RETURNED, still_running) if still_running else CANCELLED_TEXT + goes_on)
 
     def result(self, call: Any, status: CallStatus, error: str) -> FunctionResult:
         return FunctionResult(call_id=call.ctx.call_id, basic_mod=self.server.definition.name, function=call.ctx.function,

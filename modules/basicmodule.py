@@ -22,7 +22,16 @@ log = logging.getLogger("bmtree.module")
 
 
 class Failure(Exception):
-    """Raise (or return) this from a function to answer ``failed`` with a reason."""
+    """Raise (or return) this from a function to answer ``failed`` with a reason.
+
+    ``not_stopped``: raised by a cancelled call whose code gave up waiting for what it drives to stop
+    (an action server that ignores its cancel), what may go on (``/move_base did not end the goal
+    within 0.8s of its cancel``): the call answers ``cancelled`` saying so, and ``bmtree run`` lists it
+    under "may still be running"."""
+
+    def __init__(self, *args: Any, not_stopped: str = ""):
+        super().__init__(*args)
+        self.not_stopped = not_stopped
 
 
 class Rejected(Exception):

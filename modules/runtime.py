@@ -15,7 +15,7 @@ import math
 import threading
 from typing import Any, Callable, Dict, List, Optional
 
-from comm.errors import ProtocolError
+from comm.errors import ProtocolError, TooLarge
 from comm.messages import (
     DEFAULT_MAX_BYTES,
     CallStatus,
@@ -182,7 +182,9 @@ class ModuleServer:
         except ProtocolError as exc:
             keys = salvage_keys(text)
             if keys.get("basic_mod") == self.definition.name and "call_id" in keys:
-                self._reject(keys["call_id"], keys.get("function"), "malformed call: %s" % exc)
+                self._reject(keys["call_id"], keys.get("function"), "call too large: %s (raise it with --max-bytes N, "
+                             "or _max_bytes:=N, on the module's node)" % exc if isinstance(exc, TooLarge)
+                             else "malformed call: %s" % exc)
             else:
                 log.warning("ignored a malformed call: %s", exc)
             return
@@ -346,6 +348,7 @@ class ModuleServer:
         ctx = call.ctx
         outcome: Optional[Outcome] = None
         result: Optional[FunctionResult] = None
+        not_stopped = ""  # a cancelled call's code gave up waiting for what it drives: what may go on
         if not ctx.cancelled.is_set():  # a call cancelled before it started never runs
             self.impl._local.ctx = ctx
             try:
@@ -364,6 +367,7 @@ class ModuleServer:
                     result = self.answers.outputs(call, out)
             except Failure as exc:
                 result = self.answers.result(call, CallStatus.FAILED, said(exc) or "failed")
+                not_stopped = str(getattr(exc, "not_stopped", "") or "")
             except Rejected as exc:
                 result = self.answers.result(call, CallStatus.REJECTED, said(exc) or "rejected")
             except BaseException as exc:  # noqa: B036 - SystemExit, KeyboardInterrupt, GeneratorExit raised by the
@@ -380,7 +384,7 @@ class ModuleServer:
             log.info("the code of cancelled %s of %s has returned; %s is free again", which_call(ctx.call_id),
                      call.fn.qualified, self.definition.name)
         if ctx.cancelled.is_set():
-            self._finish(call, self.answers.cancelled(call))
+            self._finish(call, self.answers.cancelled(call, not_stopped=not_stopped))
         elif outcome is not None:
             self._follow(call, outcome)
         else:

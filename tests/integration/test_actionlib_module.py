@@ -142,3 +142,74 @@ def test_a_server_that_was_stopped_is_not_named_as_the_server(move_base, tmp_pat
     assert "failed" in line and "no action server on /move_base within 5s: nothing publishes /move_base/status" in line, \
         line
     assert log.read_text().count("goal") == 1
+
+
+def test_a_server_that_ignores_the_cancel_is_said_in_the_run_summary_and_log(move_base, tmp_path):
+    """The tree halts the call; the server does not end the goal within the cancel's wait: the run's summary
+    lists the call under "may still be running" and its log has a still_running notice (before, only the
+    module's own log said so, and the goal drove on after the run had ended)."""
+    from coordinator.runlog import read_log
+
+    move_base("stubborn")
+    log_path = tmp_path / "run.jsonl"
+    tree = tmp_path / "tree.yaml"
+    tree.write_text("format: 1\nroot:\n  timeout: 1\n  child:\n    call: mobile_base.go_to\n    inputs: {target: %s}\n"
+                    "    timeout: none\n" % TARGET)
+    out = subprocess.run(bmtree_cmd("run", "-q", "--modules", DEFINITION, "--record", str(log_path), str(tree)),
+                         capture_output=True, text=True, timeout=120, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    assert out.returncode == 1, out.stdout + out.stderr
+    said = "may still be running: its module says /move_base did not end the goal within 0.8s of its cancel: it may " \
+           "not have stopped"
+    assert said in out.stdout, out.stdout
+    notices = [r for r in read_log(str(log_path)).records if r.get("type") == "notice" and r.get("what") == "still_running"]
+    assert len(notices) == 1 and said.split(": ", 1)[1] in notices[0]["text"], notices
+
+
+def test_a_server_killed_during_a_goal_loses_it_without_waiting_for_silence(move_base, tmp_path, ros_graph):
+    """kill -9 of the server: its status connection closes, and the goal is LOST at the module's next look
+    (not after silence_timeout, 5 s, of no status)."""
+    log = move_base("slow")
+    tree = tmp_path / "tree.yaml"
+    tree.write_text("format: 1\nroot:\n  call: mobile_base.go_to\n  inputs: {target: %s}\n  timeout: none\n" % TARGET)
+    run = subprocess.Popen(bmtree_cmd("run", "-q", "--modules", DEFINITION, str(tree)), stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        until(lambda: "goal" in log.read_text(), 30, log.read_text)
+        server = next(p for p in ros_graph.nodes if "move_base_server.py" in " ".join(map(str, p.args)))
+        ros_graph.kill_node(server)
+        out, _ = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    assert run.returncode == 1, out
+    assert "/move_base: goal LOST: its server /move_base closed its connection to /move_base/status: it stopped or " \
+           "died" in out, out
+    assert "no status from the server" not in out, out
+
+
+def test_a_restarted_module_cancels_the_goal_its_killed_process_left(move_base, tmp_path, ros_graph):
+    """kill -9 of the module during a goal: nothing can cancel it then, and the server drives on; the module's
+    node started again (a respawn) cancels it, as a goal of an earlier process of its node, before any goal
+    of its own."""
+    log = move_base("slow")
+    tree = tmp_path / "tree.yaml"
+    tree.write_text("format: 1\nroot:\n  call: mobile_base.go_to\n  inputs: {target: %s}\n  timeout: none\n" % TARGET)
+    run = subprocess.Popen(bmtree_cmd("run", "-q", "--modules", DEFINITION, str(tree)), stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL, env=dict(os.environ), stdin=subprocess.DEVNULL)
+    try:
+        until(lambda: "goal" in log.read_text(), 30, log.read_text)
+        ros_graph.kill_node(move_base.module)
+        assert run.wait(60) == 1
+        assert "preempted" not in log.read_text()  # the goal runs on without its module
+        ros_graph.start_node(["-m", "modules.node", "--definition", DEFINITION, "--class",
+                              os.path.join(EXAMPLE, "mobile_base.py") + ":MobileBase"], "/bm_mobile_base")
+        until(lambda: "preempted" in log.read_text(), 30, log.read_text)  # its setup() connects: no call needed
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    with open(os.path.join(ros_graph.ros_home, "bm_mobile_base.out")) as fh:
+        module_log = fh.read()
+    assert "/move_base: cancelled goal /bm_mobile_base-1-" in module_log, module_log
+    assert "which an earlier process of this node left running on /move_base" in module_log, module_log

@@ -47,13 +47,15 @@ def test_each_command_steers_the_run_and_is_logged(tmp_path):
         seen = Lines(watch.stdout)
         seen.wait_for("caught up at tick")
         assert "step works while paused" in refused(run, "step")
-        # --node: a command for another run on the master is not this run's (no run answers it)
-        other = subprocess.run(bmtree_cmd("control", "pause", "--node", "/bmtree_other", "--wait", "2"),
-                               capture_output=True, text=True, env=run.env, timeout=60, stdin=subprocess.DEVNULL)
-        assert other.returncode == 3 and "no run answered" in other.stderr, other.stdout + other.stderr
         state = rosgraph.Master("/test_control", master_uri=run.env["ROS_MASTER_URI"]).getSystemState()
         node = next(n for _topic, nodes in state[0] for n in nodes if n.startswith("/bmtree_") and
                     not n.startswith(("/bmtree_watch", "/bmtree_control")))
+        # --node: a command for another run on the master is not this run's (no run of that node is there)
+        other = subprocess.run(bmtree_cmd("control", "pause", "--node", "/bmtree_other", "--wait", "2"),
+                               capture_output=True, text=True, env=run.env, timeout=60, stdin=subprocess.DEVNULL)
+        assert other.returncode == 3, other.stdout + other.stderr
+        assert "refused: no run of node /bmtree_other takes commands on this master (the runs on it: %s)" % node \
+            in other.stderr, other.stderr
         assert "will pause before 'arrived' starts" in ok(run, "break", "arrived", "--node", node)
         # pause: the pending call goes on, but no node starts after it
         assert "paused" in ok(run, "pause")

@@ -218,3 +218,5 @@ def test_a_retry_to_a_killed_module_that_is_not_restarted_says_its_process_is_go
         assert "timeout" in row and re.search(r"no answer within 3s \(never sent: node /bm_probe stopped \(its "
                                               r"process is gone\) \d+\.\d s ago and was not started again\)", row), out
     assert "restarting, or unable to reach" not in out, out
+    # a call never sent cannot be running: no "may still be running: its module did not answer the cancel"
+    assert "may still be running" not in out, out

@@ -84,11 +84,19 @@ def test_modules_live_ends_when_the_master_answers_its_check_and_then_nothing(ow
     assert "Traceback" not in text, text
 
 
+SILENT_RUN = ("import rospy; from std_msgs.msg import String; rospy.init_node('silent_run'); "
+              "rospy.Subscriber('/bmtree/run/control_request', String, lambda m: None); rospy.spin()")
+
+
 def test_control_leaves_without_unregistering_when_the_master_stops_meanwhile(own_graph):
-    """No run answers ``pause`` (none is running); the master stops while control waits for one:
-    control's exit does not wait for the master to take its unregistering."""
+    """A run that never answers ``pause`` (a node that takes requests and says nothing); the master
+    stops while control waits for its answer: control's exit does not wait for the master to take its
+    unregistering."""
+    import sys
+
     from coordinator.control import REQUEST
 
+    own_graph.start_node([sys.executable, "-c", SILENT_RUN], "/silent_run")
     ctl, out = _start(own_graph, "control", "pause", "--wait", "2")
     try:
         _registered(own_graph, "/bmtree_control", REQUEST, 20)  # it waits for a run's answer now

@@ -61,8 +61,16 @@ class Client:
         self.behave = behave
         self._missing = missing
         self.age = age
+        self.left = ""  # server_left(): why its server is gone
         self.handles = []
         self.goals = []
+        self.forgotten = []
+
+    def server_left(self):
+        return self.left
+
+    def forget(self, handle):
+        self.forgotten.append(handle)
 
     def missing(self):
         return self._missing
@@ -224,6 +232,20 @@ def test_a_server_that_ignores_the_cancel_is_waited_for_a_bounded_time():
     assert 0.25 < elapsed < 0.9
     assert "/move_base did not end the goal within 0.3s of its cancel" in logged.text
     assert "has not returned" not in logged.text  # the runtime's warning of code that ignores cancels
+    # the answer says the goal may go on, which bmtree run lists under "may still be running"
+    assert s.result(call).error == ("cancelled by the coordinator, but /move_base did not end the goal within 0.3s "
+                                    "of its cancel: it may not have stopped")
+    assert client.forgotten == [client.handles[1]]  # the ended goal's id is let go; the running one's is kept
+
+
+def test_a_server_that_ends_the_cancelled_goal_gives_a_plain_cancelled_answer():
+    client = Client()
+    s = Served(client, cancel_timeout=2.0)
+    call = s.call()
+    time.sleep(0.1)
+    client.handles[0].on_cancel = lambda h: h.end(PREEMPTED, "cancelled by the client")
+    s.cancel(call)
+    assert s.result(call).error == "cancelled by the coordinator"
 
 
 def test_the_default_cancel_wait_ends_before_the_runtimes_grace():
@@ -260,6 +282,17 @@ def test_a_server_that_falls_silent_loses_the_goal():
     r = s.result(call, timeout=3.0)
     assert r.status == "failed" and r.error.startswith("/move_base: goal LOST: no status from the server for 2.0s")
     assert client.handles[0].cancels == 1
+
+
+def test_a_server_whose_process_is_gone_loses_the_goal_without_waiting_for_silence():
+    client = Client()
+    s = Served(client, silence_timeout=60)
+    call = s.call()
+    time.sleep(0.1)
+    client.left = "its server /move_base closed its connection to /move_base/status: it stopped or died"
+    r = s.result(call, timeout=10.0)  # at the next look (0.5 s), not after 60 s of silence
+    assert r.status == "failed" and r.error == ("/move_base: goal LOST: its server /move_base closed its connection "
+                                                "to /move_base/status: it stopped or died")
 
 
 def test_a_goal_cancelled_because_the_node_stops_says_so():

@@ -109,3 +109,28 @@ def test_the_answers_to_its_cancels_go_into_the_run_log_after_its_end(grab, tmp_
                                   speed=None, bind=None, port=None))
     out = capsys.readouterr().out
     assert "late answer: navigation.go_to" in out and "the module did run it" in out, out
+
+
+def test_a_cancel_answered_with_what_may_not_have_stopped_is_maybe_running_and_a_notice(grab):
+    """A function that returned after its cancel but says what it drives may go on (an action server that
+    ignores the cancel: ``Failure(..., not_stopped=...)``): said as for code that has not returned, and as a
+    ``still_running`` notice, which the run log, the watch and replay show."""
+    from comm.messages import CallStatus, FunctionResult
+    from coordinator.context import STILL_RUNNING
+
+    grab.mocks["navigation.go_to"].hang()
+    run = grab.run()
+    ctx = grab.runners[-1].ctx
+    call = run.calls("navigation.go_to")[0]
+    call.cancel_answer = ""  # as if the module's answer to the cancel came now, saying so
+    ctx._late(call, FunctionResult(call_id=call.call_id, basic_mod="navigation", function="go_to",
+                                   status=CallStatus.CANCELLED,
+                                   error="cancelled by the coordinator, but /move_base did not end the goal within "
+                                         "0.8s of its cancel: it may not have stopped"))
+    assert call.maybe_running == ("its module says /move_base did not end the goal within 0.8s of its cancel: it may "
+                                  "not have stopped")
+    notice = [n for n in ctx.notices if n.what == STILL_RUNNING]
+    assert [n.call_id for n in notice] == [call.call_id]
+    assert notice[0].text == "navigation.go_to (call %s, timed out at 2.00s) may still be running: %s" % (
+        call.call_id, call.maybe_running)
+    assert "may still be running: " + call.maybe_running in "\n".join(summary_lines(run.result, "grab"))

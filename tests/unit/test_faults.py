@@ -88,7 +88,10 @@ def test_a_deep_call_gets_a_rejected_answer(probe):
     got = {r.call_id: r for r in map(FunctionResult.decode, out)}
     assert set(got) == {"c1", "c2", "c3"}
     assert all(r.status == "rejected" for r in got.values())
-    assert "nested deeper" in got["c1"].error and "exceeds the limit" in got["c3"].error
+    assert "nested deeper" in got["c1"].error and got["c1"].error.startswith("malformed call: ")
+    # not malformed: too large for this node, and what to raise says so
+    assert got["c3"].error.startswith("call too large: payload of ") and got["c3"].error.endswith(
+        "(raise it with --max-bytes N, or _max_bytes:=N, on the module's node)"), got["c3"].error
 
 
 def test_garbage_cancels_never_raise(probe):

@@ -1,9 +1,10 @@
 """A stand-in move_base: an actionlib SimpleActionServer of move_base_msgs/MoveBase in its own process.
 
-    move_base_server.py MODE LOG      MODE: succeed | abort | slow | instant
+    move_base_server.py MODE LOG      MODE: succeed | abort | slow | stubborn | instant
 
 ``succeed`` sends one feedback (the robot at the goal) and succeeds after 0.2 s; ``abort`` aborts with a
-status text; ``slow`` runs up to 60 s unless preempted; ``instant`` succeeds in the goal callback itself,
+status text; ``slow`` runs up to 60 s unless preempted; ``stubborn`` ignores a cancel and succeeds after
+4 s (a server that does not honour preemption); ``instant`` succeeds in the goal callback itself,
 so the result can reach the client before its ``send_goal`` has returned. Every goal and how it ended
 is written to LOG, a line each (``goal``, ``succeeded``, ``aborted``, ``preempted``).
 """
@@ -35,9 +36,9 @@ def execute(goal):
         server.set_succeeded(MoveBaseResult())
         out.write("succeeded\n")
         return
-    end = time.monotonic() + 60
+    end = time.monotonic() + (4 if mode == "stubborn" else 60)
     while time.monotonic() < end:
-        if server.is_preempt_requested():
+        if server.is_preempt_requested() and mode != "stubborn":
             server.set_preempted(MoveBaseResult(), "cancelled by the client")
             out.write("preempted\n")
             return
