@@ -404,9 +404,27 @@ def to_message(rostype: str, value: Any, allow_scalar: bool = False) -> Any:
             check_message(msg, rostype)
         except ProtocolError as exc:
             raise _refusal(rostype, given, allow_scalar, str(exc))
+        if _holds_bool(given):  # genpy packs true as 1: a mistyped flag would drive a number field to 1 or 0
+            said = misfit_text(rostype, given, scalar=allow_scalar)
+            if said:
+                raise ValueMisfit(rostype, said)
         return msg
     check_message(msg, rostype)
     return msg
+
+
+def _holds_bool(value: Any, depth: int = 0) -> bool:
+    """Whether a true or false is anywhere in ``value`` (most values hold none: the walk for a misplaced
+    one is made only then)."""
+    if isinstance(value, bool):
+        return True
+    if depth > 32:
+        return False
+    if isinstance(value, dict):
+        return any(_holds_bool(v, depth + 1) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_holds_bool(v, depth + 1) for v in value)
+    return False
 
 
 def _refusal(rostype: str, value: Any, allow_scalar: bool, fallback: str) -> ProtocolError:

@@ -94,7 +94,9 @@ def whole_number_text(value: int) -> str:
 def _shown(value: Any) -> str:
     if isinstance(value, genpy.Message):
         return "a %s" % value._type
-    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 100:  # not 400 digits
+    if isinstance(value, bool):
+        return "%s (a yes/no)" % ("true" if value else "false")   # as the tree wrote it, not Python's True
+    if isinstance(value, int) and value.bit_length() > 100:  # not 400 digits
         return whole_number_text(value)
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
@@ -130,15 +132,15 @@ def _misfit(t: str, value: Any, field: str, named: str, scalar: bool, got: str =
             if found is not None:
                 return found
         return None
-    if t in _INT_RANGES:   # genpy packs true and false as 1 and 0
-        if not isinstance(value, int):
+    if t in _INT_RANGES:   # genpy would pack true and false as 1 and 0: a mistyped flag must not drive a motor
+        if not isinstance(value, int) or isinstance(value, bool):
             return wrong_kind()
         low, high = _INT_RANGES[t]
         if not low <= value <= high:
             return field, "takes a whole number from %d to %d (%s), got %s" % (low, high, named, _shown(value))
         return None
     if t in ("float32", "float64"):
-        if not isinstance(value, (int, float)):
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
             return wrong_kind()
         # compared, never converted: math.isfinite of a whole number past a float's range overflows
         if t == "float32" and not (isinstance(value, float) and math.isinf(value)) and abs(value) > _FLOAT32_MAX:

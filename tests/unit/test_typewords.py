@@ -178,7 +178,7 @@ def test_to_message_says_it(name, written, wire, said):
     ("std_msgs/Header", {"stamp": {"secs": "a"}}, False,
      "(std_msgs/Header): field stamp.secs takes a whole number (uint32), got 'a'"),
     ("std_msgs/Header", {"stamp": True}, False,
-     "(std_msgs/Header): field stamp takes seconds, {secs, nsecs} or now (time), got True"),
+     "(std_msgs/Header): field stamp takes seconds, {secs, nsecs} or now (time), got true (a yes/no)"),
     ("std_msgs/Header", {"stamp": "yesterday"}, False,
      "(std_msgs/Header): field stamp takes seconds, {secs, nsecs} or now (time), got 'yesterday'"),
     ("std_msgs/Duration", "5s", True, "takes seconds, {secs, nsecs} (std_msgs/Duration), got '5s'"),
@@ -186,6 +186,13 @@ def test_to_message_says_it(name, written, wire, said):
     ("geometry_msgs/Polygon", [{"x": "b"}], True,
      "(geometry_msgs/Polygon): field points[0].x takes a number (float32), got 'b'"),
     ("std_msgs/Empty", 5, True, "takes an empty mapping (std_msgs/Empty), got 5"),
+    # genpy would pack a mistyped flag as 1 or 0: refused for every number field (the converter took it)
+    ("std_msgs/Float64", True, True, "takes a number (std_msgs/Float64), got true (a yes/no)"),
+    ("std_msgs/Int32", False, True, "takes a whole number (std_msgs/Int32), got false (a yes/no)"),
+    ("geometry_msgs/Point", {"x": 1, "y": False}, False,
+     "(geometry_msgs/Point): field y takes a number (float64), got false (a yes/no)"),
+    ("geometry_msgs/Polygon", [{"x": True}], True,
+     "(geometry_msgs/Polygon): field points[0].x takes a number (float32), got true (a yes/no)"),
     ("std_msgs/String", "x" * 80, False, "takes a mapping of fields data (std_msgs/String), got '%s..." % ("x" * 56)),   # long values are cut
 ])
 def test_to_message_says_where_and_what(rostype, value, scalar, said):
