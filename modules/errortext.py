@@ -13,7 +13,7 @@ from typing import Any, Dict, Optional, Set
 from modules.basicmodule import BasicModule
 
 __all__ = ["MAX_ERROR_CHARS", "salvage_keys", "bounded", "wire_text", "said", "author_files",
-           "place_of", "raised_text", "which_call"]
+           "place_of", "raised_text", "which_call", "service_error"]
 
 #: the longest ``error`` text the runtime sends (a message that long is cut, the place in the code kept)
 MAX_ERROR_CHARS = 2000
@@ -64,6 +64,25 @@ def said(value: Any) -> str:
         return text if isinstance(text, str) else "(its message cannot be shown)"
     except BaseException:  # noqa: B036 - SystemExit from __str__ is the author's bug too
         return "(its message cannot be shown)"
+
+
+_SERVER_SAID = re.compile(r"(responded with an error: )b(['\"])(.*)\2$", re.S)
+
+
+def service_error(exc: BaseException) -> str:
+    """A rospy service error as text to answer with: rospy says what the server raised as the repr of
+    its bytes (``service [/detect] responded with an error: b'error processing request: camera
+    unplugged'``, non-ASCII as ``\\xc3\\xad``); this gives the server's words."""
+    text = said(exc)
+    found = _SERVER_SAID.search(text)
+    if found is None:
+        return text
+    try:
+        words = found.group(3).encode("latin-1", "backslashreplace").decode("unicode_escape")
+        words = words.encode("latin-1").decode("utf-8", "replace")
+    except (UnicodeError, ValueError):
+        return text
+    return text[:found.start()] + found.group(1) + words
 
 
 def _ours(path: str) -> bool:

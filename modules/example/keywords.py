@@ -10,6 +10,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 from modules import BasicModule, Failure
+from modules.errortext import service_error
 
 
 class Keywords(BasicModule):
@@ -26,7 +27,7 @@ class Keywords(BasicModule):
             rospy.wait_for_service(self._enable, timeout=2.0)
             answer = rospy.ServiceProxy(self._enable, SetBool)(enabled.data)
         except (rospy.ROSException, rospy.ServiceException) as exc:
-            raise Failure("%s: %s" % (self._enable, exc))
+            raise Failure("%s: %s" % (self._enable, service_error(exc)))   # the server's words, not b'…'
         if not answer.success:
             raise Failure("%s refused: %s" % (self._enable, answer.message))
         return {"success": True}
