@@ -40,18 +40,26 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     defs = definitions_from(args.modules)
     problems = warned = 0
+    # definitions given beside trees are checked, and the trees are checked against them (as with --modules)
+    given: Dict[str, Any] = {}
+    for path in args.trees:
+        if not _not_checked_here(path) and _is_definition(path):
+            try:
+                given[path] = load_definition(path)
+            except DefinitionError as exc:
+                given[path] = exc
+    defs.update({d.name: d for d in given.values() if not isinstance(d, DefinitionError)})
     for path in args.trees:
         other = _not_checked_here(path)
         if other:
             problems += 1
             err(other)
             continue
-        if _is_definition(path):   # a module's definition: checked as one (it is no tree)
-            try:
-                d = load_definition(path)
-            except DefinitionError as exc:
+        if path in given:   # a module's definition: checked as one (it is no tree)
+            d = given[path]
+            if isinstance(d, DefinitionError):
                 problems += 1
-                err(str(exc))
+                err(str(d))
                 continue
             print("%s: ok (the definition of module %s: %d function%s, %d event%s)" % (
                 path, d.name, len(d.functions), "" if len(d.functions) == 1 else "s", len(d.events),

@@ -169,3 +169,24 @@ def test_check_takes_a_module_definition_as_one_and_says_its_problems_at_their_j
                                                "Input-params": []}]}))
     assert bmtree(["check", str(bad)]) == 2
     assert capsys.readouterr().err == "%s: Functions[0]: 'Output-params' is missing\n" % bad
+
+
+def test_check_takes_the_trees_given_with_a_definition_against_it(tmp_path, capsys):
+    """``bmtree check gripper.json grasp.yaml`` (a C++ author's first try) checked the definition, then
+    said ``unknown module 'gripper'`` of the tree: definitions given beside trees count, whatever their
+    order, as with --modules; a bad one is its own error, and the tree is not checked against it."""
+    import os
+
+    from tests.conftest import DATA
+
+    good, tree = os.path.join(DATA, "gripper", "gripper.json"), os.path.join(DATA, "gripper", "grasp.yaml")
+    assert bmtree(["check", tree, good]) == 0, capsys.readouterr()
+    assert capsys.readouterr().out.splitlines() == [
+        "%s: ok" % tree, "%s: ok (the definition of module gripper: 2 functions, 0 events)" % good]
+    assert bmtree(["check", tree]) == 2
+    assert "unknown module 'gripper'" in capsys.readouterr().err
+    bad = tmp_path / "gripper.json"
+    bad.write_text(json.dumps({"Basic Module": "gripper", "Brief Description": "x", "Hardware Required": []}))
+    assert bmtree(["check", str(bad), tree]) == 2
+    said = capsys.readouterr().err
+    assert "%s: " % bad in said and "unknown module 'gripper'" in said, said
