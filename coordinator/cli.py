@@ -114,8 +114,11 @@ def _not_checked_here(path: str) -> str:
     what = _NOT_TREES.get(ext)
     if what is None:
         return ""
+    cpp = ": the C++ module is checked against its definition when it runs: bmtree-bridge --definition DEF.json " \
+          "compares the topics and types its node declares (BM_info) with the definition's, and says what differs"
     how = {".py": ": bmtree-module --definition DEF.json --class %s:CLASS checks the class against the definition "
-                  "before it connects to a master" % path}.get(ext, "")
+                  "before it connects to a master" % path, ".cpp": cpp, ".cc": cpp, ".cxx": cpp, ".h": cpp,
+           ".hpp": cpp}.get(ext, "")
     return "%s: not a tree or a module definition but %s; bmtree check reads trees (.yaml) and module definitions " \
            "(.json)%s" % (path, what, how)
 

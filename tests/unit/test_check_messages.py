@@ -181,3 +181,14 @@ def test_check_says_what_a_file_is_when_it_is_no_tree(tmp_path, capsys):
                         "trees (.yaml) and module definitions (.json): bmtree-module --definition DEF.json "
                         "--class %s:CLASS checks the class against the definition before it connects to a "
                         "master" % (cls, cls)), lines
+
+
+def test_check_of_cpp_source_says_what_checks_it(tmp_path, capsys):
+    src = tmp_path / "gripper.cpp"
+    src.write_text("#include <bmtree/basic_module.h>\n")
+    assert bmtree(["check", str(src)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "%s: not a tree or a module definition but C++ source; bmtree check reads trees (.yaml) and module "
+        "definitions (.json): the C++ module is checked against its definition when it runs: bmtree-bridge "
+        "--definition DEF.json compares the topics and types its node declares (BM_info) with the definition's, "
+        "and says what differs" % src)
