@@ -437,7 +437,8 @@ class Parser:
         if mod is None:
             close = did_you_mean(mod_name, self.definitions)
             self.err(at, "unknown module %r%s" % (mod_name, close or (
-                " (known: %s; give your module's definition with --modules FILE.json or a folder of them)"
+                " (known: %s; give your module's definition with --modules FILE.json or a folder of them, or source "
+                "the catkin workspace of the package that exports it)"
                 % ", ".join(sorted(self.definitions)))), "" if close else mod_name)
             return None
         return mod, member

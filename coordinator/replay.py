@@ -36,14 +36,15 @@ __all__ = ["Failure", "Replay", "find_run", "read_run", "cmd_runs", "cmd_replay"
 
 
 def find_run(ref: str, directory: Optional[str] = None) -> str:
-    """A run log by path, ``last``, number in ``bmtree runs`` (1 = newest), start of its name or of its start
-    time as ``bmtree runs`` shows it."""
+    """A run log by path, ``last``, number in ``bmtree runs`` (1 = newest), start of its name, of its run's id
+    or of its start time as ``bmtree runs`` shows it."""
     if os.path.isfile(ref):
         return ref
     directory = directory or default_runs_dir()
-    runs = list_runs(directory)
+    problems: List[str] = []
+    runs = list_runs(directory, problems)
     if not runs:
-        raise RunLogError("no recorded runs in %s" % directory)
+        raise RunLogError("no recorded runs in %s%s" % (directory, "".join("; " + p for p in problems[:3])))
     if ref in ("last", "latest"):
         return runs[-1].path
     if ref.isdigit() and len(ref) <= 6:
@@ -51,9 +52,11 @@ def find_run(ref: str, directory: Optional[str] = None) -> str:
         if not 1 <= k <= len(runs):
             raise RunLogError("there are %d recorded runs in %s; %s is not one of them" % (len(runs), directory, ref))
         return runs[-k].path
-    # the start of its file name (the process's start), or of its start as 'bmtree runs' shows it (the first
-    # tick, seconds later with --sim: 20261126-072501 or "2026-11-26 07:25:01")
-    hits = [r.path for r in runs if os.path.basename(r.path).startswith(ref) or any(
+    # the start of its file name (the process's start) or of its run's id (a --record file's name is the
+    # user's), or of its start as 'bmtree runs' shows it (the first tick, seconds later with --sim:
+    # 20261126-072501 or "2026-11-26 07:25:01")
+    hits = [r.path for r in runs if os.path.basename(r.path).startswith(ref) or str(r.extra.get("run") or
+                                                                                   "\0").startswith(ref) or any(
         _start_text(r.started, form).startswith(ref) for form in ("%Y%m%d-%H%M%S", "%Y-%m-%d %H:%M:%S"))]
     if len(hits) != 1:
         raise RunLogError("%s runs in %s start with %r (use the number shown by 'bmtree runs')" % (
@@ -307,26 +310,30 @@ def _cleanup_failure(replay: Replay, out: TextIO, label: Callable[[Dict[str, Any
 
 
 def _test_command(log: RunLog, scenario: str) -> str:
-    """``bmtree test`` of ``scenario`` (whose ``modules:`` names the definition files the run was given),
-    and a word on the modules it knew only from the live graph (their definitions are in no file it had)."""
+    """``bmtree test`` of ``scenario`` (whose ``modules:`` names the definition files the run used that are
+    not the simulated robot's: :mod:`coordinator.scenariomods`), and a word on the modules it knew only from
+    the live graph (their definitions are in no file it had)."""
     import shlex
 
+    from coordinator.scenariomods import definition_paths
     from modules.definition import DefinitionError
     from modules.search import default_definitions
 
-    given = [m for m in log.tree.get("modules") or [] if isinstance(m, str) and os.path.exists(m)]
     command = "bmtree test %s" % shlex.quote(scenario)
     try:
-        known = set(default_definitions(given))
+        known = set(default_definitions(definition_paths(log)[0]))
     except (DefinitionError, OSError) as exc:  # changed since the run: the test will say what is wrong
         return "%s (its definitions: %s)" % (command, str(exc).splitlines()[0])
     used = {str(n["target"]).split(".", 1)[0] for n in log.tree.get("nodes") or []
             if isinstance(n, dict) and isinstance(n.get("target"), str)}
     missing = sorted(used - known)
-    if missing:
-        return "%s, adding --modules with the definition of %s (the run had it from the live graph)" % (
-            command, ", ".join(missing))
-    return command
+    recorded = log.tree.get("definitions") if isinstance(log.tree.get("definitions"), dict) else {}
+    gone = [m for m in missing if isinstance(recorded.get(m), str)]   # the run's file is not here any more
+    live = [m for m in missing if m not in gone]
+    said = ["adding --modules with the definition of %s (the run had it from the live graph)" % ", ".join(live)] \
+        if live else []
+    said += ["adding --modules with the definition of %s (the run's, %s, is not here)" % (m, recorded[m]) for m in gone]
+    return ", ".join([command] + said)
 
 
 def read_run(ref: str, directory: Optional[str]) -> RunLog:

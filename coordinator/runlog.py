@@ -15,16 +15,16 @@ import re
 import stat
 import threading
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Set, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 from comm.errors import InvalidInput
 from comm.nodelife import registering
 from coordinator.runrecords import MAX_RECORD_BYTES, parse_record, record_problem, version_problem
-from coordinator.runstream import Sink
+from coordinator.runstream import RunStream, Sink
 
 __all__ = ["RunFiles", "plan_run_files", "RunLogWriter", "RunLog", "RunLogError", "RunSummary", "default_runs_dir", "read_log", "list_runs",
            "new_log_path", "prune", "empty_file", "last_alive", "writer_alive", "DEFAULT_KEEP", "MAX_LOG_BYTES",
-           "MAX_RECORD_BYTES", "max_log_bytes"]
+           "MAX_RECORD_BYTES", "max_log_bytes", "definition_files"]
 
 DEFAULT_KEEP = 50
 MAX_LOG_BYTES = 64 << 20          # a log larger than this is refused, not read (read, it takes ~10 times that)
@@ -33,6 +33,7 @@ _SUFFIX = ".jsonl"
 HEARTBEAT = 1.0  # seconds: a quiet run's log is touched this often, so a killed run's length is known
 _NAME = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.jsonl$")
 _SIM = re.compile(r"^\d{8}-\d{6}-[A-Za-z0-9_.-]+\.sim$")
+_SNIFF_BYTES = 4096  # of a .jsonl not named as bmtree names its logs: a tree record says "tree" in them
 
 
 class RunLogError(InvalidInput, ValueError):
@@ -50,18 +51,32 @@ def new_log_path(directory: str, run_id: str, tree_name: str) -> str:
     return os.path.join(directory, "%s-%s%s" % (run_id, safe, _SUFFIX))
 
 
-def _logs_in(directory: str) -> List[str]:
+def _logs_in(directory: str) -> Tuple[List[str], List[str]]:
+    """The regular files of ``directory`` that may be run logs: (those named as bmtree names its own,
+    ``<start>-<id>-<tree>.jsonl``; the other ``.jsonl`` files, such as ``--record`` ones)."""
     try:
-        names = [n for n in os.listdir(directory) if _NAME.match(n)]
+        names = sorted(n for n in os.listdir(directory) if n.endswith(_SUFFIX))
     except OSError:
-        return []
-    paths = [os.path.join(directory, n) for n in sorted(names)]
-    return [p for p in paths if os.path.isfile(p)]  # a FIFO of that name would hang the reader
+        return [], []
+    paths = [os.path.join(directory, n) for n in names]
+    paths = [p for p in paths if os.path.isfile(p)]  # a FIFO of that name would hang the reader
+    named = [p for p in paths if _NAME.match(os.path.basename(p))]
+    return named, [p for p in paths if not _NAME.match(os.path.basename(p))]
+
+
+def _looks_like_log(path: str) -> bool:
+    """True if the first bytes of ``path`` may start a run log's ``tree`` record (a JSON object naming
+    ``"tree"``), so that a folder's other ``.jsonl`` files (data of the user's) cost one short read each."""
+    with open(path, "rb") as fh:
+        start = fh.read(_SNIFF_BYTES)
+    return start.lstrip().startswith(b"{") and b'"tree"' in start
 
 
 def prune(directory: str, keep: int) -> List[str]:
     """Delete all but the newest ``keep`` runs of ``directory``: a run's log and its ``.sim``
-    directory (a simulated robot's store and logs) go together; the names sort by start time."""
+    directory (a simulated robot's store and logs) go together; the names sort by start time. Only
+    the files bmtree named itself count and go: a ``--record`` log of another name there, which
+    ``bmtree runs`` lists too, is the user's and is never deleted."""
     import shutil
 
     try:
@@ -100,9 +115,9 @@ class RunFiles:
         """The run-stream observer writing to ``sinks`` and, unless ``--no-record``, the log.
         ``control``: the run takes control commands (``--control``), so viewers offer them.
         ``modules``: the definition files the run was given (``--modules``, ``--module``), so that
-        a scenario made from its log can say how to test it."""
-        from coordinator.runstream import RunStream
-
+        a scenario made from its log can say how to test it; the ``tree`` record also has, as
+        ``definitions``, the file of every definition the run had that is not the simulated robot's
+        (:func:`definition_files`: the packages' exports and ``$BMTREE_MODULE_PATH``'s too)."""
         meta: Dict[str, Any] = {"inputs": inputs, "max_duration": max_duration, "control": control}
         if modules:
             meta["modules"] = [os.path.abspath(m) for m in modules]
@@ -112,7 +127,7 @@ class RunFiles:
         if self.log_path is not None:
             self.writer = RunLogWriter(self.log_path)
             all_sinks.append(self.writer)
-        return RunStream(all_sinks, meta, self.run_id, linger=True)   # closed by bmtree run after the cancels
+        return _RecordingStream(all_sinks, meta, self.run_id, linger=True)   # closed by bmtree run after the cancels
 
     def report(self, say: Any) -> None:
         if self.writer is not None:
@@ -120,6 +135,35 @@ class RunFiles:
                                    if self.writer.error else ""))
         if os.path.isdir(self.sim_dir):
             say("simulated robot's Blackboard store and module logs: %s" % self.sim_dir)
+
+
+def definition_files(definitions: Mapping[str, Any]) -> Dict[str, str]:
+    """Module name -> the absolute path of the file its definition was read from, for the definitions
+    that are not the simulated robot's (a ROS package's export, ``$BMTREE_MODULE_PATH``, ``--modules``):
+    what a scenario made from the run's log names in its ``modules:``. A definition the run had only from
+    the live graph (a module's announcement) is in no file, and not here."""
+    from modules.search import SIM_DIR
+
+    sim = os.path.join(os.path.realpath(SIM_DIR), "")
+    out: Dict[str, str] = {}
+    for name, d in sorted(definitions.items()):
+        source = getattr(d, "source", None)
+        if getattr(d, "name", None) != name or not isinstance(source, str) or not os.path.isfile(source):
+            continue
+        if not os.path.realpath(source).startswith(sim):
+            out[name] = os.path.abspath(source)
+    return out
+
+
+class _RecordingStream(RunStream):
+    """``bmtree run``'s run stream: its ``tree`` record also says where the run's definitions came from
+    (``definitions``: :func:`definition_files` of the run's), known when the run starts."""
+
+    def on_start(self, tree: Any, root: Any, ctx: Any) -> None:
+        files = definition_files(getattr(ctx, "definitions", None) or {})
+        if files:
+            self.meta["definitions"] = files
+        super().on_start(tree, root, ctx)
 
 
 def plan_run_files(tree_path: str, record: Optional[str], no_record: bool, keep: Optional[int]) -> RunFiles:
@@ -440,14 +484,36 @@ def writer_alive(head: Dict[str, Any]) -> bool:
     return (b"bmtree" in cmdline or b"coordinator" in cmdline) and since <= started + 2.0  # btime is whole seconds
 
 
+def _run_head(path: str, named: bool) -> Optional[Dict[str, Any]]:
+    """The ``tree`` record of ``path``; None for a file not named as bmtree names its logs whose first
+    line is no ``tree`` record (not a run log: another ``.jsonl`` of the user's). RunLogError for a run
+    log whose first record cannot be used (or one named as bmtree's that is no run log); OSError."""
+    if not named:
+        if not _looks_like_log(path):
+            return None
+        with open(path, "rb") as fh:
+            rec, _problem = _parse(fh.readline(MAX_RECORD_BYTES + 1))
+        if not isinstance(rec, dict) or rec.get("type") != "tree":
+            return None
+    return _head(path)
+
+
 def list_runs(directory: str, problems: Optional[List[str]] = None) -> List[RunSummary]:
-    """Every run log of ``directory``, oldest first. A file that is not a run log bmtree can read is left
-    out, and why is added to ``problems`` (``path:line: why``); a log whose last record cannot be used
-    is listed as one without an end, and why is added too."""
+    """Every run log of ``directory``, oldest first (by the start its ``tree`` record says): the ones bmtree
+    named (``<start>-<id>-<tree>.jsonl``) and any other ``.jsonl`` whose first record is a run's (``--record
+    FILE``; only its first line is read to know, at most a record's size). A log bmtree cannot read is left
+    out, and why is added to ``problems`` (``path:line: why``); the other ``.jsonl`` files that are no run
+    logs are counted there in one line. A log whose last record cannot be used is listed as one without
+    an end, and why is added too."""
     out = []
-    for path in _logs_in(directory):
+    named, others = _logs_in(directory)
+    not_logs = 0
+    for path, ours in [(p, True) for p in named] + [(p, False) for p in others]:
         try:
-            head = _head(path)
+            head = _run_head(path, ours)
+            if head is None:
+                not_logs += 1
+                continue
             tail, problem = _tail_record(path, {n["id"] for n in head["nodes"]})
             mtime = os.path.getmtime(path)
         except (OSError, ValueError) as exc:  # not a log bmtree wrote, or damaged: `bmtree replay FILE` says more
@@ -469,5 +535,11 @@ def list_runs(directory: str, problems: Optional[List[str]] = None) -> List[RunS
             status=str(end.get("status")) if end else "RUNNING" if running else "UNFINISHED",
             reason=str(end.get("reason") or "") if end else
             "still running (pid %s)" % head.get("pid") if running else
-            "the log ends without an end record (killed?)"))
+            "the log ends without an end record (killed?)",
+            extra={"run": head.get("run")} if isinstance(head.get("run"), str) else {}))
+    if not_logs and problems is not None:
+        problems.append("%s: %s (not listed)" % (directory, "1 other .jsonl file is not a run log (its first line is no "
+                        "run's 'tree' record)" if not_logs == 1 else "%d other .jsonl files are not run logs (their first "
+                        "lines are no run's 'tree' record)" % not_logs))
+    out.sort(key=lambda r: (r.started, os.path.basename(r.path)))
     return out

@@ -32,11 +32,14 @@ import heapq
 import math
 import os
 import re
+import textwrap
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
 from coordinator.runlog import RunLog, RunLogError, empty_file
+from coordinator.scenariomods import definition_paths, definitions_of
+from coordinator.scenariomods import relative as _relative
 from coordinator.testing.expected import legacy_times
 from coordinator.testing.limits import DEFAULT_MAX_DURATION
 
@@ -49,18 +52,6 @@ def cut_short(log: RunLog) -> bool:
     """The run did not end by itself: killed (no end record) or interrupted (Ctrl-C, SIGTERM)."""
     end = log.end
     return end is None or end.get("status") == "INVALID"
-
-
-def _definitions(log: RunLog) -> Dict[str, Any]:
-    """The module definitions the run had in files (none when they cannot be read now)."""
-    from modules.definition import DefinitionError
-    from modules.search import default_definitions
-
-    given = [m for m in log.tree.get("modules") or [] if isinstance(m, str) and os.path.exists(m)]
-    try:
-        return default_definitions(given)
-    except (DefinitionError, OSError):
-        return {}
 
 
 def _times(defs: Dict[str, Any], target: str, kind: str, values: Any) -> Dict[str, Any]:
@@ -196,10 +187,12 @@ def seen_until(log: RunLog) -> Tuple[RunLog, float]:
     return RunLog(log.path, log.records[:last + 1], log.truncated), math.ceil(t * 1e6) / 1e6
 
 
-def scenario_from_log(log: RunLog, out_path: str, moved: Optional[List[str]] = None) -> Dict[str, Any]:
-    """The scenario file's content for ``log``, with the tree path and the definitions the run was given
-    (``modules:``) relative to ``out_path``; RunLogError for a run a scenario could not reproduce. ``moved``
-    gets the answers moved before their call's timeout (:func:`_before_timeout`: ``target #n (after Ss)``)."""
+def scenario_from_log(log: RunLog, out_path: str, moved: Optional[List[str]] = None,
+                      notes: Optional[List[str]] = None) -> Dict[str, Any]:
+    """The scenario file's content for ``log``, with the tree path and the definitions the run used that are
+    not the simulated robot's (``modules:``, :mod:`coordinator.scenariomods`) relative to ``out_path``;
+    RunLogError for a run a scenario could not reproduce. ``moved`` gets the answers moved before their call's
+    timeout (:func:`_before_timeout`: ``target #n (after Ss)``), ``notes`` what the header says of ``modules:``."""
     tree = log.tree
     end = log.end
     seen = log  # what the tree acted on
@@ -226,7 +219,10 @@ def scenario_from_log(log: RunLog, out_path: str, moved: Optional[List[str]] = N
     path = tree.get("path")
     if not path or not os.path.isfile(path):
         raise RunLogError("%s: the recorded tree %s is not there any more" % (log.path, path))
-    defs = _definitions(log)
+    module_paths, said = definition_paths(log)
+    notes = [] if notes is None else notes
+    notes.extend(said)
+    defs = definitions_of(log, module_paths)
     ends = {r.get("call_id"): r for r in seen.of_type("call_end")}
     mocks: Dict[str, List[Dict[str, Any]]] = {}
     calls: List[Dict[str, Any]] = []
@@ -274,9 +270,8 @@ def scenario_from_log(log: RunLog, out_path: str, moved: Optional[List[str]] = N
         scenario["expect"]["cleanup"] = "success" if cleanup.get("status") == "SUCCESS" else "failure"
     folder = os.path.dirname(os.path.abspath(out_path))
     data: Dict[str, Any] = {"tree": _relative(path, folder)}
-    modules = _module_paths(log, folder)
-    if modules:
-        data["modules"] = modules
+    if module_paths:
+        data["modules"] = list(dict.fromkeys(_relative(m, folder) for m in module_paths))
     data["scenarios"] = [scenario]
     return data
 
@@ -424,27 +419,6 @@ def _restated(value: Any, said: str, replayed: str) -> Any:
     return value
 
 
-def _relative(path: str, folder: str) -> str:
-    """``path`` relative to ``folder`` (absolute when it cannot be: another drive)."""
-    try:
-        return os.path.relpath(os.path.abspath(path), folder)
-    except ValueError:
-        return os.path.abspath(path)
-
-
-def _module_paths(log: RunLog, folder: str) -> List[str]:
-    """The definition files and folders the run was given (``--modules``, ``--module``), for the scenario
-    file's ``modules:`` key, relative to its folder: without them the scenario alone cannot mock those
-    modules (``no module 'arm' to mock``). Paths that are not there any more are left out."""
-    out: List[str] = []
-    for m in log.tree.get("modules") or []:
-        if isinstance(m, str) and os.path.exists(m):
-            rel = _relative(m, folder)
-            if rel not in out:
-                out.append(rel)
-    return out
-
-
 _HEADER_START = "# Written by 'bmtree replay"
 
 
@@ -466,7 +440,8 @@ def write_scenario(log: RunLog, out_path: str) -> None:
             raise RunLogError("--scenario %s: the file exists and was not written by 'bmtree replay --scenario'; "
                               "bmtree does not overwrite it (choose a new name)" % out_path)
     moved: List[str] = []
-    data = scenario_from_log(log, out_path, moved)
+    notes: List[str] = []
+    data = scenario_from_log(log, out_path, moved, notes)
     end = log.end
     scenario = data["scenarios"][0]
     killed = ("# It was killed at %gs while the cleanup ran (its log ends there): killed_at ends\n"
@@ -501,6 +476,8 @@ def write_scenario(log: RunLog, out_path: str) -> None:
     if moved:
         how += ("# The run's tree took these answers after their call's timeout, before the timeout's tick (which\n"
                 "# a simulated clock does not delay): here they come just before it: %s.\n" % _line(", ".join(moved)))
+    how += "".join("# %s\n" % part for n in notes for part in textwrap.wrap(
+        _line(n) + ".", 100, break_on_hyphens=False, break_long_words=False))
     header = (_HEADER_START + " %s --scenario': the modules answer as they did in that run,\n" % (
         os.path.basename(log.path)) + how)
     text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=110)

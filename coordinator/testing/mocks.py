@@ -44,6 +44,12 @@ __all__ = ["MockError", "StoredNameError", "FunctionMock", "Mocks", "MockModule"
            "Outcome", "OutcomeKind", "OUTCOME_KINDS", "succeed", "fail", "hang", "die", "reject", "respond",
            "outcome_from_dict", "outcome_to_dict"]
 
+#: how to give a mocked module's definition, said when there is none (a team's module, in a scenario run where
+#: its catkin workspace is not sourced)
+NO_DEFINITION = ("give its definition: modules: in the scenario file (a file or folder, relative to it), --modules "
+                 "FILE.json or a folder, bmtree_modules in pytest.ini, or the export of its catkin package (bmtree "
+                 "definitions in its package.xml) with the workspace sourced")
+
 OUTCOME_KINDS = tuple(k.value for k in OutcomeKind if k != OutcomeKind.RESPOND)  # the written ones
 
 
@@ -294,7 +300,8 @@ class Mocks:
         if target not in self._fns:
             mod, _, fname = target.partition(".")
             if mod not in self.definitions:
-                raise MockError("no module %r to mock (known: %s)" % (mod, ", ".join(sorted(self.definitions))))
+                raise MockError("no module %r to mock (known: %s; %s)" % (mod, ", ".join(sorted(self.definitions)),
+                                                                          NO_DEFINITION))
             try:
                 fn = self.definitions[mod].function(fname)
             except ProtocolError as exc:
@@ -340,8 +347,8 @@ class Mocks:
             mod, _, fname = target.partition(".")
             if not fname:
                 if mod not in self.definitions:
-                    raise MockError("no module %r to mock%s" % (mod, did_you_mean(mod, self.definitions)
-                                                                  or " (known: %s)" % ", ".join(sorted(self.definitions))))
+                    raise MockError("no module %r to mock%s" % (mod, did_you_mean(mod, self.definitions) or " (known: %s; "
+                                                                  "%s)" % (", ".join(sorted(self.definitions)), NO_DEFINITION)))
                 for name in self.definitions[mod].functions:
                     self["%s.%s" % (mod, name)].ignoring_cancels()
             else:

@@ -139,6 +139,8 @@ def test_a_scenario_files_tree_errors_come_before_its_own(tmp_path, capsys, name
     lines = capsys.readouterr().err.splitlines()
     assert [re.sub(r":\d+:\d+: .*", "", os.path.basename(line)) for line in lines] == ["grip.yaml", "grip.yaml", name]
     assert "no module 'gripper' to mock" in lines[2]
+    # and how to give its definition, the scenario's modules: first (a team's module where its workspace is not sourced)
+    assert "give its definition: modules: in the scenario file (a file or folder, relative to it)" in lines[2]
 
 
 # 4. the catch-up line: the moment of attaching ------------------------------------------------

@@ -103,7 +103,8 @@ def test_an_unknown_module_is_one_error_that_says_how_to_give_its_definition(tmp
         load_tree(str(path), sim_defs)
     assert [str(e) for e in info.value.errors] == [
         "%s:4:13: unknown module 'gripper' (known: battery, navigation, speech, vision; give your module's definition "
-        "with --modules FILE.json or a folder of them)" % path,
+        "with --modules FILE.json or a folder of them, or source the catkin workspace of the package that exports "
+        "it)" % path,
         "%s:7:13: module 'speech' has no function 'shout' (functions: say, listen)" % path]
 
 
