@@ -368,6 +368,9 @@ def make_parser() -> argparse.ArgumentParser:
                         help="with --sim: the address the private graph listens on (default 127.0.0.1, loopback "
                              "only; give this machine's address to let other machines in: ROS 1 has no "
                              "authentication)")
+        sp.add_argument("--port", type=count(1, "a TCP port", 65535), metavar="PORT",
+                        help="with --sim: the private master's port (default: a free one), so that a watch can be "
+                             "started before the run (ROS_MASTER_URI=http://127.0.0.1:PORT/ bmtree watch --follow)")
         sp.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a tree input (YAML value)")
         sp.add_argument("--call-timeout", type=seconds(), default=30.0, help="default timeout of a call (s)")
         sp.add_argument("--period", type=seconds(), default=0.25, help="longest time between ticks (s)")

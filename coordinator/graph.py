@@ -72,6 +72,16 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def port_free(address: str, port: int) -> bool:
+    """Whether a server could listen on ``address``:``port`` now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((address, port))
+        except OSError:
+            return False
+    return True
+
+
 class RosGraph:
     """Start with :meth:`start_master`, add nodes with :meth:`start_node`, end with :meth:`close`.
 
@@ -139,15 +149,19 @@ class RosGraph:
         self._logs.append(fh)
         return fh
 
-    def start_master(self, timeout: float = 15.0) -> str:
+    def start_master(self, timeout: float = 15.0, port: int = 0) -> str:
+        """Start a master on ``port`` (0: a free one, tried up to three times) and wait until it answers."""
         exe = shutil.which("rosmaster")
         if exe is None:
             raise GraphError("rosmaster is not installed (run 'make setup' or install python3-rosmaster)")
-        for _attempt in range(3):
-            port = free_port()
-            self.uri = "http://%s:%d/" % (self.address, port)
+        if port and not port_free(self.address, port):
+            raise GraphError("port %d of %s is in use (another ROS master, or another program): give another --port, "
+                             "or none for a free one" % (port, self.address))
+        for _attempt in range(1 if port else 3):
+            at = port or free_port()
+            self.uri = "http://%s:%d/" % (self.address, at)
             log = self._log("rosmaster")
-            self.master = subprocess.Popen([*orphan_guard(), exe, "--core", "-p", str(port), "-w", "3"], env=self.env,
+            self.master = subprocess.Popen([*orphan_guard(), exe, "--core", "-p", str(at), "-w", "3"], env=self.env,
                                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                            start_new_session=True)
             end = time.monotonic() + timeout

@@ -206,7 +206,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "(without --sim, start it with bmtree-module, or a C++ module's node with its bmtree-bridge, and "
                          "run against the live graph)")
     for option, value, what in (("--world", getattr(args, "world", None), "chooses the simulated robot's world"),
-                                ("--ros-ip", getattr(args, "ros_ip", None), "is the simulated robot's address")):
+                                ("--ros-ip", getattr(args, "ros_ip", None), "is the simulated robot's address"),
+                                ("--port", getattr(args, "port", None), "is the simulated robot's master's port")):
         if value and not args.sim:
             raise UsageError("%s %s: it needs --sim (without --sim the tree runs on the live graph, whose modules "
                              "are the robot's)" % (option, what))
@@ -284,7 +285,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             err("its Blackboard store and module logs go to %s" % files.sim_dir)
             try:
                 graph = start_sim(world=args.world, ros_home=files.sim_dir, modules=sim, user_modules=user_modules,
-                                  address=args.ros_ip, timeout=args.wait)
+                                  address=args.ros_ip, timeout=args.wait, port=args.port or 0)
             except ModuleStartError as exc:
                 err("error: %s" % exc)
                 return EXIT_INVALID if exc.code == EXIT_INVALID else EXIT_ENV

@@ -194,7 +194,8 @@ def _wait_up(graph: RosGraph, starting: List[_Starting], wait: float, started: f
 
 def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, blackboard: bool = True,
               modules: Sequence[str] = SIM_MODULES, params: Optional[Dict[str, Sequence[str]]] = None,
-              timeout: float = SIM_AT_LEAST, user_modules: Sequence[UserModule] = (), address: str = "") -> RosGraph:
+              timeout: float = SIM_AT_LEAST, user_modules: Sequence[UserModule] = (), address: str = "",
+              port: int = 0) -> RosGraph:
     """Bring the graph up and wait until every module has announced itself.
 
     Args:
@@ -206,6 +207,7 @@ def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, black
             as its node (named ``/<module>``) and a ``bmtree-bridge`` (``/<module>_bridge``), which end together
             once the graph is up (:mod:`coordinator.simcpp`).
         address: ROS_IP of the graph (default loopback, see :class:`RosGraph`).
+        port: the master's port (0: a free one).
 
     Raises:
         ModuleStartError: a user's module exited before it announced itself, or did not announce itself
@@ -214,7 +216,7 @@ def start_sim(world: Optional[str] = None, ros_home: Optional[str] = None, black
     """
     graph = SimGraph(ros_home, address=address)
     try:
-        graph.start_master()
+        graph.start_master(port=port)
         starting = []
         if blackboard:
             db = os.path.join(graph.ros_home, "blackboard.sqlite")

@@ -33,6 +33,8 @@ def no_master(monkeypatch, tmp_path):
     (["replay", "last", "--web", "--bind", ""], "argument --bind: expected an address of this machine"),  # all of them
     (["replay", "last", "--web", "--bind", "192.0.2.1"], "argument --bind: '192.0.2.1' is not an address of this machine"),
     (["run", "--sim", FIND_APPLE, "--ros-ip", "0.0.0.0"], "--ros-ip 0.0.0.0 is no address other nodes can connect to"),
+    (["run", "--sim", FIND_APPLE, "--port", "70000"], "argument --port: expected a whole number of at most 65535"),
+    (["run", FIND_APPLE, "--port", "11400"], "--port is the simulated robot's master's port: it needs --sim"),
     (["run", "--sim", FIND_APPLE, "--ros-ip", "ff02::1"], "--ros-ip ff02::1: the simulated robot's graph runs on IPv4"),
     (["run", FIND_APPLE, "--world", ""], "argument --world: expected the name of a world file, got nothing"),
     (["check", ""], "argument trees: expected the name of a tree file, got nothing"),  # was '.: Is a directory'
