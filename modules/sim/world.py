@@ -149,6 +149,8 @@ class Fault:
         if outcome.kind in (OutcomeKind.FAIL, OutcomeKind.REJECT):
             what = "%s %r" % (outcome.kind.value, outcome.reason)
             outcome.reason += INJECTED
+        elif outcome.kind == OutcomeKind.DIE and isinstance(spec.get("die"), str) and spec["die"]:
+            what = "die %r" % spec["die"]   # why it died, as the world says, in the line that lists the faults
         else:
             what = outcome.kind.value
         return cls(outcome, times, what + later)

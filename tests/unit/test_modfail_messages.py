@@ -221,6 +221,9 @@ def test_a_simulated_modules_node_logs_its_worlds_faults_at_start():
     assert _injected("navigation", nav, own) == ("faults injected: navigation.approach: delay 1.5 s; "
                                                  "navigation.go_to: fail 'wheel motor overheated' ×5")
     assert _injected("navigation", Navigation(world_with({})), {}) == ""
+    # a death says why, as the world wrote it (it said only "die")
+    dying = Navigation(world_with({"navigation.go_to": {"die": "camera USB disconnected", "times": 1}}))
+    assert _injected("navigation", dying, {}) == "faults injected: navigation.go_to: die 'camera USB disconnected' ×1"
 
 
 class ServedSim(Served):
