@@ -340,6 +340,8 @@ class Replay:
             return None, None
         end = next((r for r in self.log.records if r.get("type") == "call_end"
                     and r.get("call_id") == start.get("call_id")), None)
+        if end is not None and end.get("status") == "succeeded":
+            return None, None   # not the failure's call (a call leaf whose next call could not be built: no record)
         return start, end
 
     def snapshot(self, out: TextIO, stopped: str = "") -> None:

@@ -463,4 +463,5 @@ class TreeRunner:
             return None
         under = set(o.behaviour.iterate())
         made = [c for c in self.ctx.calls if c.owner in under and c.started <= o.time]
-        return made[-1] if made else None
+        # a call that succeeded is not the failure's (a call leaf whose next call could not be built: no record)
+        return made[-1] if made and made[-1].status != "succeeded" else None

@@ -61,7 +61,7 @@ def test_die_is_written_as_the_other_outcomes_and_a_bad_one_says_what_it_takes(t
     assert outcome_from_dict({"die": True}).reason == "its process died (mock)"
     with pytest.raises(OutcomeError, match="one of succeed, fail, reject, hang, die"):
         outcome_from_dict({"dye": True})
-    assert Fault.parse("navigation.go_to", {"die": "power cut", "times": 1}).what == "die"
+    assert Fault.parse("navigation.go_to", {"die": "power cut", "times": 1}).what == "die 'power cut'"  # why, in the line listing the faults
     with pytest.raises(WorldError, match="faults.navigation.go_to.die must be a text"):
         Fault.parse("navigation.go_to", {"die": [3]})
     tree = tmp_path / "t.yaml"
