@@ -167,6 +167,8 @@ def cmd_modules(args: argparse.Namespace) -> int:
             why = node_address_problem(m.node, m.uri, "")  # answers here, but not the others (loopback)
             if why:
                 print("    warning: %s" % why)
+            if m.not_ready:
+                print("    warning: not ready: %s" % m.not_ready)
         for name, (m, why) in unreachable.items():  # it runs, but its address cannot be reached from here
             print("%s  (node %s, unreachable)\n    %s" % (name, m.node, why))
         return EXIT_OK

@@ -106,6 +106,8 @@ class _Preflight:
                 tr._pings[ping.call_id or ""] = name
             call_pub.publish(tr._String(ping.encode()))
             self.pinged[name] = now
+        if live.not_ready:   # it says why it does not answer (a bridge whose C++ node is not running)
+            return ["module %r (node %s) is not ready: %s" % (name, live.node, live.not_ready)]
         return ["module %r (node %s) has not answered a ping on %s" % (name, live.node, call_pub.resolved_name)]
 
 

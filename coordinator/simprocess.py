@@ -36,6 +36,16 @@ def cut(text: str, width: int = LINE_WIDTH) -> str:
     return text if len(text) <= width else text[:width - 1] + "…"
 
 
+def cut_middle(text: str, width: int = 2 * LINE_WIDTH) -> str:
+    """``text`` cut in the middle: an error's what comes first and its fix last (``… must be the
+    definition's (BasicModule(nh, "hand"))``), and both are kept."""
+    text = text.rstrip()
+    if len(text) <= width:
+        return text
+    head = width * 2 // 5
+    return text[:head] + " … " + text[-(width - head - 3):]
+
+
 def log_tail(path: str, lines: int = 5, width: int = LINE_WIDTH) -> List[str]:
     """The last ``lines`` non-empty lines of the log at ``path``, each cut to ``width`` characters
     (none when it cannot be read)."""
@@ -66,7 +76,7 @@ def last_error(path: str, within: int = 50) -> str:
         if _ERROR.match(line):
             if line.startswith("terminate called") and i + 1 < len(lines) and lines[i + 1].startswith(_WHAT):
                 line += " (what(): %s)" % lines[i + 1][len(_WHAT):].strip()
-            return cut(_ROSPY.sub("", line) + (_where(lines[i + 1:]) if line.startswith("Fatal Python") else ""))
+            return cut_middle(_ROSPY.sub("", line) + (_where(lines[i + 1:]) if line.startswith("Fatal Python") else ""))
         counted += 1
         if counted >= within:
             break

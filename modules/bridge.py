@@ -20,9 +20,10 @@ import time
 from typing import Any, Dict, List, Optional, Tuple
 
 from comm import sync_publisher
+from comm.addressing import PING_FUNCTION
 from comm.errors import ProtocolError
-from comm.messages import load_payload, new_id
-from comm.nodeopts import node_name
+from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, load_payload, new_id
+from comm.nodeopts import count, node_name
 from comm.saylimit import SayLimit
 from modules.bridgegraph import CppNodeGraph
 from modules.bridgeoutput import CppCall as _Call
@@ -65,7 +66,7 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
     """
 
     def __init__(self, call_timeout: float = 30.0, input_gap: Optional[float] = None, output_wait: float = 1.0,
-                 connect_timeout: float = 30.0, max_bytes: int = 1 << 20):
+                 connect_timeout: float = 30.0, max_bytes: int = DEFAULT_MAX_BYTES):
         super().__init__()
         self.call_timeout = call_timeout
         self.input_gap = input_gap
@@ -102,8 +103,14 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._served = ""  # the URI of the C++ node last connected: its death is said, and refuses calls at once
         self._misnamed = ""  # no node serves the module, but one named as it serves another: what is there
         self._live = False  # the C++ node found is running (its missing connections are worth a wait)
+        self._absent = ""  # what the last look for the C++ node found missing ("" once connected)
+        self._finding = threading.Lock()  # held by whoever looks for the C++ node (a call, or the watch)
+        self._say_lock = threading.Lock()
         self._watch_stop = threading.Event()
         self._watcher: Optional[threading.Thread] = None
+        self._module_node: Any = None  # the module node serving this bridge (modules.node.ModuleNode)
+        self._announced_not_ready = ""  # the announcement's "not_ready" as last set
+        self._ping_warnings = SayLimit()  # a ping left unanswered: why, at most every 10 s
 
     # -- set-up ----------------------------------------------------------------------
     def setup(self, node: Any) -> None:
@@ -115,6 +122,8 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
 
         self._String = String
         self._self_name = rospy.get_name()
+        if isinstance(getattr(node, "max_bytes", None), int):  # --max-bytes, or ~max_bytes (_max_bytes:=N)
+            self.max_bytes = node.max_bytes  # BM_output, BM_info and BM_event are held to it too
         name = self.definition.name
         ins, outs = data_topics(self.definition)
         for topic, rostype in ins.items():
@@ -129,7 +138,10 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._info_sub = rospy.Subscriber("/%s/BM_info" % name, String, self._on_info, queue_size=1)
         self._event_sub = rospy.Subscriber(event_topic(name), String, self._on_event, queue_size=1000,
                                            tcp_nodelay=True)
-        missing = self._wait_connected(self.connect_timeout, check=True)
+        self._module_node = node
+        self._guard_pings(node)
+        with self._finding:
+            missing = self._wait_connected(self.connect_timeout, check=True)
         if missing:
             raise BridgeError("the C++ node of module %r is not ready after %gs: %s (the bridge waits --wait seconds "
                               "for it)" % (name, self.connect_timeout, "; ".join(missing)))
@@ -141,6 +153,41 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
                       ("bmtree library, no input gap, %s%s" % ("takes cancels" if self.cancellable else "no cancels",
                                                                ", sends events" if self.emits else ""))
                       if self.library else "input gap %gs, no cancels" % self._gap())
+
+    def _guard_pings(self, node: Any) -> None:
+        """A ping (``bmtree run``'s start-up check, :data:`comm.addressing.PING_FUNCTION`) is answered only
+        while the C++ node can take a call. The module node answers pings itself, and the ping never reaches
+        the C++ node: answered for a dead one, the run started, and its first call was refused. Unanswered,
+        the run waits (``--wait``) as for a module not started yet; why is in the bridge's log and in its
+        announcement (``not_ready``, :meth:`_announce_readiness`)."""
+        inbox = getattr(node, "inbox", None)
+        if inbox is None:
+            return
+        take = inbox.handle_call
+
+        def handle_call(text: Any, caller: Optional[str] = None) -> None:
+            if not (isinstance(text, str) and PING_FUNCTION in text and self._unready_ping(text, caller, inbox.module)):
+                take(text, caller)
+
+        inbox.handle_call = handle_call  # what the inbox's subscribers call
+
+    def _unready_ping(self, text: str, caller: Optional[str], module: str) -> bool:
+        """True (and a warning, at most every 10 s for one reason) for a ping of ``module`` that is not to be
+        answered now: the C++ node cannot take a call. Never raises."""
+        try:
+            head = load_payload(text, self.max_bytes)
+            if head.get("basic_mod") != module or head.get("function") != PING_FUNCTION or head.get("cancel") is True:
+                return False
+            reason = self._not_ready()
+        except Exception:  # malformed (the inbox answers it), or a bug here: the ping goes its usual way
+            return False
+        if not reason:
+            return False
+        more = self._ping_warnings.due(reason)
+        if more is not None:
+            log.warning("not answering the ping of %s (a run's start-up check): module %r cannot take a call now: "
+                        "%s%s", caller or "a caller", module, reason, more)
+        return True
 
     def _check_events(self) -> None:
         """At start: a definition with Events whose C++ node cannot send them is said in the log."""
@@ -220,8 +267,9 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
             # live node still connecting is waited for: a dead one refuses the call at once (no code runs)
             self._ready = False
             ctx = getattr(self._local, "ctx", None)
-            missing = self._wait_connected(min(2.0, self.connect_timeout),
-                                           cancelled=ctx.cancelled.is_set if ctx is not None else lambda: False)
+            with self._finding:
+                missing = self._wait_connected(min(2.0, self.connect_timeout),
+                                               cancelled=ctx.cancelled.is_set if ctx is not None else lambda: False)
             if missing:
                 raise Rejected(self._misnamed or self._down() or "the C++ node of module %r is not connected: %s" % (
                     self.definition.name, "; ".join(missing)))
@@ -400,6 +448,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="seconds to wait after BM_output for output values still in flight (default 1)")
     p.add_argument("--wait", type=seconds("do not wait"), default=30.0,
                    help="seconds to wait at start-up for the C++ node's connections (default 30)")
+    p.add_argument("--max-bytes", type=count(MIN_MAX_BYTES, what="a ping's answer must fit"), default=None,
+                   help="largest payload accepted, from the coordinator and from the C++ node (bytes; default %d, or "
+                        "~max_bytes)" % DEFAULT_MAX_BYTES)
     p.add_argument("--unreachable-caller", type=unreachable_seconds, default=None, metavar="SECONDS",
                    help="cancel the calls of a caller that has not answered for this long (the C++ node gets the "
                         "cancel): its machine cannot be reached or its process is stopped (default 0: never; or "
@@ -419,7 +470,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         definition = load_definition(args.definition)
         impl = make_bridge(definition, call_timeout=args.call_timeout, input_gap=args.input_gap,
-                           output_wait=args.output_wait, connect_timeout=args.wait)
+                           output_wait=args.output_wait, connect_timeout=args.wait,
+                           max_bytes=args.max_bytes or DEFAULT_MAX_BYTES)
         ModuleServer(definition, impl, lambda t: None, lambda t: None)
     except DefinitionError as exc:
         sys.stderr.write("%s\n" % exc)
@@ -428,7 +480,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         sys.stderr.write("error: %s\n" % exc)
         return 2
     return run_module(definition, impl, args.node_name, {BridgeError: 3}, name_format="%s_bridge",
-                      unreachable_caller=args.unreachable_caller)
+                      max_bytes=args.max_bytes, unreachable_caller=args.unreachable_caller)
 
 
 if __name__ == "__main__":

@@ -12,9 +12,11 @@ import time
 from typing import Any, Callable, List, Optional, Tuple
 from urllib.parse import urlsplit
 
+from comm.masterwatch import watch_master
 from comm.nodelife import stop_requested
 from comm.rpc import MASTER_TIMEOUT, master_api
 from modules.basicmodule import BindingError
+from modules.discovery import PARAM_ROOT
 
 __all__ = ["CppNodeGraph"]
 
@@ -120,8 +122,10 @@ class CppNodeGraph:
                         "\"%s\"))" % name
                 else:
                     what, fix = "subscribes %s" % topic, "the module name in the C++ code must be the definition's"
-                return "node %s is running and serves module %r (it %s), but the definition %s is module %r: %s" % (
-                    n, other.lstrip("/"), what, self.definition.source or name, name, fix)
+                # the advice before the details (a path can be long): whoever quotes the line cut short (bmtree
+                # run --sim quotes 200 characters of a bridge's last error) still gives the fix
+                return "node %s serves module %r, but the definition is module %r: %s (node %s %s; the definition " \
+                       "is %s)" % (n, other.lstrip("/"), name, fix, n, what, self.definition.source or name)
         return ""
 
     def _down(self) -> str:
@@ -171,6 +175,60 @@ class CppNodeGraph:
             out.append("%s does not publish %s to the bridge" % (node, _some(mute)))
         return out
 
+    def _not_ready(self, look: bool = True) -> str:
+        """Why the module cannot take a call now, in words ("" when it can, as far as is known): its C++ node
+        is not running (it died or exited and no node took its place), or is not connected to this bridge
+        yet (one started again), or the bridge is still starting. Cheap: what the watch found, and one look
+        at the node's XML-RPC port (a node killed less than a second ago, before the watch noticed), unless
+        not to ``look``."""
+        if self._watcher is None:
+            return "its bridge %s is still waiting for the C++ node" % (self._self_name or "")
+        down = self._down()
+        if not down and self._absent:
+            return "the C++ node of module %r is not connected: %s" % (self.definition.name, self._absent)
+        if look and not down and self.cpp_uri and self.cpp_uri != self._gone_said and self._gone():
+            self._say_gone()
+            down = self._down()
+        return down
+
+    def _look_again(self) -> None:
+        """The watch's thread, while the C++ node is down or not connected: one look for a node serving
+        the module (started again, under its name or another), unless a call is looking for it now."""
+        if not self._finding.acquire(blocking=False):
+            return
+        try:
+            self._wait_connected(0)
+        finally:
+            self._finding.release()
+
+    def _announce_readiness(self) -> None:
+        """Keep the key ``not_ready`` of the module's announcement the reason of :meth:`_not_ready` (no key
+        while it can take calls), so that a coordinator or ``bmtree modules --live`` can say why without
+        calling it. The master is asked only when the reason changes (and again until it is set)."""
+        node = self._module_node
+        reason = self._not_ready(look=False)  # (the watch has just looked)
+        if node is None or reason == self._announced_not_ready or getattr(node, "kicked_out", ""):
+            return
+        key = getattr(node, "_param", "") or "%s/%s" % (PARAM_ROOT, self.definition.name)
+        try:
+            master = master_api(self._self_name or "/bmtree_bridge", MASTER_TIMEOUT)
+            entry = master.getParam(key)
+            if not isinstance(entry, dict) or entry.get("instance") != getattr(node, "instance", None):
+                return  # not announced yet (start-up), or not this process's announcement: try again later
+            entry = dict(entry)
+            if reason:
+                entry["not_ready"] = reason
+            else:
+                entry.pop("not_ready", None)
+            if self._watch_stop.is_set() or stop_requested():  # the node is leaving: its announcement goes
+                return
+            master.setParam(key, entry)
+        except Exception as exc:  # the master does not answer, or the key is gone: next time
+            log.debug("could not set the announcement's not_ready: %s", exc)
+            return
+        self._announced_not_ready = reason
+        watch_master().keep_param(key, lambda: None if getattr(node, "kicked_out", "") else entry)
+
     def _wait_connected(self, timeout: float, check: bool = False,
                         cancelled: Optional[Callable[[], bool]] = None) -> List[str]:
         """What is still missing after ``timeout`` ([] once connected). With ``check`` (at start),
@@ -196,10 +254,11 @@ class CppNodeGraph:
             if not missing:
                 self._ready = True
                 self._served = self.cpp_uri
+                self._absent = ""
                 return []
-            if time.monotonic() >= end or stop_requested():
-                return missing
-            if cancelled is not None and (not self._live or cancelled()):
+            if time.monotonic() >= end or stop_requested() or (
+                    cancelled is not None and (not self._live or cancelled())):
+                self._absent = "; ".join(missing)
                 return missing
             time.sleep(0.05)
 
@@ -218,6 +277,10 @@ class CppNodeGraph:
         """One line in the bridge's log when its C++ node's process is gone (once per node): an error
         if it died (killed, crashed: it is still registered), a warning if it exited (Ctrl-C, rosnode
         kill: roscpp unregistered it)."""
+        with self._say_lock:  # a call's thread, the watch's and a ping's may find it at once: said once
+            self._say_gone_once()
+
+    def _say_gone_once(self) -> None:
         import rosgraph
 
         uri, node = self.cpp_uri, self.cpp_node
@@ -246,8 +309,18 @@ class CppNodeGraph:
                       ", and it is still registered with the master" if now else "")
 
     def _watch(self) -> None:
-        """A thread: notices, between calls too, that the C++ node's process is gone (kill -9, a crash)."""
+        """A thread: notices, between calls too, that the C++ node's process is gone (kill -9, a crash);
+        while it is, looks every second for one started again; and keeps the announcement's
+        ``not_ready`` up to date (:meth:`_announce_readiness`)."""
         while not self._watch_stop.wait(_WATCH):
-            uri = self.cpp_uri
-            if uri and uri != self._gone_said and not stop_requested() and _refuses(uri):
-                self._say_gone()
+            if stop_requested():
+                continue
+            try:
+                uri = self.cpp_uri
+                if uri and uri != self._gone_said and _refuses(uri):
+                    self._say_gone()
+                if (self._down() or self._absent) and self._call is None:  # (a call notices a death itself)
+                    self._look_again()
+                self._announce_readiness()
+            except Exception:  # a bug here must not end the watch: the next second tries again
+                log.exception("the bridge's watch of its C++ node failed")

@@ -144,11 +144,18 @@ class CppOutputs:
     def _outputs(self, call: CppCall) -> Dict[str, Any]:
         """The function's outputs by name; Failure/Rejected for an error or a malformed BM_output."""
         out = call.output or {}
-        if out.get("error"):
-            error = str(out.get("error"))
-            if out.get("status") == "rejected":
-                raise Rejected(error)
-            raise Failure(error)
+        status, error = out.get("status"), out.get("error")
+        # the status decides, not the error's text: a C++ function that throws bmtree::Failure("") sends
+        # "failed" with an empty error, which was taken for a success (or for outputs that are missing)
+        if status not in (None, "succeeded", "failed", "rejected", "cancelled"):
+            raise Failure("malformed BM_output from %s: unknown status %s (expected succeeded, failed, rejected or "
+                          "cancelled)" % (self.cpp_node, json.dumps(status)[:80]))
+        if error or status in ("failed", "rejected", "cancelled"):
+            text = str(error) if error else "the C++ node %s gave no message (its BM_output says %s with an empty " \
+                "error)" % (self.cpp_node, status)
+            if status == "rejected":
+                raise Rejected(text)
+            raise Failure(text)
         names = out.get("outparam_names")
         topics = out.get("outparam_topics")
         if not (isinstance(names, list) and isinstance(topics, list) and len(names) == len(topics)

@@ -46,6 +46,7 @@ class LiveModule:
     cancel_topic: Optional[str] = None
     legacy: bool = False  # an original module, announced on its behalf by ``bmtree run``
     call_limit: Optional[float] = None  # seconds after which the module itself fails a call (a bridge's --call-timeout)
+    not_ready: str = ""  # why it cannot take a call now, as it announces (a bridge whose C++ node is not running)
 
 
 def announcement(node: str, definition: ModuleDefinition, instance: str = "",
@@ -90,6 +91,11 @@ def _definition(text: Any, node: str) -> ModuleDefinition:
 def _topic(entry: Dict[str, Any], key: str) -> Optional[str]:
     value = entry.get(key)
     return value if valid_topic(value) else None
+
+
+def _not_ready(value: Any) -> str:
+    """An announcement's ``not_ready`` (bounded: it is said in a run's start-up problems), '' if none."""
+    return value[:400] if isinstance(value, str) else ""
 
 
 def _limit(value: Any) -> Optional[float]:
@@ -149,7 +155,8 @@ def _announced(master: Any) -> Dict[str, LiveModule]:
                 continue
         found[name] = LiveModule(name=name, node=entry["node"], uri=uri, definition=definition,
                                  call_topic=_topic(entry, "call_topic"), cancel_topic=_topic(entry, "cancel_topic"),
-                                 legacy=entry.get("legacy") is True, call_limit=_limit(entry.get("call_limit")))
+                                 legacy=entry.get("legacy") is True, call_limit=_limit(entry.get("call_limit")),
+                                 not_ready=_not_ready(entry.get("not_ready")))
     return found
 
 

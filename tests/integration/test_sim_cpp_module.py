@@ -57,8 +57,8 @@ def _run(tmp_path, *args):
                           cwd=str(tmp_path), stdin=subprocess.DEVNULL)
 
 
-def _sim_dir(stdout):
-    return re.search(r"^its Blackboard store and module logs go to (.*)$", stdout, re.M).group(1)
+def _sim_dir(stderr):
+    return re.search(r"^its Blackboard store and module logs go to (.*)$", stderr, re.M).group(1)
 
 
 def _log(folder, name):
@@ -71,12 +71,12 @@ def test_a_cpp_module_runs_beside_the_simulated_robot_with_its_bridge(gripper_no
     (tmp_path / "world.yaml").write_text("faults:\n  gripper.ping: {fail: jammed, times: 1}\n")
     out = _run(tmp_path, "--world", "world.yaml", "--module", "gripper.json=./build/gripper_node", "grasp.yaml")
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "battery, gripper (yours))" in out.stdout and "cpp_grasp: SUCCESS" in out.stdout, out.stdout
+    assert "battery, gripper (yours))" in out.stderr and "cpp_grasp: SUCCESS" in out.stdout, out.stdout + out.stderr
     calls = [line.split()[2:4] for line in call_lines(out.stdout)]
     assert calls == [["navigation.go_to", "succeeded"], ["gripper.ping", "failed"],
                      ["gripper.set_fingers", "succeeded"]], out.stdout
     assert "jammed (injected fault)" in call_lines(out.stdout)[1]  # the world's fault, by the bridge
-    folder = _sim_dir(out.stdout)  # served by the C++ node bmtree started, through its bridge
+    folder = _sim_dir(out.stderr)  # served by the C++ node bmtree started, through its bridge
     assert "bmtree: C++ basic module gripper ready" in _log(folder, "gripper")
     bridge = _log(folder, "gripper_bridge")
     assert "bridge for 'gripper': C++ node /gripper connected (bmtree library" in bridge, bridge
@@ -121,8 +121,10 @@ def test_a_cpp_node_that_serves_another_module_is_exit_2_naming_both(gripper_nod
     out = _run(tmp_path, "--module", "arm.json=build/gripper_node", "arm.yaml")
     assert out.returncode == 2, out.stdout + out.stderr
     assert "error: your module arm's bridge /arm_bridge exited with code 2 during start-up; its log " in out.stderr
-    assert "arm_bridge.out ends:\n  error: node /arm is running and serves module 'gripper' (it publishes " \
-           "/gripper/BM_info and subscribes /gripper/BM_input), but the definition " in out.stderr, out.stderr
+    # the fix first: the start-up error quotes 200 characters of the bridge's last line
+    assert "arm_bridge.out ends:\n  error: node /arm serves module 'gripper', but the definition is module 'arm': the " \
+           "name given to BasicModule in the C++ code must be the definition's (BasicModule(nh, \"arm\"))" in out.stderr, \
+        out.stderr
     assert "Traceback" not in out.stderr
 
 

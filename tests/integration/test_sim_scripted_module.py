@@ -39,7 +39,7 @@ def test_a_scripted_stand_in_answers_as_its_script_says_and_takes_the_worlds_fau
                                     "t.yaml"), capture_output=True, text=True, timeout=120, env=env,
                          stdin=subprocess.DEVNULL, cwd=str(tmp_path))
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "arm (yours)" in out.stdout
+    assert "arm (yours)" in out.stderr
     calls = [line.split(None, 4) for line in out.stdout.split("calls:")[1].splitlines() if "arm.grasp" in line]
     assert [(c[3], c[4].split(None, 1)[1] if c[3] == "failed" else "") for c in calls] == [
         ("failed", "jammed (injected fault)"), ("failed", "slipped"), ("succeeded", "")], out.stdout

@@ -20,7 +20,7 @@ def test_your_module_runs_beside_the_simulated_ones():
     out = _run("--module", "%s=%s:Gripper" % (os.path.join(GRIPPER, "gripper.json"),
                                               os.path.join(GRIPPER, "gripper.py")), os.path.join(GRIPPER, "grasp.yaml"))
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "gripper (yours)" in out.stdout and "grasp_apple: SUCCESS" in out.stdout
+    assert "gripper (yours)" in out.stderr and "grasp_apple: SUCCESS" in out.stdout
     calls = [line.split()[2:4] for line in out.stdout.splitlines() if line.startswith("  +")]
     assert calls == [["navigation.go_to", "succeeded"], ["gripper.open", "succeeded"],
                      ["gripper.close", "succeeded"], ["speech.say", "succeeded"]]

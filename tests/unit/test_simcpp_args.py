@@ -187,3 +187,15 @@ def test_a_cpp_nodes_uncaught_exception_is_its_last_error(tmp_path):
     log.write_text("[ INFO] [1.5]: bmtree: C++ basic module gripper ready\n[ERROR] [2.5]: bmtree: lost the arm\n")
     assert ended_text(-signal.SIGSEGV, str(log)) == "its process was killed by SIGSEGV; its log's last error: bmtree: " \
         "lost the arm"
+
+
+def test_a_long_last_error_keeps_its_end_where_the_fix_is(tmp_path):
+    from coordinator.simprocess import last_error
+
+    log = tmp_path / "hand_bridge.out"
+    said = ("error: node /hand serves module 'gripper', but the definition %s is module 'hand': the name given to "
+            "BasicModule in the C++ code must be the definition's (BasicModule(nh, \"hand\"))" % ("/very/long" * 40))
+    log.write_text("[ INFO] [1.5]: starting\n" + said + "\n")
+    got = last_error(str(log))
+    assert got.startswith("error: node /hand serves module 'gripper'") and " … " in got and len(got) <= 400, got
+    assert got.endswith("must be the definition's (BasicModule(nh, \"hand\"))"), got

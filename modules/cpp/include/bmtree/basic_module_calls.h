@@ -43,6 +43,13 @@ inline std::string jsonText(const nlohmann::json& j) {
   return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
+/// The error of a call whose function threw bmtree::Failure or bmtree::Rejected (`type`): its text,
+/// or, for an empty one (which a bridge would take for no error at all), that it gave none.
+inline std::string thrownText(const char* what, const char* type) {
+  if (what != nullptr && *what != '\0') return what;
+  return std::string("the C++ function gave no message (it threw bmtree::") + type + "(\"\"))";
+}
+
 }  // namespace detail
 }  // namespace bmtree
 
@@ -270,15 +277,17 @@ inline void BasicModule::execute(const Ready& ready) {
     try {
       reply = ready.function.run(occurrence);
     } catch (const Rejected& e) {
-      ROS_WARN("bmtree: %s rejected: %s", callName(call).c_str(), e.what());
-      reply = failure("rejected", e.what());
+      const std::string error = detail::thrownText(e.what(), "Rejected");
+      ROS_WARN("bmtree: %s rejected: %s", callName(call).c_str(), error.c_str());
+      reply = failure("rejected", error);
     } catch (const Failure& e) {
-      ROS_WARN("bmtree: %s failed: %s", callName(call).c_str(), e.what());
-      reply = failure("failed", e.what());
+      const std::string error = detail::thrownText(e.what(), "Failure");
+      ROS_WARN("bmtree: %s failed: %s", callName(call).c_str(), error.c_str());
+      reply = failure("failed", error);
     } catch (const std::exception& e) {
       const std::string type = detail::typeName(&typeid(e));
       ROS_ERROR("bmtree: %s threw %s: %s", callName(call).c_str(), type.c_str(), e.what());
-      reply = failure("failed", type + ": " + e.what());
+      reply = failure("failed", *e.what() ? type + ": " + e.what() : type + ", with no message");
     } catch (...) {  // a vendor library may throw anything: the node must answer and live on
 #if defined(__GNUG__)
       const std::string type = detail::typeName(abi::__cxa_current_exception_type());

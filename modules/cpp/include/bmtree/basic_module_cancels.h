@@ -66,18 +66,20 @@ inline CancelHook BasicModule::onCancel(std::function<void()> fn) {
   Hook& hook = hooks_[id];
   hook.fn = std::move(fn);
   if (cancelled_.load()) {  // too late to wait for the cancel: now, here
-    hook.fired = hook.running = true;
-    hook.thread = std::this_thread::get_id();
-    std::function<void()> now = hook.fn;
-    lock.unlock();
-    callHook(now);
-    lock.lock();
-    auto it = hooks_.find(id);
-    if (it != hooks_.end()) it->second.running = false;
-    lock.unlock();
-    cancel_cv_.notify_all();
+    hook.due = true;
+    runDueHook(lock, id);
   }
   return CancelHook(this, id);
+}
+
+/// cancel_mutex_ held: cancel the running call; true if it was not cancelled yet. Every onCancel()
+/// callback registered now is due from this moment, decided under the lock that sets cancelled_: the
+/// function may see the cancel (sleepFor() returns, cancelled()) and drop its CancelHook before the
+/// cancel thread runs the callback, and the callback must run all the same (removeHook() runs it then).
+inline bool BasicModule::cancelNow() {
+  if (cancelled_.exchange(true)) return false;
+  for (auto& h : hooks_) h.second.due = true;
+  return true;
 }
 
 /// In the cancel thread: cancel the running call, or remember the id of one not started yet.
@@ -96,7 +98,7 @@ inline void BasicModule::onCancelMessage(const ros::MessageEvent<std_msgs::Strin
   {
     std::lock_guard<std::mutex> lock(cancel_mutex_);
     if (in_function_ && !running_.empty() && id == running_) {
-      now = !cancelled_.exchange(true);
+      now = cancelNow();
       serial = call_serial_;
     } else {
       if (early_cancels_.size() >= kMaxEarlyCancels) early_cancels_.pop_front();
@@ -107,33 +109,35 @@ inline void BasicModule::onCancelMessage(const ros::MessageEvent<std_msgs::Strin
   if (now) runHooks(serial);
 }
 
-/// In the cancel thread: each onCancel() callback of the cancelled call `serial`, once.
+/// In the cancel thread: each due onCancel() callback of the cancelled call `serial` that no other
+/// thread has taken, once, in the order they were registered.
 inline void BasicModule::runHooks(std::uint64_t serial) {
-  for (;;) {
-    std::function<void()> fn;
-    std::uint64_t id = 0;
-    {
-      std::lock_guard<std::mutex> lock(cancel_mutex_);
-      if (!in_function_ || call_serial_ != serial) return;  // that call has ended meanwhile
-      for (auto& h : hooks_) {
-        if (!h.second.fired) {
-          h.second.fired = h.second.running = true;
-          h.second.thread = std::this_thread::get_id();
-          fn = h.second.fn;
-          id = h.first;
-          break;
-        }
-      }
-    }
-    if (id == 0) return;
-    callHook(fn);
-    {
-      std::lock_guard<std::mutex> lock(cancel_mutex_);
-      auto it = hooks_.find(id);
-      if (it != hooks_.end()) it->second.running = false;
-    }
-    cancel_cv_.notify_all();
+  std::unique_lock<std::mutex> lock(cancel_mutex_);
+  while (in_function_ && call_serial_ == serial) {  // (that call may have ended meanwhile: its hooks ran then)
+    auto it = std::find_if(hooks_.begin(), hooks_.end(), [](const std::pair<const std::uint64_t, Hook>& h) {
+      return h.second.due && !h.second.fired;
+    });
+    if (it == hooks_.end()) return;
+    runDueHook(lock, it->first);
   }
+}
+
+/// `lock` holds cancel_mutex_: run the due onCancel() callback `id` in this thread unless another
+/// thread has taken it (the lock is released while it runs, so that it may call the library); true
+/// if it ran here.
+inline bool BasicModule::runDueHook(std::unique_lock<std::mutex>& lock, std::uint64_t id) {
+  auto it = hooks_.find(id);
+  if (it == hooks_.end() || !it->second.due || it->second.fired) return false;
+  it->second.fired = it->second.running = true;
+  it->second.thread = std::this_thread::get_id();
+  const std::function<void()> fn = it->second.fn;
+  lock.unlock();
+  callHook(fn);
+  lock.lock();
+  it = hooks_.find(id);
+  if (it != hooks_.end()) it->second.running = false;
+  cancel_cv_.notify_all();
+  return true;
 }
 
 inline void BasicModule::callHook(const std::function<void()>& fn) {
@@ -151,14 +155,21 @@ inline void BasicModule::callHook(const std::function<void()>& fn) {
   }
 }
 
-/// CancelHook's destructor: forget hook `id`, after it has run if it runs in another thread now.
+/// CancelHook's destructor: forget hook `id`, after it has run if it runs in another thread now. A
+/// due one that no thread has taken yet (the call was cancelled, and the function saw it before the
+/// cancel thread came to the callback) runs here first: a cancelled call's callbacks always run.
 inline void BasicModule::removeHook(std::uint64_t id) {
   std::unique_lock<std::mutex> lock(cancel_mutex_);
-  cancel_cv_.wait(lock, [this, id]() {
+  for (;;) {
     auto it = hooks_.find(id);
-    return it == hooks_.end() || !it->second.running || it->second.thread == std::this_thread::get_id();
-  });
-  hooks_.erase(id);
+    if (it == hooks_.end()) return;
+    if (it->second.running && it->second.thread != std::this_thread::get_id()) {
+      cancel_cv_.wait(lock);  // it runs in the cancel thread: the callback never outlives its hook
+    } else if (!runDueHook(lock, id)) {  // (false: the lock was kept, `it` is still good)
+      hooks_.erase(it);
+      return;
+    }
+  }
 }
 
 /// Mark `call` running (cancels naming it now reach the function); true if it was cancelled
@@ -186,13 +197,22 @@ inline bool BasicModule::startRunning(const Pending& call) {
   return early;
 }
 
-/// The call has returned: true if it was cancelled meanwhile.
+/// The call has returned: true if it was cancelled meanwhile. Its onCancel() callbacks are done
+/// first: one still running in the cancel thread is waited for, and a due one that no thread has
+/// taken yet (its CancelHook outlives the call, kept in a member) runs here.
 inline bool BasicModule::stopRunning() {
   std::unique_lock<std::mutex> lock(cancel_mutex_);
-  cancel_cv_.wait(lock, [this]() {  // an onCancel() callback still running in the cancel thread
-    return std::none_of(hooks_.begin(), hooks_.end(),
-                        [](const std::pair<const std::uint64_t, Hook>& h) { return h.second.running; });
-  });
+  for (;;) {
+    cancel_cv_.wait(lock, [this]() {
+      return std::none_of(hooks_.begin(), hooks_.end(),
+                          [](const std::pair<const std::uint64_t, Hook>& h) { return h.second.running; });
+    });
+    auto it = std::find_if(hooks_.begin(), hooks_.end(), [](const std::pair<const std::uint64_t, Hook>& h) {
+      return h.second.due && !h.second.fired;
+    });
+    if (it == hooks_.end()) break;
+    runDueHook(lock, it->first);
+  }
   hooks_.clear();
   in_function_ = false;
   running_.clear();
@@ -263,7 +283,7 @@ inline void BasicModule::cancelCallOf(const std::string& node, const std::string
     // said before the function can see it, so that the log reads in order
     ROS_WARN("bmtree: cancelled call %s of %s.%s: its caller %s is gone (%s)", id.c_str(), module_.c_str(),
              function.c_str(), node.c_str(), reason.c_str());
-    now = !cancelled_.exchange(true);
+    now = cancelNow();
   }
   cancel_cv_.notify_all();
   if (now) runHooks(serial);

@@ -85,9 +85,11 @@ class BasicModule {
   /// thread (the one that receives BM_cancel), while the function itself goes on running in its own
   /// thread: make what `fn` touches safe to use from two threads (an atomic, a mutex, a driver's
   /// thread-safe stop), and return promptly (the call's answer waits for it). If the call is
-  /// cancelled already, `fn` runs at once, in the calling thread. Not called for a call that ends
-  /// uncancelled, nor on shutdown (poll cancelled() for that). Keep the returned CancelHook while
-  /// `fn` may run:
+  /// cancelled already, `fn` runs at once, in the calling thread. A call cancelled while `fn` is
+  /// registered always gets it called, once: should the function see the cancel (sleepFor(),
+  /// cancelled()) and drop the CancelHook before the cancel thread came to `fn`, the CancelHook's
+  /// destructor calls it, in the function's thread. Not called for a call that ends uncancelled,
+  /// nor on shutdown (poll cancelled() for that). Keep the returned CancelHook while `fn` may run:
   ///   bmtree::CancelHook hook = onCancel([this]() { driver_.halt(); });
   /// Outside a function it throws std::logic_error.
 #if defined(__GNUG__)
@@ -157,7 +159,8 @@ class BasicModule {
   };
   struct Hook {
     std::function<void()> fn;
-    bool fired = false;
+    bool due = false;      // the call was cancelled while it was registered: it runs, once, whatever comes next
+    bool fired = false;    // a thread has taken it to run (the cancel thread, or the one that unregisters it)
     bool running = false;
     std::thread::id thread;
   };
@@ -243,7 +246,9 @@ class BasicModule {
 
   // the cancel thread's side, and the caller watch's: basic_module_cancels.h
   inline void onCancelMessage(const ros::MessageEvent<std_msgs::String const>& event);
+  inline bool cancelNow();
   inline void runHooks(std::uint64_t serial);
+  inline bool runDueHook(std::unique_lock<std::mutex>& lock, std::uint64_t id);
   inline void callHook(const std::function<void()>& fn);
   inline void removeHook(std::uint64_t id);
   inline bool startRunning(const Pending& call);

@@ -13,7 +13,9 @@ class BasicModule;
 /// What onCancel() returns: the callback stays registered while this object lives (at most until
 /// the call ends). Keep it in a local variable declared after what the callback uses: its
 /// destructor unregisters the callback and waits for it if it is running, so the callback never
-/// sees those objects destroyed.
+/// sees those objects destroyed. If the call was cancelled and the callback has not run yet (the
+/// function saw the cancel first), the destructor runs it, in its own thread: a callback of a
+/// cancelled call runs once, always.
 class CancelHook {
  public:
   CancelHook() = default;
@@ -30,7 +32,8 @@ class CancelHook {
   CancelHook(const CancelHook&) = delete;
   CancelHook& operator=(const CancelHook&) = delete;
   ~CancelHook() { reset(); }
-  /// Unregister the callback now (waits for it if it is running in another thread).
+  /// Unregister the callback now (waits for it if it is running in another thread; runs it here if
+  /// the call was cancelled and it has not run yet).
   inline void reset();
 
  private:
