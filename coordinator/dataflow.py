@@ -243,7 +243,7 @@ def check_types(tree: TreeFile, nodes: Optional[Sequence[TreeNode]] = None, give
             if choices is not None:
                 choices.checking = n
             nk.check_types(n, types, errors)
-    if tree.inputs or binders:
+    if tree.inputs or binders or any(n.nodekind.name == "for_each" for n in nodes):   # (its list's elements too)
         from coordinator.inputvalues import default_misfits  # it reads the data flow: imported here
 
         errors.extend(default_misfits(tree, nodes, binders, writers, given, defaults))

@@ -27,8 +27,44 @@ def default_misfits(tree: TreeFile, nodes: Sequence[TreeNode], binders: List[Tre
                     defaults: Optional[Mapping[str, Any]]) -> List[TreeError]:
     """The literals tree inputs are given (defaults, include arguments) that a call input could never take,
     each at the literal (``defaults``: each file's ``inputs:`` as written, by file)."""
-    sources = _sources(tree, binders, writers, {}, given, defaults)
+    sources = _elements(nodes, writers, _sources(tree, binders, writers, {}, given, defaults))
     return [TreeError(src.at, text) for src, text in _misfits(nodes, sources) if src.at is not None]
+
+
+def _written(node: TreeNode) -> Set[str]:
+    writes = getattr(node.nodekind, "writes", None)
+    try:
+        return set(writes(node)) if writes is not None else set()
+    except (AttributeError, TypeError):   # a kind that writes nothing of its spec
+        return set()
+
+
+def _elements(nodes: Sequence[TreeNode], writers: Dict[str, List[TreeNode]], sources: _Sources) -> _Sources:
+    """``sources`` and, for a ``for_each`` whose ``as`` key only it writes, over a list literal or a bare
+    ``$key`` of them, that key's values: each element of the list, or of each list the key may hold
+    (``[0.2, "slow"]`` passed on to a number)."""
+    for n in nodes:
+        copies = getattr(n.nodekind, "copies", None)
+        if n.nodekind.name != "for_each" or copies is None:
+            continue
+        key, items = getattr(n.spec, "key", ""), getattr(n.spec, "items", None)
+        if key and isinstance(items, list) and key not in sources and not any(
+                w is not n for w in writers.get(key, [])) and not any(m is not n and key in _written(m) for m in nodes):
+            held = [Source(v, "element %d of the for_each's list" % i, n.value_pos or n.pos)
+                    for i, v in enumerate(items[:_MOST_SOURCES]) if not refs_in(v)]
+            if held:
+                sources[key] = {n.pos.file: held}
+        for key, ref in copies(n).items():
+            if ref.path != (0,) or key in sources or any(w is not n for w in writers.get(key, [])) or any(
+                    m is not n and key in _written(m) for m in nodes):
+                continue
+            file = n.pos.file
+            held = [Source(v, "element %d of %s" % (i, src.said), src.at, src.via)
+                    for src in sources.get(ref.key, {}).get(file, ()) if isinstance(src.value, list)
+                    for i, v in enumerate(src.value[:_MOST_SOURCES])]
+            if held:
+                sources[key] = {file: held}
+    return sources
 
 
 class Source(NamedTuple):
@@ -52,7 +88,7 @@ def set_value_errors(tree: TreeFile, values: Mapping[str, Any]) -> List[str]:
         return []
     nodes = nodes_of(top_of(tree))
     _, binders, writers = _key_types(tree, nodes, frozenset())
-    sources = _sources(tree, binders, writers, values, frozenset(), None, literals=False)
+    sources = _elements(nodes, writers, _sources(tree, binders, writers, values, frozenset(), None, literals=False))
     return [text for src, text in _misfits(nodes, sources) if src.at is None] + _param_misfits(tree, values)
 
 

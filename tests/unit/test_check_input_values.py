@@ -267,3 +267,42 @@ def test_set_values_for_counts_and_durations_are_checked_before_the_run(tmp_path
         "%s:8:14: duration of timeout $secs is 'abc' (--set secs), not a positive number of seconds: give --set secs "
         "a value that is one" % path]
     assert set_value_errors(tree, {"secs": 3, "n": 1}) == []
+
+
+# for_each's elements ---------------------------------------------------------------------------------------
+WAITS = """format: 1
+inputs:
+  waits: {default: [0.2, "slow"]}
+root:
+  for_each: $waits
+  as: d
+  child:
+    call: speech.listen
+    inputs: {seconds: $d}
+"""
+
+
+def test_each_element_of_a_for_each_list_is_checked_against_the_call_input_it_is_passed_to(tmp_path, capsys):
+    """A C++ audit's default [0.2, "slow"] passed check and the second call was refused when built."""
+    code, said = check(tmp_path, capsys, WAITS)
+    assert code == 2
+    assert said == ["t.yaml:3:20: element 1 of input waits's default 'slow' is text, but speech.listen's seconds at "
+                    "t.yaml:9:23 takes a number (std_msgs/Float64)"]
+    code, said = check(tmp_path, capsys, WAITS.replace("for_each: $waits", 'for_each: [0.2, 1, "slow"]'))
+    assert code == 2
+    assert said == ["t.yaml:5:13: element 2 of the for_each's list 'slow' is text, but speech.listen's seconds at "
+                    "t.yaml:9:23 takes a number (std_msgs/Float64)"]
+    assert check(tmp_path, capsys, WAITS.replace('"slow"', "0.5")) == (0, ["t.yaml: ok"])
+    # the as key written elsewhere too may hold another value by then: not followed
+    other = WAITS.replace("  child:\n    call:", "  child:\n   sequence:\n    - set: {d: 1.0}\n    - call:").replace(
+        "    inputs: {seconds", "      inputs: {seconds")
+    assert check(tmp_path, capsys, other)[0] == 0
+
+
+def test_set_list_elements_are_checked_like_the_defaults(tmp_path):
+    path = tmp_path / "t.yaml"
+    path.write_text(WAITS.replace('"slow"', "0.5"))
+    tree = load_tree(str(path), default_definitions(), given={"waits"})
+    assert set_value_errors(tree, {"waits": [1, "x"]}) == [
+        "element 1 of --set waits: 'x' is text, but speech.listen's seconds at %s:9:23 takes a number "
+        "(std_msgs/Float64)" % path]

@@ -25,12 +25,14 @@ name: waits
 inputs:
   durations: {default: [0.2, "slow"]}
 root:
-  for_each: $durations
-  as: d
-  child:
-    call: speech.listen
-    inputs: {seconds: $d}
-"""
+  sequence:
+    - set: {ds: "$(durations)"}
+    - for_each: $ds
+      as: d
+      child:
+        call: speech.listen
+        inputs: {seconds: $d}
+"""   # (through an expression: check does not follow the list's elements there, so the call is refused when built)
 
 
 def test_a_call_that_could_not_be_built_shows_no_other_calls_inputs(sim_defs, tmp_path):
