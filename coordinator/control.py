@@ -29,7 +29,7 @@ import logging
 import os
 import queue
 import re
-from typing import Any, Callable, Dict, List, Set, Tuple
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 from py_trees.common import Status
 
@@ -91,7 +91,9 @@ class Controller(RunObserver):
     def __init__(self, enabled: bool, reply: Callable[[Dict[str, Any]], None] = lambda r: None):
         self.enabled = enabled
         self.reply = reply
-        self.paused = False
+        self._paused = False
+        self._paused_at: Optional[float] = None  # when the pause began (the run's clock)
+        self._pause_why = ""   # " by /node", " at the breakpoint before 'x'": said with its length
         self._step = False
         self._stepping = False
         self._queue: Any = queue.Queue()  # of command dicts
@@ -133,9 +135,27 @@ class Controller(RunObserver):
         why, self._stop = self._stop, ""
         return why
 
-    def _steered(self, text: str) -> None:
+    def _steered(self, text: str, at: Optional[float] = None) -> None:
         if len(self.steered) < MAX_STEERED:
-            self.steered.append((self.ctx.clock.now() if self.ctx is not None else 0.0, text))
+            now = self.ctx.clock.now() if self.ctx is not None else 0.0
+            self.steered.append((now if at is None else at, text))
+            self.steered.sort(key=lambda s: s[0])   # (a pause is said when it ends, at its start)
+
+    @property
+    def paused(self) -> bool:
+        """No tick while true; each pause, once over, is among what control changed (its length matters:
+        the calls' timeouts kept counting)."""
+        return self._paused
+
+    @paused.setter
+    def paused(self, value: bool) -> None:
+        now = self.ctx.clock.now() if self.ctx is not None else 0.0
+        if value and not self._paused:
+            self._paused_at = now
+        elif not value and self._paused and self._paused_at is not None:
+            self._steered("paused %.1f s%s" % (now - self._paused_at, self._pause_why), at=self._paused_at)
+            self._paused_at, self._pause_why = None, ""
+        self._paused = value
 
     def unpause(self, why: str) -> None:
         """A run stopped from outside (Ctrl-C) while paused: the pause ends (said to the viewers), or its
@@ -284,6 +304,8 @@ class Controller(RunObserver):
         if self.root is None:
             return False, "the run has not started yet"
         if what == "pause":
+            if not self.paused:
+                self._pause_why = _by(cmd.get("by"))
             self.paused = True
             return True, "paused: no node starts; pending calls go on and their timeouts keep counting"
         if what == "resume":
@@ -421,8 +443,10 @@ class Controller(RunObserver):
                 b.status = Status.INVALID  # so the real tick starts it
             elif self.breaks.get(b) and b.status != Status.RUNNING:
                 self._held[b] = True
-                self.paused = True
                 label = self._label(b)
+                if not self.paused:
+                    self._pause_why = " at the breakpoint before %r" % label
+                self.paused = True
                 self._answer({"command": "breakpoint", "node": label, "by": "bmtree"}, True,
                              "paused before %r starts" % label)
                 b.status = Status.RUNNING  # held: the parent waits for it

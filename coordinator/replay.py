@@ -266,6 +266,7 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
                                                                  else "ended %s" % end.get("status")))
         else:
             out.write("no leaf failed in this run\n")
+        out.write("".join(line + "\n" for line in steered_lines(end.get("steered"))))
         _cleanup_failure(replay, out, label)
         return
     if end.get("reason") and end.get("status") != "SUCCESS" and ended is not None:
@@ -277,6 +278,8 @@ def _jump_to_failure(replay: Replay, out: TextIO) -> None:
             out.write("the failing call:\n%s\n" % call_line(
                 float(start.get("t") or 0.0), start.get("target"), status,
                 float(stop_rec.get("duration") or 0.0) if stop_rec is not None else None, error, start.get("inputs")))
+    # what an operator changed (a pause: the timeouts kept counting; a forced outcome, a write)
+    out.write("".join(line + "\n" for line in steered_lines(end.get("steered"))))
     if ended is not None and others:
         out.write("before it, the tree recovered from or went on past %d failure%s:\n" % (len(others), "" if len(others) == 1 else "s"))
         for f in others[:5]:

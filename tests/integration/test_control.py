@@ -4,6 +4,7 @@ and a run without --control refuse and change nothing."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 
 import rosgraph
@@ -82,8 +83,9 @@ def test_each_command_steers_the_run_and_is_logged(tmp_path):
         assert watch.wait(60) == 0
         # the summary says what control changed, each when it took effect and by whom
         steered = [line for line in run.out.text().splitlines() if line.startswith("steered: ")]
-        assert len(steered) == 2 and "blackboard text = \"changed by control\" by /bmtree_control" in steered[0] \
-            and "'done' forced to FAILURE by /bmtree_control" in steered[1], run.out.text()
+        assert len(steered) == 3 and re.search(r"paused \d+\.\d s by /bmtree_control", steered[0]) \
+            and "blackboard text = \"changed by control\" by /bmtree_control" in steered[1] \
+            and "'done' forced to FAILURE by /bmtree_control" in steered[2], run.out.text()
         # the run log says who did what
         log_path = run.out.wait_for("run log: ").split(": ", 1)[1]
         records = [r for r in read_log(log_path).records if r.get("type") == "control"]

@@ -60,9 +60,25 @@ def test_a_forced_success_and_a_write_are_said_under_the_result_and_in_the_log(t
     assert watch_lines(state)[1:3] == ["steered: " + s for s in steered], watch_lines(state)
 
 
+def test_a_pause_is_said_with_its_length_and_who_paused(go, monkeypatch, tmp_path):  # noqa: F811 - the fixture
+    """An operator's stray key froze a robot 18.7 s and the run's summary and replay --failure never said so:
+    the calls' timeouts kept counting meanwhile."""
+    from coordinator.replay import _jump_to_failure
+
+    go.mocks["navigation.go_to"].succeed(room="kitchen", delay=1.0)
+    log = str(tmp_path / "run.jsonl")
+    run = _run(go, Timed([(0.5, {"id": "p", "command": "pause", "by": "/bmtree_watch_1"}),
+                          (0.7, {"id": "r", "command": "resume"})]), monkeypatch,
+               observers=[RunStream([RunLogWriter(log, fsync=False)])])
+    assert run.succeeded and run.result.steered == ["0.50s paused 0.2 s by /bmtree_watch_1"], run.result.steered
+    assert "steered: 0.50s paused 0.2 s by /bmtree_watch_1" in summary_lines(run.result, "go")
+    out = io.StringIO()
+    _jump_to_failure(Replay(read_log(log)), out)
+    assert "steered: 0.50s paused 0.2 s by /bmtree_watch_1\n" in out.getvalue(), out.getvalue()
+
+
 def test_a_run_nobody_steered_says_nothing_of_it(go, monkeypatch):  # noqa: F811 - the fixture
     go.mocks["navigation.go_to"].succeed(room="kitchen", delay=1.0)
-    run = _run(go, Timed([(0.5, {"id": "p", "command": "pause"}), (0.7, {"id": "r", "command": "resume"})]),
-               monkeypatch)
+    run = _run(go, Timed([]), monkeypatch)
     assert run.succeeded and run.result.steered == []
     assert not [line for line in summary_lines(run.result, "go") if line.startswith("steered")]
