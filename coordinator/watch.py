@@ -299,8 +299,41 @@ def cmd_watch(args: argparse.Namespace) -> int:
                 watcher.close()
             rospy.signal_shutdown("bmtree watch finished")
 
+        say, gone = leaving(state, err)
         with quiet_unregistering():  # bounded: a master that does not answer is left without unregistering
-            leave_graph(steps, err, stopped_at=signals.signalled_at or (held.last_signal if held else None))
+            leave_graph(steps, say, master_down=gone,
+                        stopped_at=signals.signalled_at or (held.last_signal if held else None))
+
+
+#: a ``--sim`` run's master answers this long at most when the watch leaves (s)
+OWNER_GONE_QUESTION = 0.5
+
+
+def leaving(state: WatchState, say: Callable[[str], None],
+            answers: Optional[Callable[[float], bool]] = None) -> Tuple[Callable[[str], None], bool]:
+    """How the watch leaves the master: what it says, and whether that master is known to be gone.
+
+    A ``bmtree run --sim`` brings up a master of its own (its ``tree`` record has ``sim``) and takes it
+    down when it ends: once the run shown was such a run and has ended, a master that does not answer
+    is gone with it, and there is nothing to leave. The watch then says nothing of it (not rospy's
+    "does not answer: leaving without unregistering … rosnode cleanup", which is about a master that is
+    still there); ``answers(timeout)`` asks the master (:func:`comm.rpc.master_answers`)."""
+    with state.lock:
+        owned = state.end is not None and isinstance(state.tree.get("sim"), dict)
+    if not owned:
+        return say, False
+
+    def quiet(text: str) -> None:
+        if not (text.startswith("the ROS master at ") and "does not answer" in text):
+            say(text)
+
+    if answers is None:
+        from comm.rpc import master_answers as answers
+    try:
+        up = answers(OWNER_GONE_QUESTION)
+    except Exception:  # (a Ctrl-C is the leaving's own to handle)
+        up = False
+    return quiet, not up
 
 
 class _OutOfSync(logging.Filter):

@@ -36,7 +36,7 @@ class SnapshotSink(StateSink):
 
     def __init__(self, publish: Callable[[str], None], interval: float = 0.5,
                  clock: Callable[[], float] = time.monotonic):
-        super().__init__(WatchState())
+        super().__init__(WatchState(recent=0))  # the run's own records, in order: no snapshot comes
         self.publish = publish
         self.interval = interval
         self.clock = clock

@@ -5,13 +5,18 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 from typing import Any, Callable, Dict, List, Optional, Union
 
 from coordinator.watchstate import WatchState
 from coordinator.watchtext import summary_lines
 from coordinator.watchview import now_since, render
 
-__all__ = ["LiveView", "Keys", "key_reader", "keys_help", "KEYS_HELP", "NO_CONTROL_HELP"]
+__all__ = ["LiveView", "Keys", "key_reader", "keys_help", "KEYS_HELP", "NO_CONTROL_HELP", "WAITING_HELP",
+           "ENDED_HELP", "SAID_FOR"]
+
+#: seconds the footer shows the run's answer to a key (or why a key sent nothing), then the help again
+SAID_FOR = 6.0
 
 
 class LiveView:
@@ -31,35 +36,59 @@ class LiveView:
         self.title = title
         self.refresh = refresh
         self.summary = summary
-        self.message = ""
+        self.message = ""  # the answer to a key, or why it sent nothing (for SAID_FOR s, on the same run)
+        self.typing: Optional[str] = None  # the command being typed after ':' (shown until Enter or Esc)
         self._since: Any = None  # the run's last control record when the message came
+        self._said_at = 0.0  # when the message came (monotonic)
+        self._said_run = ""  # the run shown then
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
 
-    def answered(self, message: str) -> None:
-        """The run's answer to a key, for the footer (the help comes back with the next key)."""
+    def answered(self, message: str, run: Optional[str] = None, since: Any = False) -> None:
+        """The run's answer to a key (or why a key sent nothing), for the footer: for :data:`SAID_FOR`
+        seconds, and only while the same run is shown (then the help comes back). ``run``: the run the
+        key was for; its answer is not said once another one is shown. ``since``: the run's last control
+        record when the key was sent (the records of the command, and of a breakpoint that paused the run
+        again at once, may come before its answer)."""
         with self.state.lock:
-            self._since = self.state.control[-1] if self.state.control else None
+            if run is not None and run != self.state.run:
+                return
+            self._since = since if since is not False else self.state.control[-1] if self.state.control else None
             self.message = message
+            self._said_at = time.monotonic()
+            self._said_run = self.state.run
+
+    def said(self) -> str:
+        """The message the footer shows now: none once :data:`SAID_FOR` seconds have passed, or another
+        run is shown (a reply to a key is about the run it was sent to)."""
+        with self.state.lock:
+            if self.message and (time.monotonic() - self._said_at > SAID_FOR or self.state.run != self._said_run):
+                self.message = ""
+            return self.message
 
     def foot(self) -> str:
-        """The footer: an answer replaces the help until the next key; an answer that the run's
-        state has overtaken says so (``ok: resumed`` when a breakpoint paused it again at once)."""
+        """The footer: the command being typed; else an answer replaces the help for a few seconds; an
+        answer that the run's state has overtaken says so (``ok: resumed`` when a breakpoint paused it
+        again at once)."""
+        if self.typing is not None:
+            return ":" + self.typing
         help_ = self.footer(self.state) if callable(self.footer) else self.footer
-        foot = self.message or help_
-        if self.message.startswith("ok: resumed") and self.state.paused:
+        message = self.said()
+        foot = message or help_
+        if message.startswith("ok: resumed") and self.state.paused:
             with self.state.lock:
                 records = self.state.control
                 after = next((k + 1 for k in range(len(records) - 1, -1, -1) if records[k] is self._since), 0)
-                held = [c for c in records[after:] if c.get("paused")]  # came after the answer
+                held = [c for c in records[after:] if c.get("paused")]  # came after the key was sent
             if held:
                 foot += "; paused again: %s" % held[-1].get("answer")
         return foot.strip()
 
     def _frame(self, anchor: List[float]) -> Any:
         size = self.console.size
+        answer = self.said() if self.typing is None else ""
         return render(self.state, size.width, size.height, self.foot(), now_since(self.state, anchor), self.title,
-                      footer_wrap=bool(self.message))
+                      footer_wrap=bool(answer))
 
     def _loop(self) -> None:
         from rich.live import Live
@@ -103,11 +132,19 @@ class LiveView:
 KEYS_HELP = ("q quit  p pause/resume  s step  : command (stop, break NODE, clear NODE, force NODE SUCCESS, "
              "set KEY VALUE)")
 NO_CONTROL_HELP = "q quit  (this run takes no commands: it was started without --control)"
+WAITING_HELP = "q quit  (waiting for a run: the steering keys come with a run started with --control)"
+ENDED_HELP = "q quit  (the run has ended: it takes no more commands)"
 
 
 def keys_help(state: WatchState) -> str:
-    """The footer: the steering keys only for a run that takes them."""
-    return KEYS_HELP if state.steerable else NO_CONTROL_HELP
+    """The footer: the steering keys only while the run shown takes them (its ``tree`` record said so
+    and it has not ended); else why there are none."""
+    with state.lock:
+        if state.steerable:
+            return KEYS_HELP
+        if not state.nodes:
+            return WAITING_HELP
+        return NO_CONTROL_HELP if state.tree.get("control") is False else ENDED_HELP
 
 
 class Keys:
@@ -121,13 +158,20 @@ class Keys:
         self.line: Optional[str] = None
 
     def _send(self, cmd: Dict[str, Any]) -> None:
+        why = self.view.state.no_steering()
+        if why:  # nothing would take it: said here, nothing is sent
+            self.view.answered("not sent: %s" % why)
+            return
         node = self.to()
         if node:
             cmd = dict(cmd, to=node)
+        with self.view.state.lock:
+            run = self.view.state.run
+            since = self.view.state.control[-1] if self.view.state.control else None
 
         def go() -> None:
             reply = self.client.send(cmd, 10.0)
-            self.view.answered(("ok: " if reply.get("ok") else "refused: ") + str(reply.get("answer")))
+            self.view.answered(("ok: " if reply.get("ok") else "refused: ") + str(reply.get("answer")), run, since)
         threading.Thread(target=go, daemon=True).start()
 
     def press(self, ch: str) -> None:
@@ -136,28 +180,29 @@ class Keys:
         if self.line is not None:
             if ch in ("\r", "\n"):
                 words, self.line = self.line.split(), None
+                self.view.typing = None
                 try:
                     self._send(parse_command(words))
                 except ValueError as exc:
-                    self.view.message = "refused: %s" % exc
+                    self.view.answered("refused: %s" % exc)
             elif ch == "\x1b":
-                self.line, self.view.message = None, ""
+                self.line = self.view.typing = None
             elif ch in ("\x7f", "\b"):
-                self.line = self.line[:-1]
-                self.view.message = ":" + self.line
+                self.line = self.view.typing = self.line[:-1]
             elif ch.isprintable():
                 self.line += ch
-                self.view.message = ":" + self.line
+                self.view.typing = self.line
             return
         if ch in ("q", "Q"):
             self.stop.set()
+        elif ch in ("p", "s", ":") and self.view.state.no_steering():  # said at once, nothing sent
+            self.view.answered("'%s' not sent: %s" % (ch, self.view.state.no_steering()))
         elif ch == "p":
             self._send({"command": "resume" if self.view.state.paused else "pause"})
         elif ch == "s":
             self._send({"command": "step"})
         elif ch == ":":
-            self.line = ""
-            self.view.message = ":"
+            self.line = self.view.typing = ""
 
 
 def key_reader(handler: Callable[[str], None], stop: threading.Event) -> Optional[threading.Thread]:

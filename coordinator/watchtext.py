@@ -74,8 +74,8 @@ def _names(state: WatchState) -> Dict[Any, Dict[str, Any]]:
 
 
 def where_text(state: WatchState, node: Any) -> str:
-    """The tree node that made a call, with the element of each ``for_each`` above it:
-    ``'go to the room' (item 47 of 90)``; '' for a node the tree does not have."""
+    """The tree node that made a call, with the element of each ``for_each`` and the attempt of each
+    ``retry`` above it: ``'go to the room' (item 47 of 90, attempt 2)``; '' for a node the tree does not have."""
     by_id = _names(state)
     n = by_id.get(node)
     if n is None:
@@ -85,9 +85,9 @@ def where_text(state: WatchState, node: Any) -> str:
     seen = 0
     while up is not None and seen < 1000:  # a malformed tree must not loop
         seen += 1
-        if up in state.loops:
-            at = state.loops[up]
-            loops.append("item %d of %d" % (at[0], at[1]))
+        at = state.progress(up)
+        if at and "{s}" not in str(at.get("text")):  # a loop's place (not a wait's seconds)
+            loops.append(str(at["text"]))
         up = (by_id.get(up) or {}).get("parent")
     text = repr(str(n.get("name", "?")))
     return text + (" (%s)" % ", ".join(reversed(loops)) if loops else "")

@@ -21,7 +21,7 @@ from rich.console import Group
 from rich.text import Text
 
 from coordinator.runevents import CLEANUP_NOTICES, cleanup_said, control_line, status_word, terminal_text
-from coordinator.watchstate import WatchState
+from coordinator.watchstate import HELD, WatchState, fill
 from coordinator.watchtext import call_text, pending_text, result_text, values_text, wrap
 from coordinator.watchtext import cut as _cut
 
@@ -33,6 +33,7 @@ STYLE = {"RUNNING": "bold yellow", "SUCCESS": "green", "FAILURE": "bold red", "H
          "INTERRUPTED": "bold magenta", "was SUCCESS": "dim green", "was FAILURE": "dim red", "": "dim"}
 MARK = {"RUNNING": "*", "SUCCESS": "+", "FAILURE": "x", "HALTED": "~", "INTERRUPTED": "~", "was SUCCESS": "+",
         "was FAILURE": "x", "": "-"}
+BREAK = "●"  # before the name of a node with a breakpoint
 
 
 def _short(value: Any, width: int = 60) -> str:
@@ -49,8 +50,11 @@ def _children(nodes: List[Dict[str, Any]]) -> Tuple[Dict[Any, List[int]], Dict[i
     return kids, by_id
 
 
-def tree_lines(state: WatchState, height: int) -> List[Text]:
-    """The tree as at most ``height`` lines: folded around the running branch if it is too long."""
+def tree_lines(state: WatchState, height: int, now: Optional[float] = None) -> List[Text]:
+    """The tree as at most ``height`` lines: folded around the running branch if it is too long.
+    A node with a breakpoint is marked ``●``; one a breakpoint holds says so (``RUNNING (held at
+    breakpoint)``), an outcome forced by control ``(forced)``; a running loop or wait where it is
+    (``item 2 of 3``, ``attempt 2``, ``waited 3.2 s``: ``now`` is the run's time for the seconds)."""
     kids, by_id = _children(state.nodes)
     rows: List[Tuple[int, int, int]] = []  # (id, depth, hidden descendants)
 
@@ -86,13 +90,19 @@ def tree_lines(state: WatchState, height: int) -> List[Text]:
         label = state.label(i)
         line = Text("  " * depth)
         line.append("%s " % MARK.get(label, "~"), style=STYLE.get(label, ""))
+        if i in state.breaks:
+            line.append(BREAK + " ", style="bold red")
         line.append(state.name(i), style="bold" if label == "RUNNING" else "dim" if label.startswith("was") else "")
         if n.get("shape") not in (None, "leaf"):
             line.append(" [%s]" % n.get("kind", n.get("shape")), style="dim")
         if label:
             line.append("  %s" % label, style=STYLE.get(label, ""))
-        if label == "RUNNING" and i in state.loops:  # a for_each: the element it runs
-            line.append("  item %d of %d" % tuple(state.loops[i]), style="dim")
+            note = state.note(i)
+            if note:
+                line.append(" (%s)" % note, style="bold magenta" if note == HELD else "magenta")
+        progress = state.progress(i) if label == "RUNNING" else None
+        if progress:  # a for_each's element, a retry's attempt, how long a wait has waited
+            line.append("  " + fill(progress, state.t if now is None else now), style="dim")
         if hidden:
             line.append("  (+%d folded)" % hidden, style="dim")
         fb = state.feedback.get(i)
@@ -184,7 +194,7 @@ def render(state: WatchState, width: int, height: int, footer: str = "", now: Op
         sizes = [len(plines), len(written), len(ev), len(calls)]
         share = max(1, room // 3 // len(sizes)) if height < 30 else max(2, room // 2 // len(sizes))
         takes = [min(n, share) for n in sizes]
-        tree = tree_lines(state, max(3, room - len(sizes) - sum(takes)))
+        tree = tree_lines(state, max(3, room - len(sizes) - sum(takes)), t_now)
         spare = room - len(tree) - len(sizes) - sum(takes)
         while spare > 0 and any(t < n for t, n in zip(takes, sizes)):
             for k, n in enumerate(sizes):  # one line each in turn, so that no cut panel takes them all
@@ -234,11 +244,55 @@ class LinePrinter:
 
     def __init__(self, out: TextIO):
         self.out = out
-        self._caught: Any = None
         self._end: Optional[Tuple[int, str]] = None  # the end's line, held until its last tick is printed
         self._noted = 0  # the watch's own notices printed (another run started)
         self._held: List[Dict[str, Any]] = []  # call_end records that ended halted, until their label is known
-        self._early: List[Dict[str, Any]] = []  # records that came before the tree (its nodes' names unknown)
+        self._shown = ""  # the run whose lines are printed (its header said)
+        self._caught_runs: List[str] = []  # the runs whose catching up was said (once each)
+        self._progress: Dict[Any, str] = {}  # what was said of each loop's place (item, attempt)
+
+    def _start(self, rec: Dict[str, Any], state: WatchState) -> None:
+        """The header of the run shown from now on, then its records that came before its tree: those of
+        the run shown before (held lines) are said first, and lines in run-time order start anew."""
+        self.finish()
+        boundary = getattr(self.out, "boundary", None)
+        if callable(boundary):
+            boundary()   # the lines held of the run before go out now, ordered among themselves
+        self._shown = state.run
+        self._progress = {}
+        self._write(self._note_lines(state) + [
+            "run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or []))])
+        for r in state.taken:
+            self.record(r, state)
+
+    def _place(self, i: int, t: float, state: WatchState) -> str:
+        """`` (item 2 of 3)``: where a running loop is, said when the watch catches up (then not again)."""
+        kind = next((str(n.get("kind")) for n in state.nodes if n.get("id") == i), "")
+        p = state.progress(i) if kind in ("for_each", "retry", "repeat") else None
+        if not p:
+            return ""
+        self._progress[i] = str(p.get("text"))
+        return " (%s)" % (fill(p, t) if p.get("until") is not None else str(p.get("text")).replace("{s}", "its delay"))
+
+    def _progress_lines(self, t: float, state: WatchState) -> List[str]:
+        """A line for each running for_each now at another element, and each retry at another attempt or
+        waiting its delay before one (``[  1.200s] attempt   go to the item: attempt 2``), as the terminal
+        shows them (a retry's first attempt is its RUNNING line)."""
+        out = []
+        said: Dict[Any, str] = {}
+        for n in state.nodes:
+            i, kind = n.get("id"), str(n.get("kind"))
+            p = state.progress(i) if kind in ("for_each", "retry", "repeat") else None
+            if not p:
+                continue
+            said[i] = str(p.get("text"))
+            if self._progress.get(i) == said[i] or said[i] == "attempt 1":
+                continue
+            text = fill(p, t) if p.get("until") is not None else said[i].replace("{s}", "its delay")
+            out.append("[%7.3fs] %-9s %s: %s" % (t, {"retry": "attempt", "repeat": "run"}.get(kind, "item"),
+                                                  state.name(i), text))
+        self._progress = said
+        return out
 
     def finish(self) -> None:
         """Print the held lines (the calls' and the end's), if their tick or end never came."""
@@ -288,29 +342,25 @@ class LinePrinter:
         def name(i: Any) -> Any:  # an include with the values of its arguments, as the other views show it
             return state.name(i) if i in plain else plain.get(i, i)
 
+        if kind == "tree" and state.nodes and rec.get("run") == state.run and self._shown != state.run:
+            self._start(rec, state)
+            return
         lines = self._note_lines(state)
-        if rec.get("run") and state.run and rec.get("run") != state.run:
-            kind = None  # another run's record: the state keeps it aside, the notice above said so
-        if not state.nodes and kind not in (None, "tree"):
-            if len(self._early) < 1000:   # topics are not ordered among them: said once the tree names the nodes
-                self._early.append(rec)
+        if not state.nodes or (rec.get("run") and rec.get("run") != state.run):
+            # another run's record (the state keeps it aside, a notice says so), or one of the run to show
+            # that came before its tree (topics are not ordered among them): said after its header
             self._write(lines)
             return
         if kind == "call_end" and rec.get("status") == "halted":
             self._held.append(rec)
         lines += self._settled(state)
         if kind == "tree":
-            lines.append("run %s: %s (%d nodes)" % (rec.get("run"), rec.get("name"), len(rec.get("nodes") or [])))
-            self._write(lines)
-            early, self._early = self._early, []
-            for r in early:
-                if r.get("run") in (None, rec.get("run")):
-                    self.record(r, state)
-            return
-        elif kind == "snapshot" and state.caught_up and rec.get("n") == state.tick and self._caught != rec.get("run"):
-            self._caught = rec.get("run")  # the periodic snapshots after the first say nothing new
-            running = ["%s RUNNING" % name(int(k)) for k, v in (rec.get("status") or {}).items()
-                       if v == "RUNNING"]
+            pass  # the same run's tree again (latched)
+        elif kind == "snapshot" and state.run not in self._caught_runs and (
+                any(r is rec for r in state.loaded) or (state.caught_up and rec.get("n") == state.tick)):
+            self._caught_runs.append(state.run)  # the periodic snapshots after the first say nothing new
+            running = ["%s RUNNING%s" % (name(int(k)), self._place(int(k), t, state))
+                       for k, v in (rec.get("status") or {}).items() if v == "RUNNING"]
             pending = ["%s since %.3fs" % (c.get("target"), float(c.get("t") or 0.0)) for c in rec.get("pending") or []]
             done = max(int(rec.get("ncalls") or 0), len(rec.get("calls") or []))
             lines.append("[%7.3fs] caught up at tick %s: %s; pending calls: %s; %d call%s done" % (
@@ -324,8 +374,13 @@ class LinePrinter:
                         word = state.label(ch[0]) if state.status.get(ch[0], "INVALID") == "INVALID" else "HALTED"
                         lines.append("[%7.3fs] %-9s %s" % (t, word, name(ch[0])))
                     continue
-                extra = " (%s)" % ch[2] if len(ch) > 2 and ch[2] else ""
+                why = state._said(ch[0], str(ch[2])) if len(ch) > 2 and ch[2] else ""  # (a retry's attempts)
+                note = state.note(ch[0]) if state.status.get(ch[0]) == status else ""
+                if note and why.startswith("forced to"):
+                    note = ""  # its reason says it
+                extra = "".join(" (%s)" % w for w in (note, why) if w)
                 lines.append("[%7.3fs] %-9s %s%s" % (t, status, name(ch[0]), extra))
+            lines += self._progress_lines(t, state)
         elif kind == "call_start":
             lines.append("[%7.3fs] call      %s %s" % (t, rec.get("target"), _short(rec.get("inputs"))))
         elif kind == "call_end" and rec.get("status") != "halted":
@@ -416,6 +471,13 @@ class TimeOrderedLines:
 
     def flush(self) -> None:
         self._release(time.monotonic() - self.window)
+
+    def boundary(self) -> None:
+        """Another run's lines come next (``watch --follow``): those held go out now, and the order starts
+        anew (its times begin at 0 again; the run's header, which has none, is not kept behind them)."""
+        self._release(float("inf"))
+        with self._lock:
+            self._last_t = float("-inf")
 
     def _release(self, arrived_by: float) -> None:
         with self._lock:

@@ -127,6 +127,10 @@ class WebServer:
                 except (ValueError, UnicodeDecodeError) as exc:
                     self._json(400, {"ok": False, "answer": "bad command: %s" % exc})
                     return
+                why = server.state.no_steering() if server.state is not None else ""
+                if why:  # nothing would take it (no run shown yet, one without --control, or ended): not sent
+                    self._json(200, {"ok": False, "answer": "not sent: %s" % why})
+                    return
                 self._json(200, server.control(cmd))
 
         try:
@@ -155,7 +159,8 @@ class WebServer:
             if at != at:
                 raise ValueError("at is not a number")
             data = self.at(at)
-            data.update(mode="replay", duration=self.duration, at=min(at, self.duration), replay=self.replay)
+            data.update(mode="replay", duration=self.duration, at=min(at, self.duration), replay=self.replay,
+                        steer=False)  # a recording takes no commands
             if self.replay.get("unfinished") and at >= self.duration:  # killed: its end is when it was last alive
                 data.update(end=self.replay.get("end"), t=max(float(data.get("t") or 0.0), self.duration),
                             pending=[dict(c, maybe_running=True) for c in data.get("pending") or []])  # nobody stopped them
@@ -165,7 +170,9 @@ class WebServer:
         # while the run's node does not answer, every second: the page says for how long
         self.state.wait(lambda s: s.version != since, 1.0 if self.state.silence() else self.poll_wait)
         data = self.state.view()
-        data.update(mode="live", steer=self.control is not None and (data.get("tree") or {}).get("control") is not False)
+        # control buttons only while the run shown takes commands: its tree record said so, it has not ended
+        # (none before a run is shown: nothing would take them)
+        data.update(mode="live", steer=self.control is not None and bool(data.get("steer")))
         if data.get("end"):
             self.end_served.set()
         return data
@@ -222,7 +229,7 @@ def replay_states(records: list, last_alive: Optional[float] = None) -> Callable
 
     def at(t: float) -> Dict[str, Any]:
         with lock:
-            s = WatchState()
+            s = WatchState(recent=0)  # a log's records, in order
             for rec in records:
                 if rec.get("type") != "tree" and float(rec.get("t") or 0.0) > t:
                     break

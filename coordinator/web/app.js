@@ -5,6 +5,7 @@
 // GY between depths
 const W = 240, H = 52, GX = 12, GY = 44, PAD = 6, LINE = 14, FONT = "12px sans-serif";
 const QUIET_MS = 5000; // the view follows the run only when the user has not scrolled it for this long
+const SAID_MS = 6000; // the run's answer to a button is shown this long (and only while the same run is)
 const $ = (id) => document.getElementById(id);
 let version = -1, mode = null, last = null, shownNodes = "", gone = false;
 let boxes = {}, depths = {}, focused = null, rootId = null, culprit = null, userScrolled = 0, ours = null, replayMeta = {};
@@ -70,6 +71,17 @@ function label(s, i) {
 
 const failedLabel = (st) => st === "FAILURE" || st === "was FAILURE";
 
+// where a running loop or wait is (the server's words, `progress`): "item 2 of 3", "attempt 2", and
+// with "{s}" the seconds since `since` (or until `until`) at the run's time `now`: "waited 3.2 s"
+function fillProgress(p, now) {
+  const text = String(p.text || "");
+  if (text.indexOf("{s}") < 0) return text;
+  const secs = p.until !== undefined && p.until !== null ? Number(p.until) - now : now - Number(p.since || now);
+  return text.replace("{s}", Math.max(0, secs).toFixed(1) + " s");
+}
+// the run's time now: its last state's, moved on by the page's clock while the run goes
+const nowOf = (s) => (mode === "replay" || s.end || gone ? s.t : anchor[0] + (Date.now() - anchor[1]) / 1000);
+
 function culpritOf(s) {
   // the leaf whose failure ended the run: a replay knows it (where `replay --failure` goes), once it
   // happened; live, the node the end's reason starts with ("look for it: vision.find_object ...")
@@ -124,22 +136,42 @@ function drawTree(s) {
       svg.appendChild(el("path", { class: cls, d: `M${x1 + W},${y1 + H / 2} C${x1 + W + GY / 2},${y1 + H / 2} ${x2 - GY / 2},${y2 + H / 2} ${x2},${y2 + H / 2}` }));
     }
   }
+  const now = nowOf(s);
+  const breaks = s.breaks || [];
   for (const n of s.nodes) {
     const [x, y] = xy(n.id), st = label(s, n.id);
     boxes[n.id] = [x, y];
     const feedback = s.feedback[String(n.id)] || "";
     const why = failedLabel(st) ? feedback : "";
-    const cls = "node " + st.replace(" ", "-") + (n.id === culprit && failedLabel(st) ? " culprit" : "");
-    const grp = el("g", { class: cls, "data-name": n.name, "data-status": st || "IDLE", "data-id": n.id });
+    // steering: held at a breakpoint (RUNNING, not started), an outcome forced by control
+    const note = (s.notes || {})[String(n.id)] || "";
+    const cls = "node " + st.replace(" ", "-") + (n.id === culprit && failedLabel(st) ? " culprit" : "")
+      + (note === "held at breakpoint" ? " held" : note === "forced" ? " forced" : "");
+    const grp = el("g", { class: cls, "data-name": n.name, "data-status": st || "IDLE", "data-id": n.id,
+      "data-note": note, "data-break": breaks.indexOf(n.id) >= 0 ? "1" : "" });
     grp.appendChild(el("rect", { x, y, width: W, height: H, rx: 6 }));
-    const name = wrap(nameOf(s, n), W - 2 * PAD, why ? 1 : 2);
-    const y0 = y + Math.round((H - (name.length + (why ? 2 : 1)) * LINE) / 2) + 11; // the lines centred in the box
+    if (breaks.indexOf(n.id) >= 0) { // a breakpoint is set on it
+      const dot = el("circle", { cx: x + W - 9, cy: y + 9, r: 5, class: "bp" });
+      dot.appendChild(el("title", {}, "breakpoint: the run pauses before it starts"));
+      grp.appendChild(dot);
+    }
+    // a for_each's element, a retry's attempt, how long a wait has waited ("item 2 of 4", "attempt 2"):
+    // a line of its own, as a failed node's reason
+    const prog = st === "RUNNING" ? (s.progress || {})[String(n.id)] : null;
+    const extra = why || prog;
+    const name = wrap(nameOf(s, n), W - 2 * PAD - (breaks.indexOf(n.id) >= 0 ? 14 : 0), extra ? 1 : 2);
+    const y0 = y + Math.round((H - (name.length + (extra ? 2 : 1)) * LINE) / 2) + 11; // the lines centred in the box
     name.forEach((line, k) => grp.appendChild(el("text", { x: x + PAD, y: y0 + k * LINE, class: "name" }, line)));
-    const at = (s.loops || {})[String(n.id)]; // a for_each's element now: 2/4
-    const kind = (n.kind || n.shape) + (st ? " · " + st : "") + (at && st === "RUNNING" ? " · " + at[0] + "/" + at[1] : "");
-    grp.appendChild(el("text", { x: x + PAD, y: y0 + name.length * LINE, fill: "#555" }, kind));
+    const kind = (n.kind || n.shape) + (st ? " · " + st : "") + (note ? " (" + note + ")" : "");
+    grp.appendChild(el("text", { x: x + PAD, y: y0 + name.length * LINE, fill: "#555", class: "kind" },
+      wrap(kind, W - 2 * PAD, 1)[0]));
     if (why) grp.appendChild(el("text", { x: x + PAD, y: y0 + 2 * LINE, class: "reason" }, wrap(why, W - 2 * PAD, 1)[0]));
-    grp.appendChild(el("title", {}, nameOf(s, n) + (feedback ? ": " + feedback : "")));
+    else if (prog) {
+      const line = el("text", { x: x + PAD, y: y0 + 2 * LINE, class: "progress" }, fillProgress(prog, now));
+      line.dataset.progress = JSON.stringify(prog);
+      grp.appendChild(line);
+    }
+    grp.appendChild(el("title", {}, nameOf(s, n) + (note ? " (" + note + ")" : "") + (feedback ? ": " + feedback : "")));
     svg.appendChild(grp);
   }
   const old = g.firstChild;
@@ -295,13 +327,13 @@ function draw(s) {
   const down = graphAlert(s);
   $("alert").hidden = !down;
   $("alert").textContent = down;
-  drawTree(s);
   // the watch's "now" (the last record's time moved on by its clock): a page opened during a long call
   // counted from that record's time, as if the call had only just started
   if (typeof s.now === "number") {
     if (s !== anchored) anchor = [s.now, Date.now()]; // each answer of the watch: its own now
   } else if (s.t !== anchor[0]) anchor = [s.t, Date.now()];
   anchored = s;
+  drawTree(s);
   drawPending(s);
   const why = s.nodes.filter((n) => failedLabel(label(s, n.id)) && s.feedback[String(n.id)])
     .sort((a, b) => (b.id === culprit) - (a.id === culprit));
@@ -332,6 +364,7 @@ function draw(s) {
       sel.appendChild(o);
     }
   }
+  if ((s.tree || {}).run !== answeredRun) said(""); // an answer is about the run it was sent to
   $("controls").hidden = !s.steer || gone;
   follow(s, false);
 }
@@ -341,8 +374,12 @@ let anchored = null;
 function drawPending(s) {
   // the run's time moves on between records, and while it is paused (its calls run on): count it on
   // here, as the terminal does (not in a replay or after the end)
-  const now = mode === "replay" || s.end || gone ? s.t : anchor[0] + (Date.now() - anchor[1]) / 1000;
+  const now = nowOf(s);
   $("clock").textContent = "t=" + sec(now) + "  tick " + s.n;
+  for (const t of document.querySelectorAll("#tree text.progress")) { // their seconds count on
+    t.textContent = fillProgress(JSON.parse(t.dataset.progress), now);
+  }
+  if (answeredAt && Date.now() - answeredAt > SAID_MS) said("");
   $("pendingh").textContent = s.pending_title || "pending calls"; // during a cleanup: its calls
   // answered while the run was paused (its leaf takes it at the next tick), or of a run that is gone
   const note = (c) => (c.answered !== undefined && c.answered !== null ? " · answered " + (c.answer || "")
@@ -415,10 +452,19 @@ function startReplay(s) {
   }
 }
 
+// the run's answer to a button, shown SAID_MS and only while the run it was sent to is shown
+let answeredAt = 0, answeredRun = null;
+function said(text, run) {
+  $("answer").textContent = text;
+  answeredAt = text ? Date.now() : 0;
+  if (text) answeredRun = run;
+}
+
 async function control(cmd) {
+  const run = last && last.tree ? last.tree.run : null;
   const res = await fetch("control", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(cmd) });
   const a = await res.json();
-  $("answer").textContent = (a.ok ? "ok: " : "refused: ") + a.answer;
+  if (!last || !last.tree || last.tree.run === run) said((a.ok ? "ok: " : "refused: ") + a.answer, run);
 }
 
 $("pause").onclick = () => control({ command: "pause" });

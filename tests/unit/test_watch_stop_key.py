@@ -30,7 +30,9 @@ def _type(keys, text):
 
 
 def test_colon_stop_sends_stop_to_the_run_shown():
-    view = LiveView(WatchState())
+    s = WatchState()
+    s.apply(tree(control=True))
+    view = LiveView(s)
     client = Client({"ok": True, "answer": "stopping: the running nodes are halted and their calls cancelled"})
     keys = Keys(view, client, threading.Event(), to=lambda: "/bmtree_1_2")
     _type(keys, ":stop\n")
