@@ -1,7 +1,7 @@
 """What a tree is doing right now, in words: for the reason of a run stopped from outside, or of
 a ``timeout`` that fired. The reason reaches a cleanup as ``ended_reason``, which may say it
 aloud, so it must read as a sentence: ``… while 'pick' was running (between attempts: attempt 1
-of 2 failed)``, not the node's own progress note (``run 1 of 2 ended in FAILURE``)."""
+of 2 failed)``, not the node's own progress note (``attempt 1 of 2 failed (why); the next in 10s``)."""
 from __future__ import annotations
 
 from typing import Any, List
@@ -24,8 +24,8 @@ def between(b: Any) -> str:
         failed = "attempt %d of %d failed" % (b.runs, b.times)
         if b.resume_at is None:  # the next attempt starts at the next tick
             return "between attempts: %s" % failed
-        said = b.feedback_message  # Retry's own: "run 1 of 5 ended in FAILURE (why); the next in 10s"
-        head, tail = "run %d of %d ended in FAILURE (" % (b.runs, b.times), "); the next in %gs" % b.delay
+        said = b.feedback_message  # Retry's own: "attempt 1 of 5 failed (why); the next in 10s"
+        head, tail = "%s (" % failed, "); the next in %gs" % b.delay
         why = said[len(head):-len(tail)] if said.startswith(head) and said.endswith(tail) else ""
         return "waiting %g s between attempts: %s%s" % (b.delay, failed, ": %s" % why if why else "")
     if isinstance(b, Repeat) and b.feedback_message:

@@ -60,7 +60,7 @@ _KEYS = {  # type -> (key, check, required); None: every record. A key that is n
              ("inputs", _mapping, False), ("blackboard", _mapping, False), ("nodes", _list, True),
              ("max_duration", _seconds, False), ("control", _flag, False), ("sim", _mapping, False),
              ("modules", _list, False)),
-    "tick": (("n", _count, False), ("changes", _list, True), ("loops", _list, False)),
+    "tick": (("n", _count, False), ("changes", _list, True), ("loops", _list, False), ("waits", _list, False)),
     "call_start": _CALL, "call_answer": _CALL, "call_end": _CALL[:4] + (("status", _text, True),) + _CALL[5:],
     "event": (("module", _text, False), ("event", _text, False), ("params", _mapping, False)),
     "notice": (("what", _text, True), ("text", _text, False), ("call_id", _text, False)),
@@ -180,7 +180,8 @@ def _nodes_problem(nodes: List[Any]) -> Optional[str]:
 
 
 def _rows_problem(rec: Dict[str, Any], ids: Optional[Collection[int]]) -> Optional[str]:
-    """A tick's ``changes`` ([id, status] or [id, status, why]) and ``loops`` ([id, element, of])."""
+    """A tick's ``changes`` ([id, status] or [id, status, why]), ``loops`` ([id, element, of]) and ``waits``
+    ([id, t]: a retry's next attempt)."""
     for row in rec["changes"]:
         if not (isinstance(row, list) and 2 <= len(row) <= 3 and _node(row[0], ids) and row[1] in STATUSES
                 and (len(row) == 2 or row[2] is None or isinstance(row[2], str))):
@@ -188,6 +189,9 @@ def _rows_problem(rec: Dict[str, Any], ids: Optional[Collection[int]]) -> Option
     for row in rec.get("loops") or []:
         if not (isinstance(row, list) and len(row) == 3 and _node(row[0], ids) and _count(row[1]) and _count(row[2])):
             return "a loop of the tick record is not [node id, element, of]: %s" % _shown(row)
+    for row in rec.get("waits") or []:
+        if not (isinstance(row, list) and len(row) == 2 and _node(row[0], ids) and _seconds(row[1])):
+            return "a wait of the tick record is not [node id, seconds]: %s" % _shown(row)
     return None
 
 

@@ -160,8 +160,9 @@ class RunStream(RunObserver):
         self.meta = dict(meta or {})
         self.run_id = run_id or "%s-%s" % (time.strftime("%Y%m%d-%H%M%S"), uuid.uuid4().hex[:6])
         self._ids: Dict[Any, int] = {}
-        self._loops: List[Tuple[Any, int]] = []  # (for_each behaviour, its id)
-        self._at: Dict[int, Tuple[int, int]] = {}  # for_each id -> (element, of) last written
+        self._loops: List[Tuple[Any, int]] = []  # (for_each, retry or repeat behaviour, its id)
+        self._at: Dict[int, Tuple[int, int]] = {}  # its id -> (element, attempt or run; of) last written
+        self._resume: Dict[int, float] = {}  # a retry's id -> when its next attempt starts, last written
         self._start = 0.0
         self._ticks = 0
         self._open = False
@@ -180,10 +181,11 @@ class RunStream(RunObserver):
         self._open = True
         nodes = node_table(root)
         self._ids = {b: i for i, b in enumerate(preorder(root))}
-        from coordinator.nodes.loops import ForEach
+        from coordinator.nodes.decorators import Retry
+        from coordinator.nodes.loops import ForEach, Repeat
 
-        self._loops = [(b, i) for b, i in self._ids.items() if isinstance(b, ForEach)]
-        self._at = {}
+        self._loops = [(b, i) for b, i in self._ids.items() if isinstance(b, (ForEach, Retry, Repeat))]
+        self._at, self._resume = {}, {}
         self._clock = ctx.clock
         record: Dict[str, Any] = {
             "v": VERSION, "type": "tree", "run": self.run_id, "t": 0.0, "started": time.time(),
@@ -197,7 +199,8 @@ class RunStream(RunObserver):
     def on_tick(self, root: Any, changes: List[Change], now: float) -> None:
         self._ticks += 1
         loops = self._moved() if self._loops else []
-        if changes or loops:
+        waits = self._waiting() if self._loops else []
+        if changes or loops or waits:
             ids = self._ids
             rows: List[list] = []
             for b, _old, new in changes:
@@ -213,22 +216,44 @@ class RunStream(RunObserver):
                       "n": self._ticks, "changes": rows}
             if loops:
                 record["loops"] = loops
+            if waits:
+                record["waits"] = waits
             self._emit("status", record)
         self.flush()
 
     def _moved(self) -> List[List[int]]:
-        """``[id, element, of]`` of each running for_each now at another element than last told
-        (element counted from 1); one that stopped is told again when it runs again."""
+        """``[id, element, of]`` of each running for_each now at another element than last told, and of
+        each running retry (repeat) at another attempt (run), counted from 1; one that stopped is told
+        again when it runs again."""
         out = []
         for b, i in self._loops:
             items = getattr(b, "items", None)
+            times = getattr(b, "times", None)
+            at: Optional[Tuple[int, int]] = None
             if b.status is Status.RUNNING and items:
                 at = (int(getattr(b, "i", 0)) + 1, len(items))
+            elif b.status is Status.RUNNING and isinstance(times, int) and not isinstance(times, bool) and times > 0:
+                at = (min(int(getattr(b, "runs", 0)) + 1, times), times)
+            if at is not None:
                 if self._at.get(i) != at:
                     self._at[i] = at
                     out.append([i, at[0], at[1]])
             else:
                 self._at.pop(i, None)
+        return out
+
+    def _waiting(self) -> List[List[Any]]:
+        """``[id, t]`` of each retry that began waiting its delay since last told: the run time its next
+        attempt starts (the viewers count down to it)."""
+        out: List[List[Any]] = []
+        for b, i in self._loops:
+            resume = getattr(b, "resume_at", None)
+            if b.status is Status.RUNNING and isinstance(resume, (int, float)):
+                if self._resume.get(i) != resume:
+                    self._resume[i] = resume
+                    out.append([i, self._t(resume)])
+            else:
+                self._resume.pop(i, None)
         return out
 
     def on_call_start(self, record: Any) -> None:

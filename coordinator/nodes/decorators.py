@@ -167,7 +167,7 @@ class Retry(Guarded):
         if self.decorated.status == Status.FAILURE:
             self.runs += 1
             if self.runs < self.times:
-                said = "run %d of %d ended in %s" % (self.runs, self.times, Status.FAILURE.value)
+                said = "attempt %d of %d failed" % (self.runs, self.times)
                 if not self.delay:
                     self.number(self.index, self.runs)
                     return self.rerun(said)
@@ -178,7 +178,7 @@ class Retry(Guarded):
                 self.ctx.wake_after(self.delay)
                 self.feedback_message = "%s; the next in %gs" % (said, self.delay)
                 return Status.RUNNING
-            self.feedback_message = "failed in run %d of %d" % (self.runs, self.times)  # not the last rerun's
+            self.feedback_message = "failed in attempt %d of %d" % (self.runs, self.times)  # not the last rerun's
         return self.decorated.status
 
 

@@ -140,7 +140,7 @@ def test_retry_says_how_far_it_got(sim_defs):
     run = t.run()
     assert run.statuses("go to the kitchen")[-1] == "FAILURE"
     retry = [b for b in run.result.history if b.name == "go to the kitchen"][0]
-    assert retry.feedback_message == "failed in run 3 of 3"
+    assert retry.feedback_message == "failed in attempt 3 of 3"
 
 
 def test_max_duration_ends_in_failure_with_its_reason(sim_defs):
