@@ -69,7 +69,12 @@ def _warn_without_blackboard() -> None:
         log.debug("asking for the Blackboard node: %s", exc)
         return
     if silent:   # registered, but not reachable from here: saying "none is running" would be false
-        err("warning: %s: the results of this run's calls are not stored" % silent_blackboards(silent))
+        from comm.address import REFUSED
+
+        gone = any(failure == REFUSED for _uri, failure in silent.values())
+        err("warning: %s: %s" % (silent_blackboards(silent), "the results of this run's calls are not stored" if gone
+                                 else "it may still store the results of this run's calls (it connects to the "
+                                      "modules itself), but a recall could not get its answers here"))
         return
     err("warning: no Blackboard node is running on this master: the results of this run's calls are not stored "
         "(start one: bmtree-blackboard, or roslaunch bmtree blackboard.launch)")

@@ -20,21 +20,28 @@ __all__ = ["RunLiveness", "gone_record", "END_TICKS_GRACE", "ASK_EVERY"]
 END_TICKS_GRACE = 1.0
 
 
-def gone_record(state: WatchState, node: str, reason: str, alive: Optional[float] = None) -> Dict[str, Any]:
+def gone_record(state: WatchState, node: str, reason: str, alive: Optional[float] = None,
+                unreached: Optional[float] = None) -> Dict[str, Any]:
     """The watch's own ``end`` of a run whose process is gone before its end (killed outright, crashed):
     status ``UNFINISHED``, ``gone`` true; never on the run stream, which that run can no longer write.
     ``alive``: the run's time when its process was found gone (:meth:`WatchState.now` then), its
     ``duration`` (else the time of its last record); the last tick is the run's last tick record's
-    (a snapshot carries it as ``tick_t``), not the time the watch caught up."""
+    (a snapshot carries it as ``tick_t``), not the time the watch caught up. ``unreached``: the seconds the
+    run's node had not answered this watch before it was found gone (a dropped link): the run may have ended
+    well meanwhile, its end record lost to this watch, and nothing is claimed of its calls."""
     started = state.tree.get("started")
     wall = ""
     if isinstance(started, (int, float)):
         wall = " (%s)" % time.strftime("%H:%M:%S", time.localtime(started + state.tick_t))
     lived = max(state.t, alive if alive is not None else state.t)
+    said = "%s; it did not stop its calls" % reason
+    if unreached is not None:
+        said = ("this watch could not reach it for %d s before, so the run may have ended meanwhile (well or not): its "
+                "end never reached this watch; its result is in its run log, on the machine it ran on (bmtree runs, "
+                "bmtree replay there)" % unreached)
     return {"v": 1, "type": "end", "run": state.run, "t": round(lived, 6), "status": "UNFINISHED", "gone": True,
             "reason": "the run (pid %s, node %s) is gone, its last tick (%d) at %.3fs%s, found gone at about %.1fs: "
-                      "%s; it did not stop its calls" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t,
-                                                         wall, lived, reason),
+                      "%s" % (state.tree.get("pid", "?"), node, state.tick, state.tick_t, wall, lived, said),
             "ticks": state.tick, "duration": round(lived, 6), "calls": state.calls_total}
 
 
@@ -102,12 +109,15 @@ class RunLiveness:
             if self.watcher.nodes.get(run) != node:
                 return
             alive = self.state.now()  # its process is found gone now, not at its last record
+            asked = self.state.asked
+            # it had not answered this watch before (a dropped link): it may well have ended meanwhile
+            unreached = time.monotonic() - asked[1] if self.state.silent and asked is not None else None
         # an ending run leaves right after its (latched) end: give it the time to arrive
         if self.state.wait(lambda s: s.end is not None or s.run != run, END_TICKS_GRACE):
             return
         with self.state.lock:
             if self.state.end is None and self.state.run == run:
-                self.watcher.apply(gone_record(self.state, node, reason, alive))
+                self.watcher.apply(gone_record(self.state, node, reason, alive, unreached))
 
     def _ask_loop(self) -> None:
         try:

@@ -50,7 +50,9 @@ class StopCalls:
         span = self._spans.get(of_cleanup)
         if span is None:
             self._since.append((call_id, of_cleanup))
-        elif span[0] < t <= span[1]:  # come after the tick record that halted it
+        elif span[0] < t:  # come after the tick record that halted it: once root (the cleanup) was halted,
+            # nothing but that stop halts a call of it, whether its record's time is before that tick's or
+            # just after (the halt's cancels are sent as the tick ends: 2 of 6 Ctrl-C were "halted by the tree")
             (self.cut if of_cleanup else self.stopped).add(call_id)
 
     def tick(self, invalid: Collection[Any], root: Any, cleanup: Any, before: float, t: float) -> None:
@@ -88,10 +90,12 @@ class StopCalls:
         one of the stop's only at the tick record that halted it (``tick_t``: the last one's time), and
         how the run was stopped at its end (a line printer holds its line until then)."""
         cid = str(c.get("call_id"))
-        if c.get("status") != "halted" or end is not None:
+        if c.get("status") != "halted":
             return True
         if cid in self.stopped:
-            return bool(run_stop_status(end, blackboard))
+            return end is not None or bool(run_stop_status(end, blackboard))
         if cid in self.cut:
-            return False
+            return end is not None
+        if end is not None:   # the tick record that halted it may come after the end (another topic)
+            return not self.waiting(cid)
         return not self.waiting(cid) or tick_t > float(c.get("t") or 0.0)

@@ -261,7 +261,9 @@ class ModuleNode:
                            rospy.get_node_uri(), getattr(self.impl, "call_limit", None))
         patiently(lambda: rospy.set_param(self._param, ann))
         watch_master().keep_param(self._param, lambda: None if self.kicked_out else ann)
-        rospy.loginfo("basic module %r %s", self.definition.name, serving_line(self.definition))
+        rospy.loginfo("basic module %r %s%s", self.definition.name, serving_line(self.definition),
+                      "; cancels the calls of a caller that has not answered for %g s (unreachable_caller)"
+                      % self.unreachable_caller if self.unreachable_caller else "")
         injected = _injected(self.definition.name, self.impl, faults)
         if injected:
             log.info("%s", injected)

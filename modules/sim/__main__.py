@@ -10,6 +10,7 @@ import sys
 from typing import List, Optional
 
 from comm.nodeopts import parse_node_args
+from modules.callers import unreachable_seconds
 from modules.definition import load_definition
 from modules.node import run_module
 from modules.sim import DEFAULT_WORLD, SIM_CLASSES, World, WorldError, definition_path
@@ -19,6 +20,9 @@ def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m modules.sim", description="Run a simulated basic module.")
     p.add_argument("module", nargs="?", choices=sorted(SIM_CLASSES))
     p.add_argument("--world", default=DEFAULT_WORLD, help="world YAML (default, or '': the shipped house)")
+    p.add_argument("--unreachable-caller", type=unreachable_seconds, metavar="SECONDS",
+                   help="cancel the calls of a caller that has not answered for this long (a dropped link, a stopped "
+                        "process), as bmtree-module does (default 0: never; or ~unreachable_caller)")
     return p
 
 
@@ -35,7 +39,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     except WorldError as exc:
         sys.stderr.write("error: %s\n" % exc)
         return 2
-    return run_module(load_definition(definition_path(args.module)), SIM_CLASSES[args.module](world))
+    return run_module(load_definition(definition_path(args.module)), SIM_CLASSES[args.module](world),
+                      unreachable_caller=args.unreachable_caller)
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ def test_the_call_of_a_coordinator_that_stopped_answering_is_cancelled_and_said_
             run.proc.send_signal(signal.SIGCONT)
     assert marker.read_text() == "work: sleep returned False, cancelled True; motors stopped\n"
     said = open(log).read()
+    assert "; cancels the calls of a caller that has not answered for 2 s (unreachable_caller)" in said, said
     assert re.search(r"cancelled call \w+ of module stopper: its caller /bmtree_\w+ has not answered for [2-9]s "
                      r"\(its machine cannot be reached, or its process is stopped\)", said), said
     assert run.proc.returncode == 1, text
@@ -53,3 +54,14 @@ def test_a_bad_unreachable_caller_is_refused_at_start(tmp_path):
                           "x.py:X", "--unreachable-caller", "0.2"], capture_output=True, text=True, timeout=60)
     assert got.returncode == 2, got.stderr
     assert "expected 0 (never) or at least 1 seconds, got 0.2" in got.stderr and "Traceback" not in got.stderr
+
+
+def test_the_simulated_modules_take_the_option_too(tmp_path):
+    """The README says python -m modules.sim takes it: it refused it (unrecognized arguments)."""
+    import subprocess
+    import sys
+
+    got = subprocess.run([sys.executable, "-m", "modules.sim", "vision", "--unreachable-caller", "0.2"],
+                         capture_output=True, text=True, timeout=60)
+    assert got.returncode == 2, got.stderr
+    assert "expected 0 (never) or at least 1 seconds, got 0.2" in got.stderr and "unrecognized" not in got.stderr
