@@ -6,9 +6,11 @@ or from the run's own stream in-process) and can be caught up at once from a
 (:class:`SnapshotSink`) so that a watcher that attaches mid-run sees the present
 state without the history. Plain data only: the terminal and web views draw it.
 
-Calls the run's stop from outside halted (Ctrl-C, ``--max-duration``) and those of a tree's cleanup
-cut short are shown as ``bmtree run``'s summary and ``bmtree replay`` show them (:meth:`WatchState.call_label`,
-:mod:`coordinator.watchstops`), and the top node of a tree with ``cleanup:`` halted so as the run's status.
+What the views show of it is read through two mixins kept in their own modules: each node's shown
+status, name and the calls as shown (:class:`coordinator.watchlabels.WatchLabels`: the calls the run's
+stop from outside halted as ``bmtree run``'s summary shows them), and what the ticks and control answers
+say of single nodes besides their statuses: a loop's or a retry's progress, the steering marks
+(:class:`coordinator.watchmarks.WatchMarks`).
 
 One master may carry two runs' streams (a forgotten terminal): the state stays on the
 first run it shows (or the one ``only`` names, ``watch --run``) and keeps the other runs'
@@ -19,25 +21,22 @@ The topics are ordered each on its own, not among them: a snapshot may come afte
 of another topic, and records it holds may come after it. The live records are kept a while and
 those a snapshot does not hold (:class:`coordinator.watchruns.Cover`) applied again over it; those
 it holds that come later are left out.
-
-Besides the statuses, it tells per node what the views show on it (:meth:`WatchState.progress`,
-:meth:`WatchState.note`): a for_each's element, a retry's attempt (counted from its ticks: a child
-that failed while the retry runs on), how long a ``wait`` has waited, and from the control answers
-the breakpoints, a node a breakpoint holds and outcomes forced by control.
 """
 from __future__ import annotations
 
-import re
 import threading
 import time
 from collections import deque
 from typing import Any, Callable, Deque, Dict, List, Optional, Set, Tuple
 
-from coordinator.runevents import IncludeArgs, cleanup_said, status_word
+from coordinator.runevents import IncludeArgs, cleanup_said
 from coordinator.runrecords import parse_record, record_problem, version_problem
 from coordinator.runstream import VERSION
+from coordinator.watchlabels import WatchLabels
+from coordinator.watchmarks import FORCED, HELD, OUTCOMES, WatchMarks, fill
+from coordinator.watchmarks import WAITING_KINDS as WAITING_KINDS  # (importable from here, as before)
 from coordinator.watchruns import Cover, OtherRuns, run_matches
-from coordinator.watchstops import StopCalls, run_stop_status
+from coordinator.watchstops import StopCalls
 
 __all__ = ["WatchState", "SNAPSHOT_VERSION", "SILENT_AFTER", "SILENCE_NOTES", "HELD", "FORCED", "fill"]
 
@@ -47,31 +46,12 @@ SILENT_AFTER = 3.0
 SILENCE_NOTES = ("run_silent", "run_answers")  # the watch's own notices of it (``what``)
 _WHY_SILENT = "its machine unreachable, or its process stopped"
 KEEP = 200  # finished calls, events and control actions kept (the latest)
-OUTCOMES = ("SUCCESS", "FAILURE")
 RECENT = 1000  # live records kept to apply again over a snapshot that came after them (another topic)
-HELD = "held at breakpoint"   # a node a breakpoint holds: RUNNING, but it has not started
-FORCED = "forced"             # an outcome a ``force`` command gave, not the node's own
-#: a retry's own words end in "run 2 of 3"; the viewers call its runs attempts, as its reason does
-_RETRY_RUN = re.compile(r"\brun (\d+) of (\d+)")
-#: the leaves whose running time the views show (how long it has waited so far)
-WAITING_KINDS = ("wait", "wait_event")
 
 
-def fill(progress: Dict[str, Any], now: float) -> str:
-    """A node's progress (:meth:`WatchState.progress`) in words at the run's time ``now``: its ``{s}``,
-    the seconds since ``since`` (or until ``until``), as ``0.4 s``."""
-    text = str(progress.get("text") or "")
-    if "{s}" not in text:
-        return text
-    if progress.get("until") is not None:
-        left = max(0.0, float(progress["until"]) - now)
-    else:
-        left = max(0.0, now - float(progress.get("since") or now))
-    return text.replace("{s}", "%.1f s" % left)
-
-
-class WatchState:
-    """One run as seen from outside; every method is thread-safe."""
+class WatchState(WatchMarks, WatchLabels):
+    """One run as seen from outside; every method is thread-safe. Its state is all here; the mixins
+    (:class:`WatchMarks`, :class:`WatchLabels`) only hold methods, kept in their own modules."""
 
     def __init__(self, only: str = "", recent: int = RECENT) -> None:
         self.lock = threading.RLock()
@@ -122,21 +102,7 @@ class WatchState:
         self.blackboard: Dict[str, Any] = {}
         #: the values each include's arguments had (its label says them: ``fetch_item(item="milk")``)
         self.args = IncludeArgs({})
-        #: each running ``retry``'s attempt, from the ticks: id -> [attempt (from 1), the run's time its
-        #: last attempt failed while it waits to start the next one, else None]
-        self.attempts: Dict[int, List[Any]] = {}
-        #: a running retry's next attempt time, when the run says it (a tick's ``waits``: [[id, t]])
-        self.waits: Dict[int, float] = {}
-        #: when each running node went RUNNING (the run's time of that tick)
-        self.since: Dict[int, float] = {}
-        self.changed_t: Dict[int, float] = {}  # the run's time of each node's last change
-        #: steering, from the control answers: the nodes with a breakpoint, those a breakpoint holds
-        #: (id -> [its time, when the run was let go on or None]), forces to come (id -> [outcome, time])
-        #: and outcomes forced (id -> outcome; until the node runs again)
-        self.breaks: Set[int] = set()
-        self.held: Dict[int, List[Any]] = {}
-        self.forcing: Dict[int, List[Any]] = {}
-        self.forced: Dict[int, str] = {}
+        self._reset_marks()  # retries' attempts, running times, steering marks (:class:`WatchMarks`)
         #: the run's live records since it was shown (the latest), applied again over a snapshot that
         #: came after them without them (topics are ordered each on its own)
         self._recent: Deque[Dict[str, Any]] = deque(maxlen=self.recent)
@@ -309,120 +275,7 @@ class WatchState:
             self.t = t
             self._seen = time.monotonic()
 
-    # what the ticks and the control answers say of single nodes -----------------------------------
-    def _kinds(self) -> Tuple[Dict[int, str], Dict[int, Any]]:
-        """Each node's kind and parent (cached per tree)."""
-        cached = getattr(self, "_kind_cache", None)
-        if cached is None or cached[0] is not self.nodes:
-            cached = self._kind_cache = (self.nodes, {n.get("id"): str(n.get("kind") or "") for n in self.nodes},
-                                         {n.get("id"): n.get("parent") for n in self.nodes})
-        return cached[1], cached[2]
-
-    def _said(self, i: int, text: str) -> str:
-        """A node's failure as the viewers say it: a retry's ``failed in run 2 of 2`` is its attempt 2 of 2."""
-        if text and self._kinds()[0].get(i) == "retry":
-            return _RETRY_RUN.sub(r"attempt \1 of \2", text)
-        return text
-
-    def _changed(self, i: int, old: str, new: str, failed_under: List[int]) -> None:
-        """One change of a tick (at ``tick_t``): since when a node runs, a retry's attempt, a forced outcome,
-        a held node that ended (halted) without starting."""
-        kinds, parents = self._kinds()
-        self.changed_t[i] = self.tick_t
-        if new == "RUNNING":
-            if old != "RUNNING":
-                self.since[i] = self.tick_t
-                self.forced.pop(i, None)   # it runs again: its next outcome is its own
-                if kinds.get(i) == "retry":
-                    self.attempts[i] = [1, None]
-                    self.waits.pop(i, None)
-        else:
-            self.since.pop(i, None)
-            if kinds.get(i) == "retry":
-                self.attempts.pop(i, None)
-                self.waits.pop(i, None)
-            if i in self.held and self.tick_t > float(self.held[i][0]):  # halted or forced while held
-                del self.held[i]
-        if new in OUTCOMES:
-            force = self.forcing.get(i)
-            if force is not None and force[0] == new and self.tick_t >= float(force[1]):
-                self.forced[i] = new
-                del self.forcing[i]
-        up = parents.get(i)
-        if up is not None and kinds.get(up) == "retry":
-            if new == "FAILURE":
-                failed_under.append(up)
-            elif new == "RUNNING" and up in self.attempts:   # the next attempt started
-                self.attempts[up][1] = None
-                self.waits.pop(up, None)
-
-    def _attempted(self, failed_under: List[int]) -> None:
-        """Retries whose child failed in this tick and that still run: their next attempt, now or after
-        their delay (the child does not run meanwhile)."""
-        _kinds, parents = self._kinds()
-        for r in dict.fromkeys(failed_under):
-            if self.status.get(r) != "RUNNING" or r not in self.attempts:
-                continue
-            running = any(self.status.get(c) == "RUNNING" for c, up in parents.items() if up == r)
-            self.attempts[r] = [int(self.attempts[r][0]) + 1, None if running else self.tick_t]
-
-    def _let_go(self) -> None:
-        """Held nodes whose run went on (resumed, stepped) before the tick just applied: they start now."""
-        for i, (_at, gone_on) in list(self.held.items()):
-            if gone_on is not None and self.tick_t > float(gone_on):
-                del self.held[i]
-                if self.status.get(i) == "RUNNING":
-                    self.since[i] = self.tick_t
-
-    def named(self, name: Any, every: bool = False) -> List[int]:
-        """The ids a control command's ``node`` names, as the run reads it: the nodes so named, else
-        ``NAME@ID`` (``@ID``) the node of that id. Several so named: all of them with ``every`` (a clear),
-        else the one that is not the top of a tree with ``cleanup:`` (never steered), if one."""
-        if not isinstance(name, str):
-            return []
-        ids = [n.get("id") for n in self.nodes if n.get("name") == name]
-        if not ids:
-            head, at, num = name.rpartition("@")
-            if at and num.isdecimal() and num.isascii() and len(num) <= 9:
-                i = int(num)
-                if any(n.get("id") == i for n in self.nodes) and (not head or self._node_name(i) == head):
-                    return [i]
-            return []
-        if len(ids) > 1 and not every:
-            top = self.parts()[0]
-            ids = [i for i in ids if i != top]
-            return ids if len(ids) == 1 else []
-        return ids
-
-    def _steered(self, rec: Dict[str, Any]) -> None:
-        """What a control answer says of single nodes: a breakpoint set or cleared, one that holds a node
-        (until the run goes on: a resume, a step, a stop), an outcome to force the next time it is ticked."""
-        if not rec.get("ok"):
-            return
-        what = rec.get("command")
-        args = rec.get("args") if isinstance(rec.get("args"), dict) else {}
-        t = float(rec.get("t") or 0.0)
-        if what in ("break", "breakpoint"):
-            for i in self.named(args.get("node")):
-                self.breaks.add(i)
-                if what == "breakpoint":  # it holds the node (RUNNING: its parent waits) until the run goes on
-                    self.held[i] = [t, None]
-        elif what == "clear":
-            self.breaks.difference_update(self.named(args.get("node"), every=True))
-        elif what == "force" and str(args.get("outcome", "")).upper() in OUTCOMES:
-            outcome = str(args.get("outcome")).upper()
-            for i in self.named(args.get("node")):
-                if self.status.get(i) == outcome and self.changed_t.get(i, -1.0) >= t:  # its tick came first
-                    self.forced[i] = outcome
-                    self.forcing.pop(i, None)
-                else:
-                    self.forcing[i] = [outcome, t]
-        if rec.get("paused") is False or what == "step":  # the run goes on: a held node starts at its next tick
-            for held in self.held.values():
-                if held[1] is None and t > float(held[0]):
-                    held[1] = t
-            self._let_go()
-
+    # the runs shown, the watch's own notices, snapshots -----------------------------------------
     def _shows(self, run: str) -> bool:
         """Whether a tree record of ``run`` is (or becomes) the one shown: the one ``only`` names,
         else the first one seen, and another one only once the one shown has ended."""
@@ -487,31 +340,6 @@ class WatchState:
         finally:
             self._replaying = False
 
-    def _load_marks(self, rec: Dict[str, Any]) -> None:
-        """A snapshot's per-node extras (a newer run's; an older one's steering marks from its control answers)."""
-        known = {n.get("id") for n in self.nodes}
-
-        def ids(value: Any) -> Dict[int, Any]:
-            items = value.items() if isinstance(value, dict) else ((k, True) for k in value or [])
-            return {int(k): v for k, v in items if str(k).lstrip("-").isdigit() and int(k) in known}
-
-        self.since = {k: float(v) for k, v in ids(rec.get("since")).items()}
-        self.attempts = {k: [int(v[0]), None if v[1] is None else float(v[1])] for k, v in ids(rec.get("attempts")).items()}
-        self.waits = {k: float(v) for k, v in ids(rec.get("waits")).items()}
-        self.changed_t = {k: float(v) for k, v in ids(rec.get("changed_t")).items()}
-        if "breaks" in rec:
-            self.breaks = set(ids(rec.get("breaks")))
-            self.held = {k: [float(v[0]), None if v[1] is None else float(v[1])] for k, v in ids(rec.get("held")).items()}
-            self.forcing = {k: [str(v[0]), float(v[1])] for k, v in ids(rec.get("forcing")).items()}
-            self.forced = {k: str(v) for k, v in ids(rec.get("forced")).items() if v in OUTCOMES}
-        else:  # a snapshot of an older bmtree: what its control answers say
-            self.breaks, self.held, self.forcing, self.forced = set(), {}, {}, {}
-            for c in self.control:
-                self._steered(c)
-            for i in list(self.forcing):  # forced since (a FAILURE says so)
-                if self.feedback.get(i, "").startswith("forced to "):
-                    self.forced[i] = self.forcing.pop(i)[0]
-
     def heard(self, node: str, answered: bool, now: Optional[float] = None) -> bool:
         """Whether the run's node answered the watch's question (about once a second,
         :meth:`coordinator.watchlive.RunLiveness.ask`): an idle run sends no records either, only the
@@ -568,14 +396,7 @@ class WatchState:
                     "blackboard": dict(self.blackboard), "written": list(self.written), "paused": self.paused,
                     "end": self.end, "args": {str(k): v for k, v in self.args.values.items()},
                     "stopped": sorted(self.stops.stopped), "cut": sorted(self.stops.cut),
-                    # (newer fields: how long nodes run, retries' attempts, steering marks)
-                    "since": {str(k): v for k, v in self.since.items() if self.status.get(k) == "RUNNING"},
-                    "changed_t": {str(k): v for k, v in self.changed_t.items() if k in self.forcing},
-                    "attempts": {str(k): v for k, v in self.attempts.items()},
-                    "waits": {str(k): v for k, v in self.waits.items()},
-                    "breaks": sorted(self.breaks), "held": {str(k): v for k, v in self.held.items()},
-                    "forcing": {str(k): v for k, v in self.forcing.items()},
-                    "forced": {str(k): v for k, v in self.forced.items()}}
+                    **self._marks_snapshot()}  # (newer fields: how long nodes run, retries' attempts, steering marks)
 
     def view(self) -> Dict[str, Any]:
         """Everything a view draws, as plain data (the web page's JSON): the snapshot, with the
@@ -619,149 +440,6 @@ class WatchState:
             if self.end is not None or not self.nodes:
                 return self.t
             return self.t + max(0.0, time.monotonic() - self._seen)
-
-    @property
-    def steerable(self) -> bool:
-        """Whether the viewers offer control commands now: a run is shown, it has not ended, and its
-        ``tree`` record said it takes them (``--control``; a run of an older bmtree does not say: it may).
-        False while no run is shown: nothing would take them."""
-        return bool(self.nodes) and self.end is None and self.tree.get("control") is not False
-
-    def no_steering(self) -> str:
-        """Why the viewers offer no control commands now ('' when they do)."""
-        if not self.nodes:
-            return "no run is shown yet: the keys steer a run started with --control once one is shown"
-        if self.tree.get("control") is False:
-            return "this run takes no commands: it was started without --control"
-        if self.end is not None:
-            return "the run has ended: it takes no more commands"
-        return ""
-
-    def note(self, i: int) -> str:
-        """What the run's steering says of a node's shown status: held at a breakpoint (RUNNING, not
-        started), or an outcome forced by control (also once reset: ``was SUCCESS``), else ''."""
-        with self.lock:
-            status = self.status.get(i, "INVALID")
-            if i in self.held and status == "RUNNING":
-                return HELD
-            if i in self.forced and self.label(i) in (self.forced[i], "was " + self.forced[i]):
-                return FORCED
-            return ""
-
-    def progress(self, i: int) -> Optional[Dict[str, Any]]:
-        """Where a running loop or wait is, for the views (``text``, with ``{s}`` the seconds since ``since``
-        or until ``until``: :func:`fill`): a for_each's ``item 2 of 3``, a retry's ``attempt 2 of 3`` (or,
-        between attempts, ``waiting {s} before attempt 2``, ``next attempt in {s} (2 of 3)``), a repeat's
-        ``run 2 of 3`` (when the run says it), a ``wait``/``wait_event``'s ``waited {s}``; None else."""
-        with self.lock:
-            if self.status.get(i) != "RUNNING" or self.note(i):
-                return None
-            kind = self._kinds()[0].get(i, "")
-            at = self.loops.get(i)
-            if kind == "retry" and (at is not None or i in self.attempts):
-                n, waiting = (int(at[0]), None) if at is not None else (int(self.attempts[i][0]), self.attempts[i][1])
-                of = " of %d" % int(at[1]) if at is not None else ""
-                if i in self.waits:
-                    return {"text": "next attempt in {s} (%d%s)" % (n, of), "until": self.waits[i]}
-                if waiting is not None:
-                    return {"text": "waiting {s} before attempt %d%s" % (n, of), "since": waiting}
-                return {"text": "attempt %d%s" % (n, of)}
-            if at is not None:
-                return {"text": "%s %d of %d" % ("run" if kind == "repeat" else "item", at[0], at[1])}
-            if kind in WAITING_KINDS and i in self.since:
-                return {"text": "waited {s}", "since": self.since[i]}
-            return None
-
-    def label(self, i: int) -> str:
-        """A node's shown status: RUNNING, SUCCESS, FAILURE, HALTED (a running node its parent
-        stopped), ``was SUCCESS`` / ``was FAILURE`` (it ended so and was reset since: a selector
-        clears the children it moved past, a stopped tree its finished nodes) or '' (never ticked).
-        The top node of a tree with ``cleanup:`` stands for the run: halted (root was stopped from
-        outside, then the cleanup ran), it shows the run's status, INTERRUPTED for a Ctrl-C
-        (``bmtree run`` and ``replay`` print it so: :func:`coordinator.runevents.halted_word`)."""
-        s = self.status.get(i, "INVALID")
-        if s == "INVALID":
-            if self.halted.get(i):
-                top = self.parts()[0]
-                stopped = run_stop_status(self.end, self.blackboard) if top is not None and i == top else ""
-                return status_word(stopped) if stopped else "HALTED"
-            return "was %s" % self.last[i] if i in self.last else ""
-        return s
-
-    def call_label(self, c: Dict[str, Any]) -> Tuple[str, str]:
-        """A finished call's (status, error) as shown: ``interrupted`` (``halted  stopped after 60 s``)
-        for one the stop from outside halted, why the cleanup was cut short for one of its calls halted
-        then, as ``bmtree run``'s summary and ``bmtree replay`` say (:mod:`coordinator.watchstops`)."""
-        with self.lock:
-            return self.stops.label(c, self.end, self.blackboard)
-
-    def call_settled(self, c: Dict[str, Any]) -> bool:
-        """Whether :meth:`call_label` of a finished call is final (``--plain`` holds its line until then)."""
-        with self.lock:
-            return self.stops.settled(c, self.end, self.blackboard, self.tick_t)
-
-    def shown_calls(self) -> List[Dict[str, Any]]:
-        """The finished calls kept, each with the status and error :meth:`call_label` shows."""
-        with self.lock:
-            out = []
-            for c in self.calls:
-                status, error = self.call_label(c)
-                same = status == str(c.get("status")) and error == str(c.get("error") or "")
-                out.append(c if same else dict(c, status=status, error=error))
-            return out
-
-    def _node_name(self, i: int) -> str:
-        names = getattr(self, "_names", None)
-        if names is None or names[0] is not self.nodes:
-            names = self._names = (self.nodes, {n.get("id"): str(n.get("name", "?")) for n in self.nodes})
-        return names[1].get(i, "?")
-
-    def name(self, i: int) -> str:
-        """A node's name as shown: an include's with the values its arguments had when it started
-        (``fetch_item(item="milk")``, not ``fetch_item(item=$item)``), each value cut to 40 characters."""
-        return self.args.name(i, self._node_name(i)) if i in self.args.values else self._node_name(i)
-
-    @property
-    def cleanup_ids(self) -> Set[int]:
-        """The ids of the tree's cleanup (the second node under its ``with_cleanup`` top node); none
-        without ``cleanup:``."""
-        with self.lock:
-            if self._cleanup is None:
-                under: Set[int] = set()
-                todo = [self.parts()[2]] if self.parts()[2] is not None else []
-                while todo:
-                    i = todo.pop()
-                    under.add(i)
-                    todo.extend(n.get("id") for n in self.nodes if n.get("parent") == i and n.get("id") not in under)
-                self._cleanup = under
-            return self._cleanup
-
-    def _top(self) -> Any:
-        return next((n.get("id") for n in self.nodes if n.get("parent") is None), None)
-
-    def parts(self) -> Tuple[Any, Any, Any]:
-        """The ids of a tree's ``with_cleanup`` top node, of its root and of its cleanup's top node;
-        (None, None, None) for a tree without ``cleanup:``."""
-        with self.lock:
-            if self._parts is None:
-                top = [n for n in self.nodes if n.get("parent") is None]
-                below = [n.get("id") for n in self.nodes if top and n.get("parent") == top[0].get("id")]
-                self._parts = ((top[0].get("id"), below[0], below[1]) if top and top[0].get("kind") == "with_cleanup"
-                               and len(below) == 2 else (None, None, None))
-            return self._parts
-
-    def pending_title(self) -> str:
-        """The pending calls' panel title: during a tree's cleanup, whose calls they are (``pending
-        calls of the cleanup (root stopped)``)."""
-        with self.lock:
-            mine = [c for c in self.pending.values() if c.get("node") in self.cleanup_ids]
-            if not mine:
-                return "pending calls"
-            ended = self.blackboard.get("ended")
-            how = " (root %s)" % ended if isinstance(ended, str) and ended else ""
-            if len(mine) == len(self.pending):
-                return "pending calls of the cleanup%s" % how
-            return "pending calls (%d of the cleanup%s)" % (len(mine), how)
 
     def wait(self, predicate: Callable[[WatchState], bool], timeout: float) -> bool:
         """Block until ``predicate(self)`` holds (True) or ``timeout`` passes (False)."""

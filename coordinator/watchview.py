@@ -286,7 +286,7 @@ class LinePrinter:
             if not p:
                 continue
             said[i] = str(p.get("text"))
-            if self._progress.get(i) == said[i] or said[i] == "attempt 1":
+            if self._progress.get(i) == said[i] or said[i] == "attempt 1" or said[i].startswith("attempt 1 of "):
                 continue
             text = fill(p, t) if p.get("until") is not None else said[i].replace("{s}", "its delay")
             out.append("[%7.3fs] %-9s %s: %s" % (t, {"retry": "attempt", "repeat": "run"}.get(kind, "item"),

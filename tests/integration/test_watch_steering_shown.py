@@ -69,11 +69,11 @@ def test_attempts_breakpoints_and_forced_outcomes_are_shown(tmp_path):
         term.wait_screen("- ● announce")
         wait_until(driver, lambda d: node(d, "announce", "break") == "1")
         # the retry between its attempts (its delay), then its second attempt, with the wait's time
-        shown = term.wait_screen("keep trying [retry]  RUNNING  waiting", "before attempt 2")
+        shown = term.wait_screen("keep trying [retry]  RUNNING  next attempt in", "(2 of 2)")
         assert "x one try [sequence]  was FAILURE" in shown or "one try" in shown, shown
-        wait_until(driver, lambda d: "before attempt 2" in node(d, "keep trying", "text"))
-        shown = term.wait_screen("keep trying [retry]  RUNNING  attempt 2", "try  RUNNING  waited ")
-        wait_until(driver, lambda d: "retry · RUNNING|attempt 2" in node(d, "keep trying", "text"))
+        wait_until(driver, lambda d: "next attempt in" in node(d, "keep trying", "text"))
+        shown = term.wait_screen("keep trying [retry]  RUNNING  attempt 2 of 2", "try  RUNNING  waited ")
+        wait_until(driver, lambda d: "retry · RUNNING|attempt 2 of 2" in node(d, "keep trying", "text"))
         wait_until(driver, lambda d: "wait · RUNNING|waited " in node(d, "try", "text"))
         # given up: its attempts called so; the next child waits
         shown = term.wait_screen("FAILURE  failed in attempt 2 of 2", "rest  RUNNING  waited ")
@@ -98,12 +98,13 @@ def test_attempts_breakpoints_and_forced_outcomes_are_shown(tmp_path):
         assert "announce  SUCCESS" in shown and "(held at breakpoint)" not in shown, shown
         assert plain.wait(60) == 0
         said = seen.all_text()
-        for line in ("attempt   keep trying: attempt 2", "FAILURE   keep trying (failed in attempt 2 of 2)",
+        for line in ("attempt   keep trying: attempt 2 of 2", "FAILURE   keep trying (failed in attempt 2 of 2)",
                      "SUCCESS   rest (forced)", "RUNNING   announce (held at breakpoint)"):
             assert line in said, said
         # its delay: a line of its own, or the watch's catching up said it (a watch that attached late)
-        assert ("attempt   keep trying: waiting its delay before attempt 2" in said
-                or "keep trying RUNNING (waiting its delay before attempt 2)" in said), said
+        assert ("attempt   keep trying: next attempt in " in said
+                or "keep trying RUNNING (next attempt in " in said), said
+        assert "keep trying: attempt 1" not in said, said   # its first attempt is its RUNNING line
         assert "Traceback" not in said
     finally:
         driver.quit()
