@@ -187,10 +187,10 @@ def test_ctrl_c_cancels_and_cleans_up(slow_world):
     import socket
 
     proc, seen = _driving(slow_world)
-    uri = next(line.split("master at ")[1] for line in seen.splitlines() if "master at " in line)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 3 and "interrupted" in err, seen + out + err
+    uri = next(line.split("master at ")[1] for line in err.splitlines() if "master at " in line)  # start-up: stderr
     # what it did, why it ended and where its log is, as at a normal end
     assert "reason: interrupted while 'navigation.go_to' was running" in out, out
     assert "navigation.go_to           interrupted" in out and "run log: " in out and "module logs: " in out, out
