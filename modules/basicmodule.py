@@ -155,6 +155,12 @@ class BasicModule:
         instead of running the method (fault injection), None to run the method."""
         return None
 
+    def not_ready(self, caller: Optional[str] = None) -> str:
+        """Hook asked at each ping (``bmtree run``'s start-up check, from node ``caller``): why the module
+        cannot take a call now, '' when it can. A reason leaves the ping unanswered, so the run waits for
+        the module as for one not started yet (the C++ bridge while its C++ node is not running)."""
+        return ""
+
     def setup(self, node: Any) -> None:
         """Hook run once by the ROS node after it connected (extra topics, parameters)."""
 

@@ -20,7 +20,6 @@ import time
 from typing import Any, Dict, List, Optional, Tuple
 
 from comm import sync_publisher
-from comm.addressing import PING_FUNCTION
 from comm.errors import ProtocolError
 from comm.messages import DEFAULT_MAX_BYTES, MIN_MAX_BYTES, load_payload, new_id
 from comm.nodeopts import count, node_name
@@ -139,7 +138,6 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
         self._event_sub = rospy.Subscriber(event_topic(name), String, self._on_event, queue_size=1000,
                                            tcp_nodelay=True)
         self._module_node = node
-        self._guard_pings(node)
         with self._finding:
             missing = self._wait_connected(self.connect_timeout, check=True)
         if missing:
@@ -154,40 +152,23 @@ class CppBridge(CppNodeGraph, CppOutputs, BasicModule):
                                                                ", sends events" if self.emits else ""))
                       if self.library else "input gap %gs, no cancels" % self._gap())
 
-    def _guard_pings(self, node: Any) -> None:
-        """A ping (``bmtree run``'s start-up check, :data:`comm.addressing.PING_FUNCTION`) is answered only
-        while the C++ node can take a call. The module node answers pings itself, and the ping never reaches
-        the C++ node: answered for a dead one, the run started, and its first call was refused. Unanswered,
-        the run waits (``--wait``) as for a module not started yet; why is in the bridge's log and in its
-        announcement (``not_ready``, :meth:`_announce_readiness`)."""
-        inbox = getattr(node, "inbox", None)
-        if inbox is None:
-            return
-        take = inbox.handle_call
-
-        def handle_call(text: Any, caller: Optional[str] = None) -> None:
-            if not (isinstance(text, str) and PING_FUNCTION in text and self._unready_ping(text, caller, inbox.module)):
-                take(text, caller)
-
-        inbox.handle_call = handle_call  # what the inbox's subscribers call
-
-    def _unready_ping(self, text: str, caller: Optional[str], module: str) -> bool:
-        """True (and a warning, at most every 10 s for one reason) for a ping of ``module`` that is not to be
-        answered now: the C++ node cannot take a call. Never raises."""
+    def not_ready(self, caller: Optional[str] = None) -> str:
+        """A ping (``bmtree run``'s start-up check) is answered only while the C++ node can take a call. The
+        module node answers pings itself, and the ping never reaches the C++ node: answered for a dead one,
+        the run started, and its first call was refused. Unanswered, the run waits (``--wait``) as for a
+        module not started yet; why is in the bridge's log (at most every 10 s for one reason) and in its
+        announcement (``not_ready``, :meth:`_announce_readiness`). Never raises."""
         try:
-            head = load_payload(text, self.max_bytes)
-            if head.get("basic_mod") != module or head.get("function") != PING_FUNCTION or head.get("cancel") is True:
-                return False
             reason = self._not_ready()
-        except Exception:  # malformed (the inbox answers it), or a bug here: the ping goes its usual way
-            return False
-        if not reason:
-            return False
-        more = self._ping_warnings.due(reason)
-        if more is not None:
-            log.warning("not answering the ping of %s (a run's start-up check): module %r cannot take a call now: "
-                        "%s%s", caller or "a caller", module, reason, more)
-        return True
+        except Exception:  # a bug here must not keep a run from starting: the ping goes its usual way
+            log.exception("could not tell whether the C++ node of module %r is ready", self.definition.name)
+            return ""
+        if reason:
+            more = self._ping_warnings.due(reason)
+            if more is not None:
+                log.warning("not answering the ping of %s (a run's start-up check): module %r cannot take a call "
+                            "now: %s%s", caller or "a caller", self.definition.name, reason, more)
+        return reason
 
     def _check_events(self) -> None:
         """At start: a definition with Events whose C++ node cannot send them is said in the log."""

@@ -64,7 +64,8 @@ class CallInbox:
                  publish_result: Callable[[str], None], max_bytes: int = DEFAULT_MAX_BYTES, remember: int = 4096,
                  on_parsed: Optional[Callable[[Dict[str, Any], Optional[str]], None]] = None,
                  heard: Optional[Callable[[Optional[str]], None]] = None,
-                 ping_note: Optional[Callable[[], str]] = None):
+                 ping_note: Optional[Callable[[], str]] = None,
+                 not_ready: Optional[Callable[[Optional[str]], str]] = None):
         self.module = module
         self.heard = heard  # told the node each call came from (its answer waits for that node's connection)
         self.on_call = on_call
@@ -72,6 +73,7 @@ class CallInbox:
         self.on_cancel = on_cancel
         self.publish_result = publish_result
         self.ping_note = ping_note  # what a ping's answer tells beside "alive" (a stuck call holding the module)
+        self.not_ready = not_ready  # why a ping is left unanswered now ('' answers it): the module's own hook
         self.max_bytes = max_bytes
         self.skipped = 0  # calls for other modules, refused without parsing
         self.duplicates = 0
@@ -96,7 +98,7 @@ class CallInbox:
                 return
             call_id = head.get("call_id") if isinstance(head.get("call_id"), str) else None
             if head.get("function") == PING_FUNCTION:
-                if call_id is not None:
+                if call_id is not None and not (self.not_ready is not None and self.not_ready(caller)):
                     note = self.ping_note() if self.ping_note is not None else ""
                     self.publish_result(FunctionResult(call_id=call_id, basic_mod=self.module,
                                                        function=PING_FUNCTION, error=note).encode())
@@ -248,7 +250,7 @@ class ModuleNode:
         self.inbox = CallInbox(self.definition.name, self.server.handle_call, self.server.handle_cancel,
                                lambda text: res_pub.publish(String(text)), self.max_bytes,
                                on_parsed=self.server.handle_parsed, heard=res_pub.heard,
-                               ping_note=self.server.stuck_note)
+                               ping_note=self.server.stuck_note, not_ready=self.impl.not_ready)
         self.callers = CallerWatch(self.server, self.definition.name, self.unreachable_caller).start()
         self.inbox.subscribe()
         try:

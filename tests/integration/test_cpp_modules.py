@@ -338,10 +338,17 @@ def test_basic_mod_renames_the_cpp_node_too(ros_graph, gripper_exe):
     """Two copies of one C++ module, told apart by _basic_mod:= alone, both stay up."""
     import rosgraph
 
+    from tests.conftest import until
+
     left = ros_graph.start_node([gripper_exe, "_basic_mod:=left_gripper"], "/left_gripper")
     right = ros_graph.start_node([gripper_exe, "_basic_mod:=right_gripper"], "/right_gripper")
-    pubs, subs, _ = rosgraph.Master("/test").getSystemState()
-    inputs = {t: n for t, n in subs if t.endswith("/BM_input")}
+
+    def inputs_now():
+        return {t: n for t, n in rosgraph.Master("/test").getSystemState()[1] if t.endswith("/BM_input")}
+
+    # a node is registered before its subscriptions are (under load, one had none yet)
+    until(lambda: len(inputs_now()) >= 2, 20, inputs_now)
+    inputs = inputs_now()
     assert inputs.get("/left_gripper/BM_input") == ["/left_gripper"], inputs
     assert inputs.get("/right_gripper/BM_input") == ["/right_gripper"], inputs
     assert left.poll() is None and right.poll() is None

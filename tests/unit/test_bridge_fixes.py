@@ -98,12 +98,13 @@ def test_max_bytes_is_an_option_of_the_bridge_and_reaches_its_node(monkeypatch, 
 
 
 class _Node:
-    """What the bridge's setup() is given, as far as pings go: the module node's call inbox."""
+    """The module node's call inbox, as its node makes it (asking the module's not_ready at each ping)."""
 
-    def __init__(self, module):
+    def __init__(self, module, impl):
         self.answers = []
         self.calls = []
-        self.inbox = CallInbox(module, self.calls.append, lambda text: None, self.answers.append)
+        self.inbox = CallInbox(module, self.calls.append, lambda text: None, self.answers.append,
+                               not_ready=impl.not_ready)
 
 
 def test_a_ping_is_not_answered_while_the_cpp_node_is_down():
@@ -111,8 +112,7 @@ def test_a_ping_is_not_answered_while_the_cpp_node_is_down():
     call was refused. The bridge now lets the ping go unanswered (the run waits, as for a module not
     started) while its C++ node is not running, and says why in its log."""
     bridge = _bridge()
-    node = _Node("gripper")
-    bridge._guard_pings(node)
+    node = _Node("gripper", bridge)
     bridge._watcher = object()  # (started)
     bridge.cpp_uri = ""  # (no port to look at)
 
